@@ -1,0 +1,31 @@
+# dcslam — the two commands: `make reproduce-table-5-2` (main job) and `make test` (tests).
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+DCSLAM := $(VENV)/bin/dcslam
+STAMP  := $(VENV)/.dcslam-installed
+
+.PHONY: setup test bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@if ! ldconfig -p 2>/dev/null | grep -q libusb-1.0; then \
+	  echo "installing libusb-1.0-0 (needed by Open3D)"; \
+	  (apt-get update -qq && apt-get install -y -qq libusb-1.0-0) >/dev/null || \
+	  echo "warning: could not install libusb-1.0-0; run 'apt-get install -y libusb-1.0-0' as root"; \
+	fi
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q torch==2.13.0
+	$(PY) -m pip install -q -e '.[test]'
+	touch $(STAMP)
+
+test: setup
+	$(PY) -m pytest -q tests
+
+bench: setup
+	$(PY) benchmarks/run_all.py
+
+clean:
+	rm -rf $(VENV) workspace .pytest_cache

@@ -1,0 +1,9 @@
+"""The ``dcslam`` command line: one module per command, registered on one Typer app."""
+from dcslam.cli.app import app
+from dcslam.cli import synth, prepare, train, predict, filter as filter_, slam, score  # noqa: F401  (registers)
+
+__all__ = ["app", "main"]
+
+
+def main() -> None:
+    app()

@@ -1,0 +1,63 @@
+"""The Typer application and what every command shares: the workspace option and error handling.
+
+Each command lives in its own module of this package, is a thin wrapper that turns options into a library call,
+and never holds logic of its own. Heavy imports (torch, open3d, h5py) stay inside command bodies so that
+``dcslam --help`` answers fast.
+"""
+from __future__ import annotations
+
+import functools
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+app = typer.Typer(
+    name="dcslam",
+    help="Depth completion trained through a differentiable dense SLAM: generate or read KITTI, train, predict, "
+         "filter, run SLAM and score (reproduces Tables 5.1 and 5.2 of 'Machine Learning for Robotic Exploration').",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+WorkspaceOption = Annotated[Optional[Path], typer.Option(
+    "--workspace", "-w", envvar="DCSLAM_WORKSPACE", show_default="./workspace",
+    help="Workspace folder holding kitti/, drives/, runs/, predictions/, slam/, results/.")]
+ForceOption = Annotated[bool, typer.Option("--force", help="Overwrite outputs that exist.")]
+
+
+def fail(message: str) -> None:
+    """Print one line on stderr and exit with code 1."""
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(1)
+
+
+def known_errors(command):
+    """Turn :class:`~dcslam.errors.DcslamError` (and Ctrl-C) into one line on stderr and exit code 1."""
+
+    @functools.wraps(command)
+    def wrapper(*args, **kwargs):
+        from dcslam.errors import DcslamError
+
+        try:
+            return command(*args, **kwargs)
+        except DcslamError as error:
+            fail(str(error))
+        except KeyboardInterrupt:
+            typer.echo("interrupted; no partial output was kept", err=True)
+            raise typer.Exit(1) from None
+
+    return wrapper
+
+
+def not_yet_built(name: str, issue: str) -> None:
+    typer.echo(f"error: `dcslam {name}` is not yet built ({issue})", err=True)
+    raise typer.Exit(1)
+
+
+def summary(text: str) -> None:
+    """A short result summary on stdout."""
+    sys.stdout.write(text.rstrip("\n") + "\n")

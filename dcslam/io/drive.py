@@ -1,0 +1,296 @@
+"""The dcslam drive file (``drives/<drive>.h5``) and depth-layer files (predictions, filtered depth).
+
+Drive file, schema ``dcslam.drive/1``:
+
+============  =========================  ===========================================================
+dataset       shape, dtype               meaning
+============  =========================  ===========================================================
+rgb           (N, H, W, 3) uint8         left colour camera (KITTI ``image_02``), rectified
+depth/sparse  (N, H, W) float32          projected LiDAR in metres, 0 = no measurement
+depth/dense   (N, H, W) float32          annotated ("ground-truth") depth in metres, 0 = none
+T_world_cam   (N, 4, 4) float64          pose of camera 2; world = camera 2 at the first frame
+K             (3, 3) float64             intrinsics of rectified camera 2
+timestamps    (N,) float64               seconds
+frame_ids     (N,) int64                 KITTI frame numbers
+============  =========================  ===========================================================
+
+Root attributes: ``schema``, ``source`` (``kitti`` | ``synthetic`` | ``tum``), ``date``, ``drive``, ``split``.
+Images are chunked one frame per chunk and compressed, so reading frame i reads only frame i.
+
+Layer file, schema ``dcslam.layer/1``: dataset ``depth`` (N, H, W) float32 metres (0 = none, never NaN) and root
+attributes ``schema``, ``drive`` (the drive file's name), ``made_by`` (a run or filter name) and ``config`` (JSON).
+"""
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from dcslam.errors import DcslamError
+from dcslam.workspace import atomic_output
+
+DRIVE_SCHEMA = "dcslam.drive/1"
+LAYER_SCHEMA = "dcslam.layer/1"
+DEPTH_KINDS = ("sparse", "dense")
+_COMPRESSION = dict(compression="gzip", compression_opts=1, shuffle=True)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One frame of a drive. Shapes: rgb (H, W, 3) uint8, sparse and dense (H, W) float32 metres,
+    T_world_cam (4, 4) float64."""
+
+    rgb: np.ndarray
+    sparse: np.ndarray
+    dense: np.ndarray
+    T_world_cam: np.ndarray
+    timestamp: float
+    frame_id: int
+
+
+def _check_frame(frame: Frame, height: int, width: int) -> None:
+    expect = {"rgb": ((height, width, 3), np.uint8), "sparse": ((height, width), None),
+              "dense": ((height, width), None), "T_world_cam": ((4, 4), None)}
+    for name, (shape, dtype) in expect.items():
+        value = np.asarray(getattr(frame, name))
+        if value.shape != shape:
+            raise DcslamError(f"frame {frame.frame_id}: {name} has shape {value.shape}, expected {shape}")
+        if dtype is not None and value.dtype != dtype:
+            raise DcslamError(f"frame {frame.frame_id}: {name} has dtype {value.dtype}, expected {np.dtype(dtype)}")
+    for name in DEPTH_KINDS:
+        depth = np.asarray(getattr(frame, name))
+        if not np.all(np.isfinite(depth)) or np.any(depth < 0):
+            raise DcslamError(f"frame {frame.frame_id}: {name} depth must be finite and >= 0 (0 = no value)")
+
+
+class DriveWriter:
+    """Write a drive file frame by frame, atomically (the file appears under its name only when closed cleanly).
+
+    >>> with DriveWriter(path, K, height, width, source="synthetic", date="2011_09_26", drive="...") as w:
+    ...     for frame in frames:
+    ...         w.append(frame)
+    """
+
+    def __init__(self, path: Path | str, K: np.ndarray, height: int, width: int, *, source: str, date: str,
+                 drive: str, split: str = "", force: bool = False, attrs: dict | None = None):
+        K = np.asarray(K, dtype=np.float64)
+        if K.shape != (3, 3):
+            raise DcslamError(f"K has shape {K.shape}, expected (3, 3)")
+        self.path, self.K, self.height, self.width = Path(path), K, int(height), int(width)
+        self.attrs = dict(schema=DRIVE_SCHEMA, source=source, date=date, drive=drive, split=split, **(attrs or {}))
+        self.force = force
+        self._frames: list[tuple[np.ndarray, float, int]] = []
+
+    def __enter__(self) -> "DriveWriter":
+        import h5py
+
+        self._atomic = atomic_output(self.path, force=self.force)
+        tmp = self._atomic.__enter__()
+        try:
+            self._h5 = h5py.File(tmp, "w")
+            h, w = self.height, self.width
+            self._rgb = self._h5.create_dataset("rgb", (0, h, w, 3), np.uint8, maxshape=(None, h, w, 3),
+                                                chunks=(1, h, w, 3), **_COMPRESSION)
+            self._depth = {kind: self._h5.create_dataset(f"depth/{kind}", (0, h, w), np.float32,
+                                                         maxshape=(None, h, w), chunks=(1, h, w), **_COMPRESSION)
+                           for kind in DEPTH_KINDS}
+        except BaseException as exc:
+            self._atomic.__exit__(type(exc), exc, exc.__traceback__)
+            raise
+        return self
+
+    def append(self, frame: Frame) -> None:
+        _check_frame(frame, self.height, self.width)
+        n = len(self._frames)
+        self._rgb.resize(n + 1, axis=0)
+        self._rgb[n] = frame.rgb
+        for kind in DEPTH_KINDS:
+            self._depth[kind].resize(n + 1, axis=0)
+            self._depth[kind][n] = np.asarray(getattr(frame, kind), dtype=np.float32)
+        self._frames.append((np.asarray(frame.T_world_cam, np.float64), float(frame.timestamp), int(frame.frame_id)))
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if exc_type is None:
+                if not self._frames:
+                    raise DcslamError(f"{self.path}: no frames to write")
+                self._h5.create_dataset("T_world_cam", data=np.stack([f[0] for f in self._frames]))
+                self._h5.create_dataset("K", data=self.K)
+                self._h5.create_dataset("timestamps", data=np.array([f[1] for f in self._frames], np.float64))
+                self._h5.create_dataset("frame_ids", data=np.array([f[2] for f in self._frames], np.int64))
+                for key, value in self.attrs.items():
+                    self._h5.attrs[key] = value
+        except BaseException as error:
+            self._h5.close()
+            self._atomic.__exit__(type(error), error, error.__traceback__)
+            raise
+        self._h5.close()
+        self._atomic.__exit__(exc_type, exc, tb)
+
+
+class DriveFile:
+    """Read a drive file lazily: ``len(drive)``, ``drive.frame(i)``, ``drive.depth("dense", i)``, ``drive.poses``.
+
+    Use as a context manager, or call :meth:`close`.
+    """
+
+    REQUIRED = ("rgb", "depth/sparse", "depth/dense", "T_world_cam", "K", "timestamps", "frame_ids")
+
+    def __init__(self, path: Path | str):
+        import h5py
+
+        self.path = Path(path)
+        if not self.path.exists():
+            raise DcslamError(f"drive file {self.path} not found; run `dcslam prepare-kitti` first")
+        try:
+            self._h5 = h5py.File(self.path, "r")
+        except OSError as exc:
+            raise DcslamError(f"{self.path} is not a readable HDF5 drive file ({exc})") from None
+        try:
+            self._validate()
+        except BaseException:
+            self._h5.close()
+            raise
+        self.K = self._h5["K"][()]
+        self.poses = self._h5["T_world_cam"][()]
+        self.timestamps = self._h5["timestamps"][()]
+        self.frame_ids = self._h5["frame_ids"][()]
+        self.attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in self._h5.attrs.items()}
+
+    def _validate(self) -> None:
+        h5 = self._h5
+        schema = h5.attrs.get("schema")
+        if schema != DRIVE_SCHEMA:
+            raise DcslamError(f"{self.path}: schema is {schema!r}, expected {DRIVE_SCHEMA!r}")
+        missing = [name for name in self.REQUIRED if name not in h5]
+        if missing:
+            raise DcslamError(f"{self.path}: missing dataset(s) {', '.join(missing)}")
+        n, h, w = h5["depth/dense"].shape
+        expect = {"rgb": (n, h, w, 3), "depth/sparse": (n, h, w), "T_world_cam": (n, 4, 4), "K": (3, 3),
+                  "timestamps": (n,), "frame_ids": (n,)}
+        for name, shape in expect.items():
+            if h5[name].shape != shape:
+                raise DcslamError(f"{self.path}: {name} has shape {h5[name].shape}, expected {shape}")
+
+    @property
+    def name(self) -> str:
+        return self.attrs.get("drive") or self.path.stem
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """(N, H, W)."""
+        return tuple(self._h5["depth/dense"].shape)
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def rgb(self, i: int) -> np.ndarray:
+        """(H, W, 3) uint8."""
+        return self._h5["rgb"][i]
+
+    def depth(self, kind: str, i: int) -> np.ndarray:
+        """(H, W) float32 metres of ``kind`` (``sparse`` or ``dense``)."""
+        if kind not in DEPTH_KINDS:
+            raise DcslamError(f"unknown depth kind {kind!r}; expected one of {', '.join(DEPTH_KINDS)}")
+        return self._h5[f"depth/{kind}"][i]
+
+    def frame(self, i: int) -> Frame:
+        return Frame(rgb=self.rgb(i), sparse=self.depth("sparse", i), dense=self.depth("dense", i),
+                     T_world_cam=self.poses[i], timestamp=float(self.timestamps[i]), frame_id=int(self.frame_ids[i]))
+
+    def __iter__(self) -> Iterator[Frame]:
+        for i in range(len(self)):
+            yield self.frame(i)
+
+    def close(self) -> None:
+        self._h5.close()
+
+    def __enter__(self) -> "DriveFile":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+@dataclass
+class Layer:
+    """A depth layer: ``depth`` (N, H, W) float32 metres (0 = none) with its provenance."""
+
+    depth: np.ndarray
+    drive: str
+    made_by: str
+    config: dict = field(default_factory=dict)
+
+
+def write_layer(path: Path | str, layer: Layer, force: bool = False) -> Path:
+    """Write a layer file atomically. Raises :class:`DcslamError` on NaN/negative depth or an existing file."""
+    import h5py
+
+    depth = np.asarray(layer.depth)
+    if depth.ndim != 3:
+        raise DcslamError(f"layer depth has shape {depth.shape}, expected (N, H, W)")
+    if not np.all(np.isfinite(depth)) or np.any(depth < 0):
+        raise DcslamError("layer depth must be finite and >= 0 (0 = no value)")
+    n, h, w = depth.shape
+    with atomic_output(path, force=force) as tmp, h5py.File(tmp, "w") as h5:
+        h5.create_dataset("depth", data=depth.astype(np.float32), chunks=(1, h, w), **_COMPRESSION)
+        h5.attrs["schema"] = LAYER_SCHEMA
+        h5.attrs["drive"] = layer.drive
+        h5.attrs["made_by"] = layer.made_by
+        h5.attrs["config"] = json.dumps(layer.config, default=str)
+    return Path(path)
+
+
+def read_layer(path: Path | str, expect_frames: int | None = None) -> Layer:
+    """Read a whole layer file; ``expect_frames`` checks its frame count against its drive's."""
+    import h5py
+
+    path = Path(path)
+    if not path.exists():
+        raise DcslamError(f"layer file {path} not found; run `dcslam predict` or `dcslam filter` first")
+    try:
+        with h5py.File(path, "r") as h5:
+            if h5.attrs.get("schema") != LAYER_SCHEMA or "depth" not in h5:
+                raise DcslamError(f"{path}: not a dcslam depth layer (schema {h5.attrs.get('schema')!r})")
+            depth = h5["depth"][()]
+            layer = Layer(depth=depth, drive=str(h5.attrs.get("drive", "")), made_by=str(h5.attrs.get("made_by", "")),
+                          config=json.loads(h5.attrs.get("config", "{}")))
+    except OSError as exc:
+        raise DcslamError(f"{path} is not a readable HDF5 layer file ({exc})") from None
+    if depth.ndim != 3:
+        raise DcslamError(f"{path}: depth has shape {depth.shape}, expected (N, H, W)")
+    if expect_frames is not None and depth.shape[0] != expect_frames:
+        raise DcslamError(f"{path}: layer has {depth.shape[0]} frames but its drive has {expect_frames}")
+    return layer
+
+
+def load_depth(drive: DriveFile, source: str | Path) -> np.ndarray:
+    """All depth frames (N, H, W) float32 of a drive from ``sparse``, ``dense`` or a layer file path."""
+    if str(source) in DEPTH_KINDS:
+        return np.stack([drive.depth(str(source), i) for i in range(len(drive))])
+    layer = read_layer(source, expect_frames=len(drive))
+    if layer.depth.shape[1:] != drive.shape[1:]:
+        raise DcslamError(f"{source}: layer frames are {layer.depth.shape[1:]}, drive frames are {drive.shape[1:]}")
+    return layer.depth
+
+
+def list_drives(drives_dir: Path | str) -> list[Path]:
+    """Drive files in a folder, sorted by name."""
+    return sorted(p for p in Path(drives_dir).glob("*.h5") if not p.name.startswith("."))
+
+
+def read_splits(path: Path | str) -> dict[str, list[str]]:
+    """``splits.json``: ``{"train": [...], "val": [...], "test": [...]}`` of drive names."""
+    path = Path(path)
+    if not path.exists():
+        raise DcslamError(f"{path} not found; run `dcslam prepare-kitti` first")
+    try:
+        splits = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise DcslamError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(splits, dict) or not all(isinstance(splits.get(k), list) for k in ("train", "val", "test")):
+        raise DcslamError(f'{path}: expected {{"train": [...], "val": [...], "test": [...]}} of drive names')
+    return splits

@@ -1,0 +1,108 @@
+"""TUM trajectory files: one pose per line, ``timestamp tx ty tz qx qy qz qw`` (Hamilton quaternion, scalar last).
+
+This is the format evo reads with ``evo_ape tum``. Lines starting with ``#`` and blank lines are ignored.
+Poses are ``T_world_cam`` (camera to world) as (N, 4, 4) float64 arrays.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from dcslam.errors import DcslamError
+from dcslam.workspace import atomic_output
+
+FORMAT = "'timestamp tx ty tz qx qy qz qw' per line"
+
+
+def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotation matrices → (..., 4) unit quaternions (qx, qy, qz, qw) with qw >= 0."""
+    R = np.asarray(R, dtype=np.float64)
+    m = R.reshape(-1, 3, 3)
+    q = np.empty((m.shape[0], 4))
+    tr = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
+    # Shepperd's method: pick the largest of (w, x, y, z) to divide by, for accuracy everywhere.
+    cands = np.stack([tr, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], axis=1)
+    pick = np.argmax(cands, axis=1)
+    for i in range(m.shape[0]):
+        a = m[i]
+        if pick[i] == 0:
+            s = 2.0 * np.sqrt(max(1.0 + tr[i], 1e-300))
+            q[i] = [(a[2, 1] - a[1, 2]) / s, (a[0, 2] - a[2, 0]) / s, (a[1, 0] - a[0, 1]) / s, 0.25 * s]
+        elif pick[i] == 1:
+            s = 2.0 * np.sqrt(max(1.0 + a[0, 0] - a[1, 1] - a[2, 2], 1e-300))
+            q[i] = [0.25 * s, (a[0, 1] + a[1, 0]) / s, (a[0, 2] + a[2, 0]) / s, (a[2, 1] - a[1, 2]) / s]
+        elif pick[i] == 2:
+            s = 2.0 * np.sqrt(max(1.0 + a[1, 1] - a[0, 0] - a[2, 2], 1e-300))
+            q[i] = [(a[0, 1] + a[1, 0]) / s, 0.25 * s, (a[1, 2] + a[2, 1]) / s, (a[0, 2] - a[2, 0]) / s]
+        else:
+            s = 2.0 * np.sqrt(max(1.0 + a[2, 2] - a[0, 0] - a[1, 1], 1e-300))
+            q[i] = [(a[0, 2] + a[2, 0]) / s, (a[1, 2] + a[2, 1]) / s, 0.25 * s, (a[1, 0] - a[0, 1]) / s]
+    q[q[:, 3] < 0] *= -1
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return q.reshape(R.shape[:-2] + (4,))
+
+
+def quaternion_to_rotation(q: np.ndarray) -> np.ndarray:
+    """(..., 4) quaternions (qx, qy, qz, qw), normalised here → (..., 3, 3) rotation matrices."""
+    q = np.asarray(q, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    x, y, z, w = np.moveaxis(q, -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+def write_tum(path: Path | str, timestamps: np.ndarray, T_world_cam: np.ndarray, force: bool = False) -> Path:
+    """Write poses (N, 4, 4) with timestamps (N,) seconds as a TUM file, atomically."""
+    timestamps = np.asarray(timestamps, dtype=np.float64)
+    T_world_cam = np.asarray(T_world_cam, dtype=np.float64)
+    if T_world_cam.ndim != 3 or T_world_cam.shape[1:] != (4, 4) or timestamps.shape != T_world_cam.shape[:1]:
+        raise DcslamError(f"expected timestamps (N,) and poses (N, 4, 4), got {timestamps.shape} and "
+                          f"{T_world_cam.shape}")
+    if not np.all(np.isfinite(T_world_cam)):
+        raise DcslamError(f"{path}: refusing to write non-finite poses")
+    q = rotation_to_quaternion(T_world_cam[:, :3, :3])
+    t = T_world_cam[:, :3, 3]
+    lines = ["# timestamp tx ty tz qx qy qz qw"]
+    lines += [f"{s:.9f} " + " ".join(f"{v:.9f}" for v in (*ti, *qi)) for s, ti, qi in zip(timestamps, t, q)]
+    with atomic_output(path, force=force) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    return Path(path)
+
+
+def read_tum(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
+    """Read a TUM file → (timestamps (N,), T_world_cam (N, 4, 4)). Fails on malformed lines, non-unit
+    quaternions or timestamps that are not strictly increasing."""
+    path = Path(path)
+    if not path.exists():
+        raise DcslamError(f"trajectory file {path} not found")
+    rows = []
+    for number, line in enumerate(path.read_text().splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        fields = line.replace(",", " ").split()
+        if len(fields) != 8:
+            raise DcslamError(f"{path}:{number}: {len(fields)} fields, expected 8 ({FORMAT})")
+        try:
+            rows.append([float(f) for f in fields])
+        except ValueError:
+            raise DcslamError(f"{path}:{number}: not a number ({FORMAT})") from None
+    if not rows:
+        raise DcslamError(f"{path}: no poses ({FORMAT})")
+    data = np.array(rows)
+    if not np.all(np.isfinite(data)):
+        raise DcslamError(f"{path}: non-finite values")
+    norms = np.linalg.norm(data[:, 4:], axis=1)
+    if np.any(np.abs(norms - 1) > 1e-3):
+        bad = int(np.argmax(np.abs(norms - 1)))
+        raise DcslamError(f"{path}: quaternion of pose {bad} has norm {norms[bad]:.4f}, expected 1")
+    if np.any(np.diff(data[:, 0]) <= 0):
+        raise DcslamError(f"{path}: timestamps are not strictly increasing")
+    T = np.tile(np.eye(4), (len(data), 1, 1))
+    T[:, :3, :3] = quaternion_to_rotation(data[:, 4:])
+    T[:, :3, 3] = data[:, 1:4]
+    return data[:, 0], T
