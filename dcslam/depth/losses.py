@@ -1,0 +1,80 @@
+"""Per-pixel losses and depth error metrics. Depth is in metres and 0 means "no value" everywhere.
+
+The thesis's published code applied its mask after ``nn.MSELoss`` had already reduced to a scalar, so the mask
+masked nothing and invalid (zero) targets were trained on. Here the mask selects pixels *before* the mean, and a
+pixel without a ground-truth value is never a target.
+"""
+from __future__ import annotations
+
+import torch
+
+from dcslam.errors import DcslamError
+
+MASKS = ("sparse", "dense")
+
+
+def _check_same(*tensors: torch.Tensor) -> None:
+    shape = tensors[0].shape
+    if len(shape) != 4 or shape[1] != 1:
+        raise DcslamError(f"depth has shape {tuple(shape)}, expected (B, 1, H, W)")
+    for t in tensors[1:]:
+        if t.shape != shape:
+            raise DcslamError(f"shapes differ: {tuple(t.shape)} vs {tuple(shape)}")
+
+
+def supervision_mask(sparse: torch.Tensor, dense: torch.Tensor, mask: str) -> torch.Tensor:
+    """Pixels that supervise training: ``dense`` = every pixel with ground truth; ``sparse`` = pixels with a sparse
+    input value that also have ground truth.
+
+    Shape:
+        sparse, dense: (B, 1, H, W) metres → (B, 1, H, W) bool
+    """
+    _check_same(sparse, dense)
+    if mask == "dense":
+        return dense > 0
+    if mask == "sparse":
+        return (sparse > 0) & (dense > 0)
+    raise DcslamError(f"unknown mask {mask!r}; expected one of {', '.join(MASKS)}")
+
+
+def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Mean of (pred − target)² over the pixels where ``mask`` is true (0 with zero gradient if none is).
+
+    Shape:
+        pred, target: (B, 1, H, W), mask: (B, 1, H, W) bool → scalar
+    """
+    _check_same(pred, target, mask)
+    mask = mask & (target > 0)
+    count = mask.sum()
+    if count == 0:
+        return (pred * 0).sum()
+    return torch.where(mask, pred - target, torch.zeros_like(pred)).square().sum() / count
+
+
+class MaskedMSE:
+    """The MSE training loss with the thesis's ``sparse`` or ``dense`` mask: ``MaskedMSE("dense")(pred, sparse, dense)``."""
+
+    def __init__(self, mask: str = "dense"):
+        if mask not in MASKS:
+            raise DcslamError(f"unknown mask {mask!r}; expected one of {', '.join(MASKS)}")
+        self.mask = mask
+
+    def __call__(self, pred: torch.Tensor, sparse: torch.Tensor, dense: torch.Tensor) -> torch.Tensor:
+        return masked_mse(pred, dense, supervision_mask(sparse, dense, self.mask))
+
+
+def depth_errors(pred: torch.Tensor, dense: torch.Tensor) -> dict[str, float]:
+    """MSE (m²), MAE and RMSE (mm) over pixels with ground truth, and the pixel count.
+
+    Shape:
+        pred, dense: (B, 1, H, W) metres
+    """
+    _check_same(pred, dense)
+    with torch.no_grad():
+        valid = dense > 0
+        n = int(valid.sum())
+        if n == 0:
+            return {"mse": float("nan"), "mae_mm": float("nan"), "rmse_mm": float("nan"), "pixels": 0}
+        err = (pred[valid] - dense[valid]).double()
+        mse = float(err.square().mean())
+        return {"mse": mse, "mae_mm": float(err.abs().mean()) * 1000.0, "rmse_mm": mse ** 0.5 * 1000.0, "pixels": n}

@@ -1,0 +1,75 @@
+import pytest
+import torch
+
+from dcslam.depth.models.sparse_conv import SparseConv, SparseConvNet
+from dcslam.errors import DcslamError
+
+
+class TestSparseConv:
+    def test_smoke_shapes(self):
+        layer = SparseConv(1, 4, 5)
+        x = torch.rand(2, 1, 12, 16)
+        m = (torch.rand(2, 1, 12, 16) > 0.7).float()
+        y, m2 = layer(x, m)
+        assert y.shape == (2, 4, 12, 16) and m2.shape == (2, 1, 12, 16)
+        assert (y >= 0).all()
+
+    def test_known_answer_normalised_average(self):
+        # one-channel layer, all weights 1, bias 0.5: output = mean of valid inputs in the window + bias
+        layer = SparseConv(1, 1, 3, eps=0.0)
+        with torch.no_grad():
+            layer.weight.fill_(1.0)
+            layer.bias.fill_(0.5)
+        x = torch.zeros(1, 1, 5, 5)
+        m = torch.zeros(1, 1, 5, 5)
+        x[0, 0, 2, 2], m[0, 0, 2, 2] = 4.0, 1.0
+        x[0, 0, 2, 3], m[0, 0, 2, 3] = 8.0, 1.0
+        x[0, 0, 0, 0] = 100.0  # masked out: must not leak in
+        y, m2 = layer(x, m)
+        assert y[0, 0, 2, 2].item() == pytest.approx(6.5)
+        assert y[0, 0, 1, 1].item() == pytest.approx(4.5)
+        # mask propagation = 3x3 max pooling
+        assert m2[0, 0, 1:4, 1:5].eq(1).all() and m2[0, 0, 0].eq(0).all()
+
+    def test_invariant_to_values_outside_mask(self):
+        torch.manual_seed(0)
+        net = SparseConvNet()
+        x = torch.rand(1, 1, 16, 24) * 10
+        m = (torch.rand(1, 1, 16, 24) > 0.8).float()
+        noise = torch.rand_like(x) * 100 * (1 - m)
+        assert torch.allclose(net(x, m), net(x + noise, m), atol=1e-5)
+
+    def test_gradcheck_float64(self):
+        torch.manual_seed(0)
+        layer = SparseConv(2, 2, 3).double()
+        x = torch.rand(1, 2, 5, 6, dtype=torch.float64, requires_grad=True) + 0.5
+        m = (torch.rand(1, 1, 5, 6) > 0.5).double()
+        # no ReLU kinks: make the bias large so every output is positive
+        with torch.no_grad():
+            layer.bias.fill_(5.0)
+        assert torch.autograd.gradcheck(lambda x, w, b: _call(layer, x, m, w, b), (x, layer.weight, layer.bias))
+
+    def test_bad_shapes(self):
+        net = SparseConvNet()
+        with pytest.raises(DcslamError):
+            net(torch.rand(1, 2, 8, 8), torch.ones(1, 1, 8, 8))
+        with pytest.raises(DcslamError):
+            net(torch.rand(1, 1, 8, 8), torch.ones(1, 1, 8, 9))
+        with pytest.raises(DcslamError):
+            SparseConv(1, 1, 4)
+
+
+def _call(layer, x, m, w, b):
+    return torch.func.functional_call(layer, {"weight": w, "bias": b}, (x, m))[0]
+
+
+class TestSparseConvNet:
+    def test_architecture_is_the_papers(self):
+        net = SparseConvNet()
+        assert [l.kernel_size for l in net.layers] == [11, 7, 5, 3, 3, 1]
+        assert [(l.in_channels, l.out_channels) for l in net.layers] == [(1, 16)] + [(16, 16)] * 4 + [(16, 1)]
+
+    @pytest.mark.parametrize("batch", [1, 3])
+    def test_cardinality(self, batch):
+        out = SparseConvNet()(torch.rand(batch, 1, 10, 14), None)
+        assert out.shape == (batch, 1, 10, 14)

@@ -1,0 +1,62 @@
+import math
+
+import pytest
+import torch
+
+from dcslam.depth.losses import MaskedMSE, depth_errors, masked_mse, supervision_mask
+from dcslam.errors import DcslamError
+
+
+def _pair():
+    dense = torch.zeros(1, 1, 2, 3)
+    dense[0, 0, 0] = torch.tensor([1.0, 2.0, 3.0])  # bottom row: no ground truth
+    sparse = torch.zeros(1, 1, 2, 3)
+    sparse[0, 0, 0, 0] = 1.0
+    sparse[0, 0, 1, 1] = 7.0  # sparse value without ground truth
+    pred = torch.full((1, 1, 2, 3), 2.0, requires_grad=True)
+    return pred, sparse, dense
+
+
+def test_dense_mask_ignores_pixels_without_ground_truth():
+    pred, sparse, dense = _pair()
+    loss = MaskedMSE("dense")(pred, sparse, dense)
+    assert loss.item() == pytest.approx((1 + 0 + 1) / 3)  # not diluted, not trained on the zero targets
+    (grad,) = torch.autograd.grad(loss, pred)
+    assert grad[0, 0, 1].eq(0).all()
+
+
+def test_sparse_mask():
+    pred, sparse, dense = _pair()
+    mask = supervision_mask(sparse, dense, "sparse")
+    assert mask.sum() == 1
+    assert MaskedMSE("sparse")(pred, sparse, dense).item() == pytest.approx(1.0)
+
+
+def test_not_the_theses_defect():
+    # masking after reduction would give mean over all 6 pixels including zero targets
+    pred, sparse, dense = _pair()
+    defect = torch.nn.MSELoss()(pred, dense).item()
+    assert MaskedMSE("dense")(pred, sparse, dense).item() != pytest.approx(defect)
+
+
+def test_empty_mask_is_zero_with_zero_gradient():
+    pred = torch.ones(1, 1, 2, 2, requires_grad=True)
+    loss = masked_mse(pred, torch.zeros(1, 1, 2, 2), torch.ones(1, 1, 2, 2, dtype=torch.bool))
+    assert loss.item() == 0
+    loss.backward()
+    assert pred.grad.eq(0).all()
+
+
+def test_depth_errors():
+    pred, _, dense = _pair()
+    e = depth_errors(pred.detach(), dense)
+    assert e["pixels"] == 3 and e["mae_mm"] == pytest.approx(2000 / 3)
+    assert e["rmse_mm"] == pytest.approx(math.sqrt(2 / 3) * 1000)
+    assert math.isnan(depth_errors(pred.detach(), torch.zeros_like(dense))["mae_mm"])
+
+
+def test_bad_input():
+    with pytest.raises(DcslamError):
+        MaskedMSE("both")
+    with pytest.raises(DcslamError):
+        masked_mse(torch.zeros(1, 2, 2), torch.zeros(1, 2, 2), torch.zeros(1, 2, 2, dtype=torch.bool))
