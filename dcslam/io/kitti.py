@@ -7,15 +7,31 @@ Layout under a KITTI root (real, or written by ``dcslam synth``)::
     raw/<date>/<date>_drive_<NNNN>_sync/oxts/data/<frame:010d>.txt, oxts/timestamps.txt
     raw/<date>/<date>_drive_<NNNN>_sync/velodyne_points/data/<frame:010d>.bin, velodyne_points/timestamps.txt
     depth_completion/{train,val}/<date>_drive_<NNNN>_sync/proj_depth/{velodyne_raw,groundtruth}/image_02/<frame:010d>.png
+    SYNTHETIC              (only in generated roots: a marker file written by ``dcslam synth``)
+
+This module holds the per-file formats (depth PNG, image, Velodyne scan, timestamps) and the drive-level reading:
+:func:`find_drives` lists drives, :func:`index_drive` checks that their files line up and works out timestamps and
+camera-2 poses, :func:`read_drive` yields :class:`dcslam.io.drive.Frame` records. Calibration is in
+:mod:`dcslam.io.kitti_calib`, OXTS packets and poses in :mod:`dcslam.io.kitti_oxts` (both re-exported here).
+
+The depth benchmark has depth only for frames 5 .. n-6 of each raw drive; frames are aligned by their number.
+Real and generated roots are read by the same code; the only difference recorded is the source.
 """
 from __future__ import annotations
 
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
 
 import numpy as np
 
 from dcslam.errors import DcslamError
+from dcslam.io.drive import Frame
+from dcslam.io.kitti_calib import Calibration, project_velodyne, read_calibration  # noqa: F401  (re-exported)
+from dcslam.io.kitti_oxts import (OxtsPacket, camera_poses, oxts_to_T_world_imu, read_oxts,  # noqa: F401
+                                  rebase, write_oxts)
 
 DEPTH_SCALE = 256.0  # uint16 depth PNG: metres = value / 256, 0 = no value
 
@@ -135,3 +151,200 @@ def write_timestamps(path: Path | str, seconds: np.ndarray) -> None:
         lines.append(datetime.fromtimestamp(whole, tz=timezone.utc).strftime("%Y-%m-%d %H:%M:%S") + f".{nanos:09d}")
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     Path(path).write_text("\n".join(lines) + "\n")
+
+
+# --- Drives: finding them under a KITTI root, checking that their files line up, reading their frames -------------
+
+SYNTHETIC_MARKER = "SYNTHETIC"  # a file at the root written by `dcslam synth`; its presence makes source "synthetic"
+DEPTH_SPLITS = ("train", "val")  # folders of KITTI depth completion
+_DRIVE_NAME = re.compile(r"^(\d{4}_\d{2}_\d{2})_drive_(\d{4})_sync$")
+
+
+def dataset_source(root: Path | str) -> str:
+    """``"synthetic"`` if ``root`` holds the ``SYNTHETIC`` marker written by ``dcslam synth``, else ``"kitti"``."""
+    return "synthetic" if (Path(root) / SYNTHETIC_MARKER).is_file() else "kitti"
+
+
+@dataclass(frozen=True)
+class RawDrive:
+    """Where one drive's files are under a KITTI root. ``depth_dir`` is None when the depth benchmark lacks it;
+    ``raw_dir`` may not exist when only its depth was found (see :attr:`has_raw`)."""
+
+    root: Path
+    name: str  # e.g. "2011_09_26_drive_0001_sync"
+    depth_dir: Path | None
+    source: str = "kitti"
+
+    @property
+    def date(self) -> str:
+        return self.name[:10]
+
+    @property
+    def number(self) -> str:
+        """The four-digit drive number, e.g. ``"0001"``."""
+        return self.name[17:21]
+
+    @property
+    def date_dir(self) -> Path:
+        return self.root / "raw" / self.date
+
+    @property
+    def raw_dir(self) -> Path:
+        return self.date_dir / self.name
+
+    @property
+    def has_raw(self) -> bool:
+        return self.raw_dir.is_dir()
+
+    def image_path(self, frame_id: int) -> Path:
+        return self.raw_dir / "image_02" / "data" / frame_name(frame_id, ".png")
+
+    def oxts_path(self, frame_id: int) -> Path:
+        return self.raw_dir / "oxts" / "data" / frame_name(frame_id, ".txt")
+
+    def velodyne_path(self, frame_id: int) -> Path:
+        return self.raw_dir / "velodyne_points" / "data" / frame_name(frame_id, ".bin")
+
+    def depth_path(self, kind: str, frame_id: int) -> Path:
+        """``kind`` is ``"velodyne_raw"`` (sparse) or ``"groundtruth"`` (dense)."""
+        if self.depth_dir is None:
+            raise DcslamError(f"{self.name}: no depth-completion folder under {self.root / 'depth_completion'}")
+        return self.depth_dir / "proj_depth" / kind / "image_02" / frame_name(frame_id, ".png")
+
+
+def find_drives(root: Path | str) -> list[RawDrive]:
+    """All drives under a KITTI root that have a raw folder (``raw/<date>/<date>_drive_NNNN_sync``) or a depth
+    folder (``depth_completion/{train,val}/<name>``), sorted by name. Nothing is read or checked here."""
+    root = Path(root)
+    source = dataset_source(root)
+    names = {p.name for p in (root / "raw").glob("*/*_drive_*_sync")
+             if p.is_dir() and _DRIVE_NAME.match(p.name) and p.parent.name == p.name[:10]}
+    depth_dirs: dict[str, Path] = {}
+    for split in DEPTH_SPLITS:
+        for p in sorted((root / "depth_completion" / split).glob("*_drive_*_sync")):
+            if p.is_dir() and _DRIVE_NAME.match(p.name):
+                depth_dirs.setdefault(p.name, p)
+    return [RawDrive(root, name, depth_dirs.get(name), source) for name in sorted(names | set(depth_dirs))]
+
+
+def _frame_ids(folder: Path, suffix: str) -> list[int]:
+    if not folder.is_dir():
+        raise DcslamError(f"folder {folder} not found")
+    ids = []
+    for p in folder.iterdir():
+        if p.suffix == suffix and not p.name.startswith("."):
+            if not p.stem.isdigit():
+                raise DcslamError(f"{p}: expected a frame file named like {frame_name(0, suffix)}")
+            ids.append(int(p.stem))
+    return sorted(ids)
+
+
+def _count_lines(path: Path) -> int:
+    if not path.exists():
+        raise DcslamError(f"timestamps file {path} not found")
+    return sum(1 for line in path.read_text(errors="replace").splitlines() if line.strip())
+
+
+@dataclass(frozen=True, eq=False)
+class DriveIndex:
+    """A checked drive: the frames that have depth, with their timestamps and camera-2 poses.
+
+    Attributes:
+        drive: where the files are.
+        calib: the date's calibration.
+        frame_ids: (N,) int64 KITTI numbers of the frames with depth (5 .. n-6 for real KITTI).
+        timestamps: (N,) float64 POSIX seconds from ``image_02/timestamps.txt``.
+        T_world_cam: (N, 4, 4) float64 poses of camera 2; world = camera 2 at ``frame_ids[0]``, the first frame
+            with depth (not raw frame 0), so the first stored pose is the identity.
+    """
+
+    drive: RawDrive
+    calib: Calibration
+    frame_ids: np.ndarray
+    timestamps: np.ndarray
+    T_world_cam: np.ndarray
+
+    @property
+    def K(self) -> np.ndarray:
+        """(3, 3) intrinsics of rectified camera 2."""
+        return self.calib.K_cam2
+
+    def __len__(self) -> int:
+        return len(self.frame_ids)
+
+    def head(self, max_frames: int | None) -> "DriveIndex":
+        """The first ``max_frames`` frames (all if None); poses keep their world (the first frame is unchanged)."""
+        if max_frames is None:
+            return self
+        if max_frames < 1:
+            raise DcslamError(f"max_frames is {max_frames}, expected at least 1")
+        n = int(max_frames)
+        return DriveIndex(self.drive, self.calib, self.frame_ids[:n], self.timestamps[:n], self.T_world_cam[:n])
+
+
+def index_drive(drive: RawDrive) -> DriveIndex:
+    """Check that a drive's files line up and read its calibration, timestamps and OXTS poses (not its images).
+
+    Raises :class:`DcslamError` naming the file when: a calibration file is missing or malformed; the image files
+    are not frames 0 .. n-1 or their count differs from the lines of ``image_02/timestamps.txt``; the OXTS files
+    differ from the image frames (or from ``oxts/timestamps.txt``); an OXTS packet is malformed; the
+    ``velodyne_raw`` and ``groundtruth`` frames differ, are empty, or include frames the raw drive lacks.
+    """
+    if not drive.has_raw:
+        raise DcslamError(f"{drive.name}: raw folder {drive.raw_dir} not found")
+    if drive.depth_dir is None:
+        raise DcslamError(f"{drive.name}: no depth folder depth_completion/{{train,val}}/{drive.name} under "
+                          f"{drive.root}")
+    calib = read_calibration(drive.date_dir)
+    image_dir = drive.raw_dir / "image_02"
+    raw_ids = _frame_ids(image_dir / "data", ".png")
+    stamps_path = image_dir / "timestamps.txt"
+    stamps = read_timestamps(stamps_path)
+    if len(stamps) != len(raw_ids):
+        raise DcslamError(f"{stamps_path}: {len(stamps)} timestamps but {len(raw_ids)} images in {image_dir / 'data'}")
+    if raw_ids != list(range(len(raw_ids))):
+        missing = sorted(set(range(len(raw_ids))) - set(raw_ids))
+        raise DcslamError(f"{image_dir / 'data'}: images are not frames 0..{len(raw_ids) - 1} "
+                          f"(missing {frame_name(missing[0], '.png')})")
+    oxts_dir = drive.raw_dir / "oxts"
+    oxts_ids = _frame_ids(oxts_dir / "data", ".txt")
+    if oxts_ids != raw_ids:
+        raise DcslamError(f"{oxts_dir / 'data'}: {len(oxts_ids)} OXTS packets but {len(raw_ids)} images in "
+                          f"{image_dir / 'data'}")
+    if (oxts_dir / "timestamps.txt").exists() and _count_lines(oxts_dir / "timestamps.txt") != len(raw_ids):
+        raise DcslamError(f"{oxts_dir / 'timestamps.txt'}: {_count_lines(oxts_dir / 'timestamps.txt')} lines but "
+                          f"{len(raw_ids)} OXTS packets")
+    T_world_cam_raw = camera_poses(oxts_to_T_world_imu([read_oxts(drive.oxts_path(i)) for i in raw_ids]), calib)
+
+    kinds = {kind: drive.depth_dir / "proj_depth" / kind / "image_02" for kind in ("velodyne_raw", "groundtruth")}
+    sparse_ids, dense_ids = (_frame_ids(folder, ".png") for folder in kinds.values())
+    if sparse_ids != dense_ids:
+        odd = sorted(set(sparse_ids) ^ set(dense_ids))
+        raise DcslamError(f"{drive.depth_dir}: velodyne_raw has {len(sparse_ids)} frames and groundtruth "
+                          f"{len(dense_ids)}; they differ at {frame_name(odd[0], '.png')}")
+    if not sparse_ids:
+        raise DcslamError(f"{kinds['velodyne_raw']}: no depth PNGs")
+    if sparse_ids[-1] >= len(raw_ids):
+        raise DcslamError(f"{kinds['velodyne_raw']}: depth frame {frame_name(sparse_ids[-1], '.png')} has no raw "
+                          f"frame ({drive.raw_dir} has {len(raw_ids)} frames)")
+    ids = np.array(sparse_ids, dtype=np.int64)
+    return DriveIndex(drive, calib, ids, stamps[ids], rebase(T_world_cam_raw[ids]))
+
+
+def read_drive(index: DriveIndex) -> Iterator[Frame]:
+    """The frames of a checked drive, read lazily: image, sparse and dense depth, pose, timestamp, frame number.
+
+    Raises :class:`DcslamError` naming the file on an unreadable image, an 8-bit or truncated depth PNG, or sizes
+    that differ between a frame's image and its depth.
+    """
+    drive = index.drive
+    for i, frame_id in enumerate(index.frame_ids):
+        rgb = read_image(drive.image_path(frame_id))
+        sparse = read_depth_png(drive.depth_path("velodyne_raw", frame_id))
+        dense = read_depth_png(drive.depth_path("groundtruth", frame_id))
+        for kind, depth in (("velodyne_raw", sparse), ("groundtruth", dense)):
+            if depth.shape != rgb.shape[:2]:
+                raise DcslamError(f"{drive.depth_path(kind, frame_id)}: depth is {depth.shape[1]}x{depth.shape[0]} "
+                                  f"but image {drive.image_path(frame_id).name} is {rgb.shape[1]}x{rgb.shape[0]}")
+        yield Frame(rgb=rgb, sparse=sparse, dense=dense, T_world_cam=index.T_world_cam[i],
+                    timestamp=float(index.timestamps[i]), frame_id=int(frame_id))
