@@ -1,0 +1,74 @@
+"""One input frame made ready for odometry and mapping: vertex map, normals, validity, colours."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from dcslam.errors import DcslamError
+from dcslam.geometry.camera import backproject, check_depth, check_K
+from dcslam.geometry.normals import vertex_normals
+
+
+@dataclass(frozen=True)
+class FrameSettings:
+    """How a depth image becomes surfels.
+
+    normal_search: pixels searched for the nearest valid neighbour when taking normals (1 for dense depth; 0 means
+        choose from the fraction of valid pixels: 1 above 30 %, else 8, for LiDAR-like sparse depth).
+    max_relative_gap: neighbours beyond this relative depth difference are across an edge (not used for normals).
+    min_depth, max_depth: measurements outside [min_depth, max_depth] metres are ignored.
+    """
+
+    normal_search: int = 0
+    max_relative_gap: float = 0.1
+    min_depth: float = 0.1
+    max_depth: float = 80.0
+
+
+@dataclass
+class Frame:
+    """A depth frame in its camera.
+
+    Shape: depth (1, 1, H, W) metres; vertex (H, W, 3) and normal (H, W, 3) in the camera frame; valid (H, W) bool
+    (depth in range and a normal); rgb (H, W, 3) in [0, 1] or None; K (3, 3).
+    """
+
+    depth: torch.Tensor
+    vertex: torch.Tensor
+    normal: torch.Tensor
+    valid: torch.Tensor
+    rgb: torch.Tensor | None
+    K: torch.Tensor
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return tuple(self.depth.shape[-2:])
+
+
+def prepare_frame(depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None = None,
+                  settings: FrameSettings = FrameSettings()) -> Frame:
+    """Back-project one depth image and take its normals.
+
+    Shape: depth (1, 1, H, W) or (H, W) metres, K (3, 3), rgb (1, 3, H, W) or (3, H, W) in [0, 1] -> :class:`Frame`.
+    """
+    if isinstance(depth, torch.Tensor) and depth.ndim == 2:
+        depth = depth[None, None]
+    B, H, W = check_depth(depth)
+    if B != 1:
+        raise DcslamError(f"one frame at a time: depth has batch {B}")
+    K = check_K(K)[0].to(depth.dtype)
+    in_range = (depth >= settings.min_depth) & (depth <= settings.max_depth)
+    depth = torch.where(in_range, depth, torch.zeros((), dtype=depth.dtype, device=depth.device))
+    search = settings.normal_search
+    if search <= 0:
+        search = 1 if float(in_range.float().mean()) > 0.3 else 8
+    vertex = backproject(depth, K)
+    normal, ok = vertex_normals(vertex, in_range, search=search, max_relative_gap=settings.max_relative_gap)
+    if rgb is not None:
+        if rgb.ndim == 3:
+            rgb = rgb[None]
+        if rgb.shape != (1, 3, H, W):
+            raise DcslamError(f"rgb has shape {tuple(rgb.shape)}, expected (1, 3, {H}, {W})")
+        rgb = rgb[0].permute(1, 2, 0).to(depth.dtype)
+    return Frame(depth, vertex[0].permute(1, 2, 0), normal[0].permute(1, 2, 0), ok[0, 0], rgb, K)

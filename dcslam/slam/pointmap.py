@@ -1,0 +1,204 @@
+"""The global point map shared by the mappers, its voxel keys, and rendering it into a camera (z-buffer).
+
+A :class:`PointMap` is a set of surfels in the world frame. Its tensors may carry an autograd graph back to the
+depth (and colour) images that made them; the bookkeeping tensors (``last_seen``, ``voxel_key``) never do.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields, replace
+
+import torch
+
+from dcslam.errors import DcslamError
+from dcslam.geometry.camera import check_K, project
+from dcslam.geometry.se3 import inverse, rotate, transform_points
+
+_KEY_BITS = 21
+_KEY_OFFSET = 1 << (_KEY_BITS - 1)
+
+
+@dataclass
+class PointMap:
+    """A surfel map in the world frame.
+
+    Shape: points (P, 3) metres, normals (P, 3) unit, colors (P, 3) in [0, 1], confidence (P,), radius (P,) metres,
+    last_seen (P,) int64 frame index of the last update, observations (P,) int64 number of frames that updated the
+    point, voxel_key (P,) int64 (see :func:`voxel_keys`).
+    """
+
+    points: torch.Tensor
+    normals: torch.Tensor
+    colors: torch.Tensor
+    confidence: torch.Tensor
+    radius: torch.Tensor
+    last_seen: torch.Tensor
+    observations: torch.Tensor
+    voxel_key: torch.Tensor
+
+    @classmethod
+    def empty(cls, dtype: torch.dtype = torch.float32, device: torch.device | str | None = None) -> "PointMap":
+        z3 = torch.zeros(0, 3, dtype=dtype, device=device)
+        z1 = torch.zeros(0, dtype=dtype, device=device)
+        zi = torch.zeros(0, dtype=torch.int64, device=device)
+        return cls(z3, z3.clone(), z3.clone(), z1, z1.clone(), zi, zi.clone(), zi.clone())
+
+    def __len__(self) -> int:
+        return self.points.shape[0]
+
+    def select(self, index: torch.Tensor) -> "PointMap":
+        """The points at ``index`` (a (P,) bool mask or (Q,) int64 indices)."""
+        return PointMap(*(getattr(self, f.name)[index] for f in fields(self)))
+
+    def detach(self) -> "PointMap":
+        return PointMap(*(getattr(self, f.name).detach() for f in fields(self)))
+
+    def to(self, device: torch.device | str) -> "PointMap":
+        return PointMap(*(getattr(self, f.name).to(device) for f in fields(self)))
+
+    def nbytes(self) -> int:
+        return sum(getattr(self, f.name).element_size() * getattr(self, f.name).nelement() for f in fields(self))
+
+    def cat(self, other: "PointMap") -> "PointMap":
+        return PointMap(*(torch.cat([getattr(self, f.name), getattr(other, f.name)]) for f in fields(self)))
+
+    def with_(self, **changes) -> "PointMap":
+        return replace(self, **changes)
+
+
+def voxel_keys(points: torch.Tensor, voxel_size: float) -> torch.Tensor:
+    """One int64 per point naming its voxel (21 bits per axis: +-2^20 voxels, e.g. +-52 km at 5 cm).
+
+    Shape: points (P, 3) -> (P,) int64.
+    """
+    if voxel_size <= 0:
+        raise DcslamError(f"voxel_size must be > 0, got {voxel_size}")
+    ijk = torch.floor(points.detach() / voxel_size).to(torch.int64) + _KEY_OFFSET
+    ijk = ijk.clamp(0, (1 << _KEY_BITS) - 1)
+    return (ijk[:, 0] << (2 * _KEY_BITS)) | (ijk[:, 1] << _KEY_BITS) | ijk[:, 2]
+
+
+@dataclass
+class ModelView:
+    """A point map rendered into a camera: per pixel the map point nearest to the camera.
+
+    Shape: index (H, W) int64 (-1 = empty), vertex (H, W, 3) and normal (H, W, 3) in the world frame,
+    valid (H, W) bool; T_world_cam (4, 4) and K (3, 3) of the rendering camera.
+    """
+
+    index: torch.Tensor
+    vertex: torch.Tensor
+    normal: torch.Tensor
+    valid: torch.Tensor
+    T_world_cam: torch.Tensor
+    K: torch.Tensor
+
+
+def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
+           splat: int = 0) -> ModelView:
+    """Render a map into a camera with a z-buffer; each point covers a (2 splat + 1)^2 pixel square.
+
+    Shape: T_world_cam (4, 4), K (3, 3) -> :class:`ModelView` of (H, W).
+    """
+    if T_world_cam.shape != (4, 4):
+        raise DcslamError(f"T_world_cam has shape {tuple(T_world_cam.shape)}, expected (4, 4)")
+    K = check_K(K)[0]
+    device, dtype = pm.points.device, pm.points.dtype
+    index = torch.full((height * width,), -1, dtype=torch.int64, device=device)
+    if len(pm):
+        p_cam = transform_points(inverse(T_world_cam.to(dtype)), pm.points.detach())
+        uv, z = project(p_cam, K.to(dtype))
+        ids = torch.arange(len(pm), device=device)
+        px = torch.round(uv).to(torch.int64)
+        zbuf = torch.full((height * width,), float("inf"), dtype=dtype, device=device)
+        cand_pix, cand_z, cand_id = [], [], []
+        for dy in range(-splat, splat + 1):
+            for dx in range(-splat, splat + 1):
+                u, v = px[:, 0] + dx, px[:, 1] + dy
+                ok = (z > 0) & (u >= 0) & (u < width) & (v >= 0) & (v < height)
+                cand_pix.append((v * width + u)[ok])
+                cand_z.append(z[ok])
+                cand_id.append(ids[ok])
+        pix, zc, idc = torch.cat(cand_pix), torch.cat(cand_z), torch.cat(cand_id)
+        zbuf.scatter_reduce_(0, pix, zc, reduce="amin")
+        win = zc <= zbuf[pix]
+        index.scatter_(0, pix[win], idc[win])
+    index = index.view(height, width)
+    valid = index >= 0
+    if len(pm):
+        safe = index.clamp_min(0)
+        vertex = torch.where(valid[..., None], pm.points[safe], torch.zeros((), dtype=dtype, device=device))
+        normal = torch.where(valid[..., None], pm.normals[safe], torch.zeros((), dtype=dtype, device=device))
+    else:
+        vertex = normal = torch.zeros(height, width, 3, dtype=dtype, device=device)
+    return ModelView(index, vertex, normal, valid, T_world_cam.to(dtype), K.to(dtype))
+
+
+def assign_voxels(pm: PointMap, keys: torch.Tensor, target: torch.Tensor,
+                  voxel_size: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Give every frame point without a target (-1) the map point of its voxel, or a new slot per new voxel.
+
+    Shape: keys (F,) int64, target (F,) int64 (-1 = unassigned) -> (target (F,) all >= 0, new voxel keys (Q,)),
+    where slots ``len(pm) ... len(pm) + Q - 1`` are new points.
+    """
+    free = target < 0
+    target = target.clone()
+    n = len(pm)
+    if voxel_size <= 0:
+        count = int(free.sum())
+        target[free] = n + torch.arange(count, device=target.device)
+        return target, keys[free]
+    if n:
+        sorted_keys, order = torch.sort(pm.voxel_key)
+        pos = torch.searchsorted(sorted_keys, keys).clamp_max(n - 1)
+        hit = free & (sorted_keys[pos] == keys)
+        target[hit] = order[pos[hit]]
+        free = free & ~hit
+    new_keys, inverse = torch.unique(keys[free], return_inverse=True)
+    target[free] = n + inverse
+    return target, new_keys
+
+
+def merge(pm: PointMap, target: torch.Tensor, new_keys: torch.Tensor, points: torch.Tensor, normals: torch.Tensor,
+          colors: torch.Tensor, radius: torch.Tensor, weight: torch.Tensor, frame_index: int) -> PointMap:
+    """Confidence-weighted averaging of frame surfels into their target map points (new slots start empty).
+
+    A point updated by weights w_i becomes (c p + sum w_i p_i) / (c + sum w_i), its confidence c + sum w_i; normals
+    are averaged the same way and renormalised. Differentiable with respect to every float input.
+
+    Shape: target (F,) int64 in [0, P + Q), new_keys (Q,), points / normals / colors (F, 3) world frame,
+    radius (F,), weight (F,) -> PointMap of P + Q points.
+    """
+    P, Q = len(pm), new_keys.shape[0]
+    size = P + Q
+    dtype, device = points.dtype, points.device
+    pad3 = torch.zeros(Q, 3, dtype=dtype, device=device)
+    pad1 = torch.zeros(Q, dtype=dtype, device=device)
+    c = torch.cat([pm.confidence, pad1])
+    w_sum = torch.zeros(size, dtype=dtype, device=device).index_add(0, target, weight)
+    touched = w_sum > 0
+    total = c + w_sum
+    safe_total = torch.where(touched, total, torch.ones_like(total))
+
+    def average(old: torch.Tensor, new: torch.Tensor) -> torch.Tensor:
+        old = torch.cat([old, pad3 if old.ndim == 2 else pad1])
+        w = weight[:, None] if new.ndim == 2 else weight
+        s = torch.zeros_like(old).index_add(0, target, w * new)
+        cc = c[:, None] if old.ndim == 2 else c
+        tt = touched[:, None] if old.ndim == 2 else touched
+        st = safe_total[:, None] if old.ndim == 2 else safe_total
+        return torch.where(tt, (cc * old + s) / st, old)
+
+    n = average(pm.normals, normals)
+    n_norm2 = (n * n).sum(1, keepdim=True)
+    n = n / torch.sqrt(torch.where(n_norm2 > 1e-20, n_norm2, torch.ones_like(n_norm2)))
+    observed = torch.zeros(size, dtype=torch.int64, device=device).index_add(
+        0, target, torch.ones_like(target))
+    return PointMap(
+        points=average(pm.points, points), normals=n, colors=average(pm.colors, colors),
+        confidence=total, radius=average(pm.radius, radius),
+        last_seen=torch.where(observed > 0, torch.full_like(observed, frame_index),
+                              torch.cat([pm.last_seen, torch.zeros(Q, dtype=torch.int64, device=device)])),
+        observations=torch.cat([pm.observations, torch.zeros(Q, dtype=torch.int64, device=device)])
+        + (observed > 0).to(torch.int64),
+        voxel_key=torch.cat([pm.voxel_key, new_keys]),
+    )
