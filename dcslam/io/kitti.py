@@ -29,7 +29,7 @@ import numpy as np
 
 from dcslam.errors import DcslamError
 from dcslam.io.drive import Frame
-from dcslam.io.kitti_calib import Calibration, project_velodyne, read_calibration  # noqa: F401  (re-exported)
+from dcslam.io.kitti_calib import CALIB_FILES, Calibration, project_velodyne, read_calibration  # noqa: F401
 from dcslam.io.kitti_oxts import (OxtsPacket, camera_poses, oxts_to_T_world_imu, read_oxts,  # noqa: F401
                                   rebase, write_oxts)
 
@@ -118,7 +118,8 @@ def write_velodyne(path: Path | str, points: np.ndarray) -> None:
 def read_timestamps(path: Path | str) -> np.ndarray:
     """A KITTI ``timestamps.txt`` (``2011-09-26 13:02:25.964389445`` per line) → (N,) float64 POSIX seconds.
 
-    The nanosecond digits are kept: whole seconds from the date, the fraction parsed separately.
+    Whole seconds come from the date and the fraction is parsed separately, so precision is that of float64 POSIX
+    seconds (about 0.2 µs today), not the file's nanoseconds.
     """
     path = Path(path)
     if not path.exists():

@@ -138,12 +138,18 @@ def oxts_to_T_world_imu(packets: list[OxtsPacket]) -> np.ndarray:
 
 def camera_poses(T_world_imu: np.ndarray, calib: Calibration) -> np.ndarray:
     """(N, 4, 4) IMU poses → (N, 4, 4) poses ``T_world_cam2`` of rectified camera 2, re-based so that the first
-    one is the identity (world = camera 2 at the first given pose)."""
+    one is the identity (world = camera 2 at the first given pose).
+
+    KITTI's calibration rotations are orthonormal only to about 1e-7 (seven printed digits), so the camera
+    rotations are projected onto SO(3) (nearest rotation, by SVD); this moves them by about 1e-7.
+    """
     T_world_imu = np.asarray(T_world_imu, dtype=np.float64)
     if T_world_imu.ndim != 3 or T_world_imu.shape[1:] != (4, 4) or len(T_world_imu) == 0:
         raise DcslamError(f"IMU poses have shape {T_world_imu.shape}, expected (N, 4, 4) with N >= 1")
-    T_world_cam2 = T_world_imu @ np.linalg.inv(calib.T_cam2_imu)
-    return rebase(T_world_cam2)
+    T_world_cam2 = rebase(T_world_imu @ np.linalg.inv(calib.T_cam2_imu))
+    U, _, Vt = np.linalg.svd(T_world_cam2[:, :3, :3])
+    T_world_cam2[:, :3, :3] = U @ Vt  # det(U Vt) = +1: the rotations are 1e-7 from proper ones
+    return T_world_cam2
 
 
 def rebase(T_world_cam: np.ndarray, index: int = 0) -> np.ndarray:
