@@ -1,0 +1,184 @@
+"""``prepare-kitti``: KITTI raw + depth-completion folders (real or generated) → one drive file per drive + splits.
+
+Every drive of a split becomes ``<out>/<date>_drive_<NNNN>_sync.h5`` (schema in :mod:`dcslam.io.drive`) holding
+only the frames that have depth (5 .. n-6 for real KITTI), with ``frame_ids`` giving the KITTI numbers and poses
+re-based so that camera 2 at the first STORED frame (the first frame with depth, not raw frame 0) is the identity.
+``<out>/splits.json`` lists the drive names of each split; ``<out>/prepare-kitti.json`` records the settings.
+
+Splits. Real KITTI (no ``SYNTHETIC`` marker) uses the thesis's own split by default (:data:`THESIS_SPLITS`):
+drives of the split absent from the root are skipped with a note, and drives found in no split are noted and not
+converted unless ``include_unsplit``. Generated drives are divided deterministically in the thesis's proportion
+(:func:`proportional_splits`). Any split can be given instead (a ``splits.json``-style file).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from dcslam.errors import DcslamError
+from dcslam.io.drive import DriveWriter, read_splits
+from dcslam.io.kitti import DriveIndex, RawDrive, find_drives, index_drive, read_drive
+from dcslam.progress import track
+from dcslam.workspace import stage_config, write_json_atomic
+
+SPLIT_NAMES = ("train", "val", "test")
+
+
+def _names(date: str, numbers: str) -> list[str]:
+    return [f"{date}_drive_{n}_sync" for n in numbers.split()]
+
+
+THESIS_SPLITS: dict[str, list[str]] = {
+    "train": _names("2011_09_26", "0011 0027 0057 0096 0101")
+    + _names("2011_09_28", "0075 0098 0141 0145 0167 0171 0198 0220")
+    + _names("2011_09_30", "0018") + _names("2011_10_03", "0042"),
+    "val": _names("2011_09_26", "0029 0051") + _names("2011_09_28", "0095 0168"),
+    "test": _names("2011_09_26", "0001 0005 0009 0018 0048") + _names("2011_10_03", "0027"),
+}
+"""The drive split of the thesis: 15 train, 4 validation and 6 test drives of KITTI raw."""
+
+
+def proportional_splits(names: list[str]) -> dict[str, list[str]]:
+    """Divide drive names deterministically in the thesis's proportion (15 / 4 / 5 of 24).
+
+    Names are sorted; the last ``round(5n/24)`` (at least 1) go to test, the ``round(4n/24)`` before them (at least
+    1 when n >= 3) to val, the rest to train.
+    """
+    names = sorted(set(names))
+    n = len(names)
+    if n == 0:
+        return {split: [] for split in SPLIT_NAMES}
+    n_test = max(1, int(n * 5 / 24 + 0.5))
+    n_val = max(1 if n >= 3 else 0, int(n * 4 / 24 + 0.5))
+    n_val = min(n_val, n - n_test)
+    n_train = n - n_test - n_val
+    return {"train": names[:n_train], "val": names[n_train:n_train + n_val], "test": names[n_train + n_val:]}
+
+
+@dataclass(frozen=True)
+class PreparedDrive:
+    """One written drive file."""
+
+    name: str
+    split: str
+    path: Path
+    frames: int
+
+
+@dataclass(frozen=True)
+class PrepareResult:
+    """What :func:`prepare_kitti` wrote and what it noticed (``notes``: drives skipped and why)."""
+
+    source: str
+    drives: tuple[PreparedDrive, ...]
+    splits: dict[str, list[str]]
+    splits_path: Path
+    config_path: Path
+    notes: tuple[str, ...]
+
+
+def _listing(names: list[str], limit: int = 6) -> str:
+    shown = ", ".join(names[:limit])
+    return shown + (f" and {len(names) - limit} more" if len(names) > limit else "")
+
+
+def _assign(found: list[RawDrive], splits: dict[str, list[str]], splits_label: str, include_unsplit: bool,
+            notes: list[str]) -> list[tuple[RawDrive, str]]:
+    split_of: dict[str, str] = {}
+    for split in SPLIT_NAMES:
+        for name in splits.get(split, []):
+            if name in split_of and split_of[name] != split:
+                raise DcslamError(f"{splits_label}: drive {name} is in both {split_of[name]} and {split}")
+            split_of[name] = split
+    found_names = {d.name for d in found}
+    absent = sorted(name for name in split_of if name not in found_names)
+    if absent:
+        notes.append(f"{len(absent)} drive(s) of {splits_label} not found, skipped: {_listing(absent)}")
+    chosen, unsplit = [], []
+    for drive in found:
+        split = split_of.get(drive.name)
+        if split is None:
+            unsplit.append(drive.name)
+            if not include_unsplit:
+                continue
+            split = ""
+        chosen.append((drive, split))
+    if unsplit:
+        what = "converted with no split" if include_unsplit else "not converted (use --all-drives to convert them)"
+        notes.append(f"{len(unsplit)} drive(s) in no split of {splits_label}, {what}: {_listing(unsplit)}")
+    return chosen
+
+
+def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: Path | str | None = None,
+                  max_frames: int | None = None, include_unsplit: bool = False,
+                  force: bool = False) -> PrepareResult:
+    """Convert the drives of a KITTI root (real or generated) into drive files and ``splits.json``.
+
+    Args:
+        kitti_root: folder holding ``raw/`` and ``depth_completion/`` (layout in :mod:`dcslam.io.kitti`).
+        out_dir: where drive files, ``splits.json`` and ``prepare-kitti.json`` are written.
+        splits_file: a ``{"train": [...], "val": [...], "test": [...]}`` file of drive names; default: the thesis
+            split for real KITTI, :func:`proportional_splits` for generated data.
+        max_frames: keep at most this many frames (the first ones with depth) per drive.
+        include_unsplit: also convert drives found in no split (their ``split`` attribute is empty).
+        force: overwrite drive files and ``splits.json`` that exist.
+
+    Every drive is checked (:func:`dcslam.io.kitti.index_drive`) before anything is written; outputs that exist
+    without ``force`` fail before anything is written. Each drive file is written atomically.
+    """
+    kitti_root, out_dir = Path(kitti_root), Path(out_dir)
+    if max_frames is not None and max_frames < 1:
+        raise DcslamError(f"--max-frames is {max_frames}, expected at least 1")
+    all_drives = find_drives(kitti_root)
+    found = [d for d in all_drives if d.has_raw and d.depth_dir is not None]
+    if not found:
+        raise DcslamError(f"no KITTI drives under {kitti_root} (looked for raw/<date>/<date>_drive_NNNN_sync with "
+                          f"depth_completion/{{train,val}}/<date>_drive_NNNN_sync); run `dcslam synth` to generate a "
+                          f"KITTI-format dataset there, or pass --kitti DIR")
+    source = found[0].source
+    notes: list[str] = []
+    raw_only = [d.name for d in all_drives if d.has_raw and d.depth_dir is None]
+    depth_only = [d.name for d in all_drives if not d.has_raw and d.depth_dir is not None]
+    if raw_only:
+        notes.append(f"{len(raw_only)} raw drive(s) without depth-completion folders, skipped: {_listing(raw_only)}")
+    if depth_only:
+        notes.append(f"{len(depth_only)} depth-completion drive(s) without raw folders, skipped: "
+                     f"{_listing(depth_only)}")
+
+    if splits_file is not None:
+        splits, label = read_splits(splits_file), str(splits_file)
+    elif source == "kitti":
+        splits, label = THESIS_SPLITS, "the thesis split"
+    else:
+        splits, label = proportional_splits([d.name for d in found]), "the proportional split"
+    chosen = _assign(found, splits, label, include_unsplit, notes)
+    if not chosen:
+        raise DcslamError(f"none of the {len(found)} drive(s) under {kitti_root} is in {label}; nothing to convert")
+
+    splits_path = out_dir / "splits.json"
+    targets = [out_dir / f"{drive.name}.h5" for drive, _ in chosen]
+    if not force:
+        for path in (*targets, splits_path):
+            if path.exists():
+                raise DcslamError(f"{path} exists; pass --force to overwrite it")
+    indexes: list[DriveIndex] = [index_drive(drive).head(max_frames) for drive, _ in chosen]
+
+    written = []
+    for (drive, split), index, path in zip(chosen, indexes, targets):
+        frames = track(read_drive(index), drive.name, total=len(index))
+        first = next(frames)  # its image gives the frame size
+        height, width = first.rgb.shape[:2]
+        with DriveWriter(path, index.K, height, width, source=source, date=drive.date, drive=drive.name,
+                         split=split, force=force) as writer:
+            writer.append(first)
+            for frame in frames:
+                writer.append(frame)
+        written.append(PreparedDrive(drive.name, split, path, len(index)))
+
+    out_splits = {split: [d.name for d in written if d.split == split] for split in SPLIT_NAMES}
+    write_json_atomic(splits_path, out_splits, force=True)
+    config_path = write_json_atomic(out_dir / "prepare-kitti.json", stage_config("prepare-kitti", {
+        "kitti_root": str(kitti_root), "out_dir": str(out_dir), "source": source, "splits": label,
+        "max_frames": max_frames, "include_unsplit": include_unsplit,
+        "drives": {d.name: {"split": d.split, "frames": d.frames} for d in written}}), force=True)
+    return PrepareResult(source, tuple(written), out_splits, splits_path, config_path, tuple(notes))

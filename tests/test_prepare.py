@@ -1,0 +1,199 @@
+"""prepare_kitti: KITTI roots (real sample, tiny generated ones) → drive files, splits.json, config."""
+import importlib.util
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from dcslam.errors import DcslamError
+from dcslam.io import kitti
+from dcslam.io.drive import DriveFile, read_splits
+from dcslam.prepare import THESIS_SPLITS, prepare_kitti, proportional_splits
+
+_spec = importlib.util.spec_from_file_location("kitti_fixtures", Path(__file__).parent / "io" / "kitti_fixtures.py")
+fx = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(fx)
+
+
+@pytest.fixture
+def tiny_root(tmp_path) -> Path:
+    """A KITTI root with one small drive 2011_09_26_drive_0002_sync (in no thesis split): 14 frames, depth 5..8."""
+    fx.write_tiny_drive(tmp_path / "tiny")
+    return tmp_path / "tiny"
+
+
+def _files(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir()) if folder.exists() else []
+
+
+class TestSplits:
+    def test_thesis_split(self):
+        sizes = {k: len(v) for k, v in THESIS_SPLITS.items()}
+        assert sizes == {"train": 15, "val": 4, "test": 6}
+        names = sum(THESIS_SPLITS.values(), [])
+        assert len(set(names)) == len(names)
+        assert "2011_09_26_drive_0001_sync" in THESIS_SPLITS["test"]
+        assert "2011_10_03_drive_0042_sync" in THESIS_SPLITS["train"]
+
+    @pytest.mark.parametrize("n, sizes", [(24, (15, 4, 5)), (1, (0, 0, 1)), (2, (1, 0, 1)), (3, (1, 1, 1)),
+                                          (5, (3, 1, 1)), (12, (7, 2, 3)), (48, (30, 8, 10))])
+    def test_proportional(self, n, sizes):
+        names = [f"d{i:03d}" for i in range(n)]
+        splits = proportional_splits(list(reversed(names)))
+        assert tuple(len(splits[k]) for k in ("train", "val", "test")) == sizes
+        assert sorted(sum(splits.values(), [])) == names
+        assert splits == proportional_splits(names)  # deterministic, independent of the order given
+
+
+class TestPrepareReal:
+    def test_real_drive(self, tmp_path):
+        root = fx.link_real_drive(tmp_path / "kitti")
+        result = prepare_kitti(root, tmp_path / "drives", max_frames=3)
+        name = "2011_09_26_drive_0001_sync"
+        assert result.source == "kitti"
+        assert [(d.name, d.split, d.frames) for d in result.drives] == [(name, "test", 3)]
+        assert _files(tmp_path / "drives") == [f"{name}.h5", "prepare-kitti.json", "splits.json"]
+        assert read_splits(result.splits_path) == {"train": [], "val": [], "test": [name]}
+        assert any("of the thesis split not found" in note for note in result.notes)
+        index = kitti.index_drive(kitti.find_drives(root)[0])
+        with DriveFile(tmp_path / "drives" / f"{name}.h5") as drive:
+            assert drive.shape == (3, 375, 1242)
+            assert drive.attrs == {"schema": "dcslam.drive/1", "source": "kitti", "date": "2011_09_26",
+                                   "drive": name, "split": "test"}
+            assert drive.frame_ids.tolist() == [5, 6, 7]
+            assert np.array_equal(drive.poses[0], np.eye(4))
+            assert np.allclose(drive.poses, index.T_world_cam[:3], atol=1e-12)
+            assert np.array_equal(drive.timestamps, index.timestamps[:3])
+            assert np.array_equal(drive.K, index.calib.K_cam2)
+            assert np.array_equal(drive.rgb(1), kitti.read_image(fx.REAL_RAW / "image_02" / "data" / "0000000005.png"))
+            sparse = kitti.read_depth_png(fx.REAL_DEPTH / "velodyne_raw" / "image_02" / "0000000005.png")
+            assert np.array_equal(drive.depth("sparse", 2), sparse)
+        config = json.loads(result.config_path.read_text())
+        assert config["stage"] == "prepare-kitti" and config["settings"]["max_frames"] == 3
+
+    def test_thesis_split_notes_and_unsplit(self, tmp_path):
+        root = tmp_path / "kitti"
+        for name in ("2011_09_26_drive_0011_sync", "2011_09_26_drive_0029_sync", "2011_09_26_drive_0002_sync"):
+            fx.write_tiny_drive(root, name, n_frames=12)
+        fx.write_tiny_drive(root, "2011_09_28_drive_0075_sync", n_frames=12, depth_split="val")
+        result = prepare_kitti(root, tmp_path / "drives")
+        assert result.splits == {"train": ["2011_09_26_drive_0011_sync", "2011_09_28_drive_0075_sync"],
+                                 "val": ["2011_09_26_drive_0029_sync"], "test": []}
+        assert not (tmp_path / "drives" / "2011_09_26_drive_0002_sync.h5").exists()
+        assert any("in no split" in n and "2011_09_26_drive_0002_sync" in n for n in result.notes)
+        again = prepare_kitti(root, tmp_path / "drives", include_unsplit=True, force=True)
+        assert {d.name: d.split for d in again.drives}["2011_09_26_drive_0002_sync"] == ""
+        with DriveFile(tmp_path / "drives" / "2011_09_26_drive_0002_sync.h5") as drive:
+            assert drive.attrs["split"] == "" and drive.frame_ids.tolist() == [5, 6]
+
+    def test_raw_only_and_depth_only_are_noted(self, tmp_path):
+        root = tmp_path / "kitti"
+        fx.write_tiny_drive(root, "2011_09_26_drive_0011_sync", n_frames=11)
+        fx.write_tiny_drive(root, "2011_09_26_drive_0001_sync", n_frames=11)
+        fx.write_tiny_drive(root, "2011_09_26_drive_0005_sync", n_frames=11)
+        import shutil
+        shutil.rmtree(root / "depth_completion" / "train" / "2011_09_26_drive_0001_sync")
+        shutil.rmtree(root / "raw" / "2011_09_26" / "2011_09_26_drive_0005_sync")
+        result = prepare_kitti(root, tmp_path / "drives")
+        assert [d.name for d in result.drives] == ["2011_09_26_drive_0011_sync"]
+        assert any("without depth-completion" in n and "0001" in n for n in result.notes)
+        assert any("without raw" in n and "0005" in n for n in result.notes)
+
+
+class TestPrepareSynthetic:
+    def test_proportional_split_and_source(self, tmp_path):
+        root = tmp_path / "kitti"
+        names = [f"2011_09_26_drive_{i:04d}_sync" for i in range(1, 6)]
+        for i, name in enumerate(names):
+            fx.write_tiny_drive(root, name, n_frames=11, size=(16, 24), seed=i)
+        (root / kitti.SYNTHETIC_MARKER).write_text("made by dcslam synth\n")
+        result = prepare_kitti(root, tmp_path / "drives")
+        assert result.source == "synthetic" and not result.notes
+        assert result.splits == {"train": names[:3], "val": names[3:4], "test": names[4:]}
+        for d in result.drives:
+            with DriveFile(d.path) as drive:
+                assert drive.attrs["source"] == "synthetic" and drive.attrs["split"] == d.split
+                assert drive.frame_ids.tolist() == [5] and drive.shape == (1, 16, 24)
+
+    def test_splits_file(self, tmp_path):
+        root = tmp_path / "kitti"
+        fx.write_tiny_drive(root, "2011_09_26_drive_0001_sync", n_frames=11)
+        fx.write_tiny_drive(root, "2011_09_26_drive_0002_sync", n_frames=11)
+        (tmp_path / "s.json").write_text(json.dumps({"train": ["2011_09_26_drive_0002_sync"], "val": [],
+                                                     "test": ["2011_09_26_drive_0001_sync", "other_drive"]}))
+        result = prepare_kitti(root, tmp_path / "drives", splits_file=tmp_path / "s.json")
+        assert result.splits == {"train": ["2011_09_26_drive_0002_sync"], "val": [],
+                                 "test": ["2011_09_26_drive_0001_sync"]}
+        assert any("other_drive" in n for n in result.notes)
+        (tmp_path / "bad.json").write_text('{"train": ["a"], "val": [], "test": ["a"]}')
+        with pytest.raises(DcslamError, match="in both train and test"):
+            prepare_kitti(root, tmp_path / "out2", splits_file=tmp_path / "bad.json")
+
+
+class TestPrepareFailures:
+    """Each failure names the file, and leaves no drive file (complete or partial) and no temporary file."""
+
+    def test_no_data_suggests_synth(self, tmp_path):
+        with pytest.raises(DcslamError, match=r"no KITTI drives under .*empty.*dcslam synth"):
+            prepare_kitti(tmp_path / "empty", tmp_path / "drives")
+
+    def test_existing_output_needs_force(self, tiny_root, tmp_path):
+        out = tmp_path / "drives"
+        first = prepare_kitti(tiny_root, out, include_unsplit=True)
+        stamp = first.drives[0].path.stat().st_mtime_ns
+        with pytest.raises(DcslamError, match="2011_09_26_drive_0002_sync.h5 exists; pass --force"):
+            prepare_kitti(tiny_root, out, include_unsplit=True)
+        assert first.drives[0].path.stat().st_mtime_ns == stamp
+        prepare_kitti(tiny_root, out, include_unsplit=True, force=True)
+        (out / "2011_09_26_drive_0002_sync.h5").unlink()
+        with pytest.raises(DcslamError, match="splits.json exists"):  # checked before any drive is written
+            prepare_kitti(tiny_root, out, include_unsplit=True)
+        assert not (out / "2011_09_26_drive_0002_sync.h5").exists()
+
+    @pytest.mark.parametrize("breakage, match", [
+        ("calib", "calib_cam_to_cam.txt not found"),
+        ("oxts", r"0000000003.txt: 29 fields, expected 30"),
+        ("timestamps", "timestamps.txt: 15 timestamps but 14 images"),
+        ("8bit", "0000000007.png: expected a 16-bit"),
+        ("truncated", "0000000008.png: not a readable PNG"),
+    ])
+    def test_bad_input(self, tiny_root, tmp_path, breakage, match):
+        drive = kitti.find_drives(tiny_root)[0]
+        if breakage == "calib":
+            (drive.date_dir / "calib_cam_to_cam.txt").unlink()
+        elif breakage == "oxts":
+            drive.oxts_path(3).write_text(" ".join(drive.oxts_path(3).read_text().split()[:29]) + "\n")
+        elif breakage == "timestamps":
+            path = drive.raw_dir / "image_02" / "timestamps.txt"
+            path.write_text(path.read_text() + "2011-09-26 13:02:40.000000000\n")
+        elif breakage == "8bit":
+            cv2.imwrite(str(drive.depth_path("velodyne_raw", 7)), np.zeros((32, 48), np.uint8))
+        else:
+            path = drive.depth_path("groundtruth", 8)
+            path.write_bytes(path.read_bytes()[:100])
+        out = tmp_path / "drives"
+        with pytest.raises(DcslamError, match=match):
+            prepare_kitti(tiny_root, out, include_unsplit=True)
+        assert _files(out) == []
+
+    def test_interrupted_conversion_leaves_nothing(self, tiny_root, tmp_path, monkeypatch):
+        calls = []
+        real_read_image = kitti.read_image
+
+        def interrupted(path):
+            calls.append(path)
+            if len(calls) == 3:
+                raise KeyboardInterrupt
+            return real_read_image(path)
+
+        monkeypatch.setattr(kitti, "read_image", interrupted)
+        out = tmp_path / "drives"
+        with pytest.raises(KeyboardInterrupt):
+            prepare_kitti(tiny_root, out, include_unsplit=True)
+        assert len(calls) == 3 and _files(out) == []
+
+    def test_max_frames_checked(self, tiny_root, tmp_path):
+        with pytest.raises(DcslamError, match="at least 1"):
+            prepare_kitti(tiny_root, tmp_path / "drives", max_frames=0)
