@@ -67,7 +67,7 @@ def write_tum(path: Path | str, timestamps: np.ndarray, T_world_cam: np.ndarray,
     q = rotation_to_quaternion(T_world_cam[:, :3, :3])
     t = T_world_cam[:, :3, 3]
     lines = ["# timestamp tx ty tz qx qy qz qw"]
-    lines += [f"{s:.9f} " + " ".join(f"{v:.9f}" for v in (*ti, *qi)) for s, ti, qi in zip(timestamps, t, q)]
+    lines += [f"{s:.9f} " + " ".join(f"{v:.12f}" for v in (*ti, *qi)) for s, ti, qi in zip(timestamps, t, q)]
     with atomic_output(path, force=force) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
     return Path(path)

@@ -1,0 +1,92 @@
+"""TUM trajectory files and the quaternion helpers."""
+import numpy as np
+import pytest
+
+from dcslam.errors import DcslamError
+from dcslam.io.tum import quaternion_to_rotation, read_tum, rotation_to_quaternion, write_tum
+
+
+def random_poses(n: int, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    T = np.tile(np.eye(4), (n, 1, 1))
+    T[:, :3, :3] = quaternion_to_rotation(rng.normal(size=(n, 4)))
+    T[:, :3, 3] = rng.uniform(-500, 500, (n, 3))
+    return T
+
+
+class TestQuaternions:
+    def test_known_answers(self):
+        Rz90 = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+        assert rotation_to_quaternion(Rz90) == pytest.approx([0, 0, np.sqrt(0.5), np.sqrt(0.5)])
+        assert rotation_to_quaternion(np.eye(3)) == pytest.approx([0, 0, 0, 1])
+        assert quaternion_to_rotation([0, 0, 1, 1]) == pytest.approx(Rz90)  # normalised on the way
+
+    @pytest.mark.parametrize("axis", range(3))
+    def test_half_turns(self, axis):
+        q = np.zeros(4)
+        q[axis] = 1.0
+        R = quaternion_to_rotation(q)
+        assert np.allclose(np.diag(R), [1 if i == axis else -1 for i in range(3)])
+        back = rotation_to_quaternion(R)
+        assert abs(back[axis]) == pytest.approx(1.0) and quaternion_to_rotation(back) == pytest.approx(R)
+
+    def test_batch_shapes_and_round_trip(self):
+        q = np.random.default_rng(3).normal(size=(2, 5, 4))
+        R = quaternion_to_rotation(q)
+        assert R.shape == (2, 5, 3, 3)
+        assert np.abs(R @ np.swapaxes(R, -1, -2) - np.eye(3)).max() < 1e-12
+        assert np.allclose(np.linalg.det(R), 1.0)
+        back = rotation_to_quaternion(R)
+        assert back.shape == (2, 5, 4) and np.all(back[..., 3] >= 0)
+        expect = q / np.linalg.norm(q, axis=-1, keepdims=True) * np.sign(q[..., 3:])
+        assert back == pytest.approx(expect, abs=1e-12)
+
+
+class TestTumFile:
+    def test_round_trip_random_poses(self, tmp_path):
+        T = random_poses(200)
+        stamps = 1.3e9 + np.cumsum(np.random.default_rng(1).uniform(0.01, 0.2, 200))
+        write_tum(tmp_path / "t.txt", stamps, T)
+        back_stamps, back = read_tum(tmp_path / "t.txt")
+        assert np.abs(back - T).max() < 1e-9
+        assert np.abs(back_stamps - stamps).max() < 1e-6
+        assert (tmp_path / "t.txt").read_text().startswith("# timestamp tx ty tz qx qy qz qw\n")
+
+    def test_comments_blank_lines_and_commas(self, tmp_path):
+        (tmp_path / "t.txt").write_text("# header\n\n0.5 1 2 3 0 0 0 1\n1.0, 1, 2, 4, 0, 0, 0, 1\n")
+        stamps, T = read_tum(tmp_path / "t.txt")
+        assert stamps.tolist() == [0.5, 1.0] and T[1, :3, 3].tolist() == [1, 2, 4]
+
+    @pytest.mark.parametrize("text, match", [
+        ("0 1 2 3 0 0 1\n", r"t.txt:1: 7 fields, expected 8"),
+        ("0 1 2 3 0 0 0 1\n1 1 2 3 0 0 zero 1\n", r"t.txt:2: not a number"),
+        ("0 1 2 3 0 0 0 2\n", "norm 2.0000, expected 1"),
+        ("0 1 2 3 0 0 0 1\n0 1 2 3 0 0 0 1\n", "not strictly increasing"),
+        ("2 1 2 3 0 0 0 1\n1 1 2 3 0 0 0 1\n", "not strictly increasing"),
+        ("0 nan 2 3 0 0 0 1\n", "non-finite"),
+        ("# only a comment\n", "no poses"),
+    ])
+    def test_malformed(self, tmp_path, text, match):
+        (tmp_path / "t.txt").write_text(text)
+        with pytest.raises(DcslamError, match=match):
+            read_tum(tmp_path / "t.txt")
+
+    def test_missing_file(self, tmp_path):
+        with pytest.raises(DcslamError, match="not found"):
+            read_tum(tmp_path / "none.txt")
+
+    def test_write_checks(self, tmp_path):
+        T = random_poses(3)
+        with pytest.raises(DcslamError, match=r"\(N, 4, 4\)"):
+            write_tum(tmp_path / "a.txt", np.arange(2.0), T)
+        T[1, 0, 3] = np.inf
+        with pytest.raises(DcslamError, match="non-finite"):
+            write_tum(tmp_path / "a.txt", np.arange(3.0), T)
+        assert not (tmp_path / "a.txt").exists()
+
+    def test_no_overwrite_without_force(self, tmp_path):
+        write_tum(tmp_path / "a.txt", np.arange(2.0), random_poses(2))
+        with pytest.raises(DcslamError, match="exists"):
+            write_tum(tmp_path / "a.txt", np.arange(2.0), random_poses(2, seed=1))
+        write_tum(tmp_path / "a.txt", np.arange(2.0), random_poses(2, seed=1), force=True)
+        assert read_tum(tmp_path / "a.txt")[1] == pytest.approx(random_poses(2, seed=1), abs=1e-9)
