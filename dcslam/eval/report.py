@@ -1,0 +1,131 @@
+"""What ``dcslam score`` computes and writes: per-layer depth / trajectory / map tables, and the full report
+(Tables 5.1 and 5.2 as Markdown and CSV, a trajectory plot per test drive, a figure of depth examples).
+
+Every output is checked before anything is written: an existing file without ``force`` fails the whole call with
+nothing overwritten, and so does bad input (a layer whose frame count does not match its drive, trajectories of
+different lengths or with unsorted timestamps, a run without validation metrics).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from dcslam.errors import DcslamError
+from dcslam.eval.depth import METRICS, mean_errors
+from dcslam.eval.layers import (TrajectoryPair, drive_file, resolve_layer, score_layer_depth)
+from dcslam.eval.maps import MapScores
+from dcslam.eval.tables import (Column, LayerResult, Table, list_runs, table_5_1, table_5_2, table_5_2_results,
+                                thesis_figures)
+from dcslam.workspace import Workspace, write_text_atomic
+
+
+def check_outputs(paths: list[Path], force: bool) -> None:
+    """Fail, before anything is written, when an output exists and ``force`` is false."""
+    existing = [str(p) for p in paths if Path(p).exists()]
+    if existing and not force:
+        raise DcslamError(f"{existing[0]} exists{f' (and {len(existing) - 1} more)' if len(existing) > 1 else ''}; "
+                          "pass --force to overwrite")
+
+
+def depth_table(ws: Workspace, layer_name: str, drives: list[str], interpolate: bool = True) -> Table:
+    """Depth errors of a layer: one row per drive (mean over its frames) and a row ``all`` (mean over all frames)."""
+    layer = resolve_layer(ws, layer_name)
+    per_drive = score_layer_depth(ws, layer, drives, interpolate)
+    columns = [Column("drive", "drive"), Column("frames", "frames"), Column("mae_mm", "MAE (mm)", "{:.1f}"),
+               Column("rmse_mm", "RMSE (mm)", "{:.1f}"), Column("imae_per_km", "iMAE (1/km)", "{:.2f}"),
+               Column("irmse_per_km", "iRMSE (1/km)", "{:.2f}"), Column("coverage", "coverage", "{:.3f}")]
+    table = Table(f"depth errors of {layer.name}", columns)
+    for drive, frames in per_drive.items():
+        mean = mean_errors(frames)
+        table.rows.append({"drive": drive, "frames": len(frames), **{m: getattr(mean, m) for m in METRICS},
+                           "coverage": mean.coverage})
+    overall = mean_errors(e for frames in per_drive.values() for e in frames)
+    table.rows.append({"drive": "all", "frames": sum(len(f) for f in per_drive.values()),
+                       **{m: getattr(overall, m) for m in METRICS}, "coverage": overall.coverage})
+    table.notes.append("KITTI devkit: holes of the prediction filled by background interpolation"
+                       if interpolate else "holes of the prediction scored as depth 0")
+    return table
+
+
+TRAJECTORY_SHOWN = ("poses", "localisation", "ate_aligned_rmse", "ate_rmse", "rpe_trans_m_rmse", "rpe_rot_deg_rmse")
+
+
+def trajectory_table(pairs: dict[str, TrajectoryPair], title: str) -> Table:
+    """Every trajectory score of each pair (``{name: pair}``), one row each (evo's full statistics in the CSV)."""
+    rows = [{"trajectory": name, **pair.score().flat()} for name, pair in pairs.items()]
+    keys = [k for k in rows[0] if k != "trajectory"] if rows else list(TRAJECTORY_SHOWN)
+    table = Table(title, [Column("trajectory", "trajectory")] + [Column(k, k) for k in keys], rows)
+    table.notes.append("localisation: thesis accuracy (m + rad, acos argument clamped to [-1, 1]); "
+                       "localisation_thesis_clamp: clamped to [0, 1] as the thesis's code did")
+    return table
+
+
+def map_table(scores: dict[str, MapScores], title: str) -> Table:
+    columns = [Column("map", "map"), Column("chamfer_m2", "chamfer (m²)"), Column("accuracy_m", "accuracy (m)"),
+               Column("completeness_m", "completeness (m)"), Column("map_points", "map points"),
+               Column("gt_points", "gt points")]
+    return Table(title, columns, [{"map": name, **s.as_dict()} for name, s in scores.items()])
+
+
+def write_table_csv(table: Table, path: Path, force: bool = False) -> Path:
+    check_outputs([path], force)
+    return write_text_atomic(path, table.to_csv(), force=True)
+
+
+@dataclass
+class Report:
+    table_5_1: Table
+    table_5_2: Table
+    written: list[Path]
+
+
+def _depth_example_rows(ws: Workspace, results: list[LayerResult], drive: str):
+    """(rgb, rows) for the middle frame of ``drive``: one row per model layer that has depth."""
+    from dcslam.io.drive import DriveFile, read_layer
+
+    models = [r for r in results if r.depth is not None and r.layer not in ("sparse", "dense")]
+    if not models:
+        return None, []
+    with DriveFile(drive_file(ws, drive)) as d:
+        i = len(d) // 2
+        rgb, sparse, dense = d.rgb(i), d.depth("sparse", i), d.depth("dense", i)
+        n = len(d)
+    rows = []
+    for result in models:
+        layer = resolve_layer(ws, result.layer)
+        pred = read_layer(layer.source(drive), expect_frames=n).depth[i]
+        rows.append((f"{result.label} ({result.layer})", sparse, pred, dense))
+    return rgb, rows
+
+
+def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, force: bool = False) -> Report:
+    """Compute Tables 5.1 and 5.2 over ``drives`` and write them (Markdown + CSV) with the figures."""
+    from dcslam.eval.plots import plot_depth_examples, plot_trajectories
+    from dcslam.io.drive import DriveFile
+
+    out_dir = Path(out_dir) if out_dir else ws.results
+    thesis = thesis_figures()
+    runs = list_runs(ws)
+    t51 = table_5_1(runs, thesis)
+    results = table_5_2_results(ws, runs, drives)
+    t52 = table_5_2(results, thesis, drives)
+    rgb, examples = _depth_example_rows(ws, results, drives[0])
+    tables = {"table_5_1": t51, "table_5_2": t52}
+    outputs = [out_dir / f"{name}.{ext}" for name in tables for ext in ("md", "csv")]
+    plots = [out_dir / f"trajectories_{drive}.png" for drive in drives]
+    examples_path = out_dir / "depth_examples.png"
+    check_outputs(outputs + plots + ([examples_path] if examples else []), force)
+
+    written = []
+    for name, table in tables.items():
+        written.append(write_text_atomic(out_dir / f"{name}.md", table.to_markdown(), force=True))
+        written.append(write_text_atomic(out_dir / f"{name}.csv", table.to_csv(), force=True))
+    for drive, path in zip(drives, plots):
+        with DriveFile(drive_file(ws, drive)) as d:
+            T_gt = d.poses
+        estimates = {f"{r.label} ({r.layer})": r.pairs[drive].T_est for r in results if drive in r.pairs}
+        written.append(plot_trajectories(path, T_gt, estimates, title=f"{drive}: top view", force=True))
+    if examples:
+        written.append(plot_depth_examples(examples_path, examples, rgb=rgb, force=True))
+    return Report(table_5_1=t51, table_5_2=t52, written=written)
+
