@@ -31,7 +31,8 @@ class SparseConv(nn.Module):
         x: (B, C_in, H, W), mask: (B, 1, H, W) in {0, 1} → (B, C_out, H, W), (B, 1, H, W)
     """
 
-    def __init__(self, in_channels: int, out_channels: int, kernel_size: int, eps: float = 1e-8, relu: bool = True):
+    def __init__(self, in_channels: int, out_channels: int, kernel_size: int, eps: float = 1e-8, relu: bool = True,
+                 init_noise: float = 0.3):
         super().__init__()
         if kernel_size % 2 != 1:
             raise DcslamError(f"kernel size must be odd, got {kernel_size}")
@@ -39,7 +40,13 @@ class SparseConv(nn.Module):
         self.eps, self.relu = eps, relu
         self.weight = nn.Parameter(torch.empty(out_channels, in_channels, kernel_size, kernel_size))
         self.bias = nn.Parameter(torch.zeros(out_channels))
-        nn.init.kaiming_uniform_(self.weight, a=5 ** 0.5)
+        # Initialisation: every output channel starts as a normalised average of its valid inputs, channel mean
+        # included (weight 1 / in_channels), plus 30 % noise to break symmetry. The untrained network is then a
+        # smoothing interpolator of the sparse depth. The usual fan-in initialisation (in_channels · k²) ignores
+        # that the window sum is already divided by the valid-pixel count: six such layers shrink the output by
+        # ~1e-7 and the ReLUs start dead; a zero-mean one at the right scale blows up where few pixels are valid.
+        with torch.no_grad():
+            self.weight.normal_(1.0, init_noise).div_(in_channels)
         self.register_buffer("ones", torch.ones(1, 1, kernel_size, kernel_size), persistent=False)
 
     def forward(self, x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

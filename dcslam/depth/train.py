@@ -1,0 +1,350 @@
+"""Training a depth-completion network with the thesis's recipes.
+
+Losses: masked MSE (``sparse`` or ``dense`` mask) or chamfer between maps of predicted and ground-truth depth built
+with ground-truth poses (``map_frames`` frames per map). AdamW (lr 1e-3, weight decay 0.01); at most 200 frames
+per drive; the training drives in turn; after each epoch a validation pass without back-propagation averaged over
+the validation drives (chamfer, MSE, MAE, RMSE); the best validation checkpoint is kept.
+
+A run folder holds ``config.json``, ``metrics.jsonl`` (one JSON object per training step and per validation),
+``model.pt`` (best validation), ``last.pt`` (resume state, written after every drive) and ``curves.png``.
+Distributed training (DistributedDataParallel) is used when ``torch.distributed`` is initialised: the chunks of
+frames of each epoch are dealt out round-robin to the ranks (each rank the same number), rank 0 validates and
+writes every file.
+"""
+from __future__ import annotations
+
+import json
+import math
+import random
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from dcslam.depth.data import DriveFrames, check_view, frame_windows
+from dcslam.depth.losses import MASKS, MaskedMSE, depth_errors
+from dcslam.depth.maps import MapChamfer
+from dcslam.depth.models import architectures, build_model, model_record, save_model
+from dcslam.errors import DcslamError
+from dcslam.progress import Bar
+from dcslam.workspace import atomic_output, stage_config, write_json_atomic
+
+LOSSES = ("mse", "chamfer")
+RUN_FILES = ("model.pt", "last.pt", "metrics.jsonl", "config.json", "curves.png")
+
+
+@dataclass
+class TrainConfig:
+    """Every option of a training run (written to ``config.json`` as its ``settings``)."""
+
+    loss: str = "mse"
+    mask: str = "dense"
+    map_frames: int = 1
+    model: str = "sparse-conv"
+    model_hparams: dict = field(default_factory=dict)
+    epochs: int = 1
+    lr: float = 1e-3
+    weight_decay: float = 0.01
+    max_frames: int = 200
+    stride: int = 1
+    scale: float = 1.0
+    crop: int = 0
+    batch_size: int = 1
+    seed: int = 0
+    device: str = "auto"
+    train_drives: list = field(default_factory=list)
+    val_drives: list = field(default_factory=list)
+
+    def check(self) -> None:
+        if self.loss not in LOSSES:
+            raise DcslamError(f"unknown loss {self.loss!r}; expected one of {', '.join(LOSSES)}")
+        if self.mask not in MASKS:
+            raise DcslamError(f"unknown mask {self.mask!r}; expected one of {', '.join(MASKS)}")
+        if self.model not in architectures():
+            raise DcslamError(f"unknown model {self.model!r}; expected one of {', '.join(architectures())}")
+        for name in ("map_frames", "epochs", "max_frames", "stride", "batch_size"):
+            if getattr(self, name) < 1:
+                raise DcslamError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+        check_view(self.scale, self.crop)
+        if not self.train_drives:
+            raise DcslamError("no training drives; run `dcslam prepare-kitti` (or `dcslam synth`) first")
+
+    @property
+    def chunk(self) -> int:
+        """Frames per optimisation step: one multi-frame map window, else one batch."""
+        return self.map_frames if self.loss == "chamfer" and self.map_frames > 1 else self.batch_size
+
+
+@dataclass
+class TrainResult:
+    run_dir: Path
+    steps: int
+    epochs: int
+    best: dict | None
+    last_val: dict | None
+
+
+def resolve_device(device: str) -> torch.device:
+    """``auto`` → the first GPU if there is one, else the CPU."""
+    if device == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    try:
+        resolved = torch.device(device)
+    except RuntimeError:
+        raise DcslamError(f"unknown device {device!r}; expected auto, cpu or cuda") from None
+    if resolved.type == "cuda" and not torch.cuda.is_available():
+        raise DcslamError("--device cuda, but no GPU is available")
+    return resolved
+
+
+def _dist():
+    """(rank, world size) of the running torch.distributed group, (0, 1) without one."""
+    import torch.distributed as dist
+
+    if dist.is_available() and dist.is_initialized():
+        return dist.get_rank(), dist.get_world_size()
+    return 0, 1
+
+
+def _barrier() -> None:
+    import torch.distributed as dist
+
+    if dist.is_available() and dist.is_initialized():
+        dist.barrier()
+
+
+def _seed(seed: int) -> None:
+    random.seed(seed)
+    np.random.seed(seed)
+    torch.manual_seed(seed)
+
+
+class Objective:
+    """The training loss of a configuration: ``objective(pred, batch)`` → scalar."""
+
+    def __init__(self, config: TrainConfig, map_builder=None):
+        self.loss = config.loss
+        self.mse = MaskedMSE(config.mask)
+        self.chamfer = MapChamfer(config.map_frames, map_builder)
+
+    def __call__(self, pred, batch):
+        if self.loss == "mse":
+            return self.mse(pred, batch.sparse, batch.dense)
+        return self.chamfer(pred, batch.dense, batch.K, batch.T_world_cam)
+
+
+def validate(model, drives: list[DriveFrames], map_frames: int, device, map_builder=None) -> dict:
+    """The validation pass: no back-propagation, metrics per drive averaged over the drives.
+
+    Returns ``{"chamfer": m², "mse": m², "mae_mm": mm, "rmse_mm": mm}``; chamfer uses maps of ``map_frames`` frames.
+    """
+    chamfer = MapChamfer(map_frames, map_builder)
+    per_drive = []
+    model.eval()
+    with torch.no_grad():
+        for frames in drives:
+            sq, ab, n, chamfers = 0.0, 0.0, 0, []
+            for window in frame_windows(len(frames), map_frames):
+                batch = frames.load(window).to(device)
+                pred = model(batch.sparse, (batch.sparse > 0).to(batch.sparse.dtype))
+                chamfers.append(float(chamfer(pred, batch.dense, batch.K, batch.T_world_cam)))
+                e = depth_errors(pred, batch.dense)
+                if e["pixels"]:
+                    sq += e["mse"] * e["pixels"]
+                    ab += e["mae_mm"] * e["pixels"]
+                    n += e["pixels"]
+            if n == 0:
+                raise DcslamError(f"validation drive {frames.name} has no ground-truth depth")
+            mse = sq / n
+            per_drive.append({"chamfer": float(np.mean(chamfers)), "mse": mse, "mae_mm": ab / n,
+                              "rmse_mm": math.sqrt(mse) * 1000.0})
+    model.train()
+    return {key: float(np.mean([d[key] for d in per_drive])) for key in ("chamfer", "mse", "mae_mm", "rmse_mm")}
+
+
+def _prepare_run_dir(run_dir: Path, force: bool, resume: bool) -> None:
+    existing = [name for name in RUN_FILES if (run_dir / name).exists()]
+    if resume:
+        if not (run_dir / "last.pt").exists():
+            raise DcslamError(f"{run_dir / 'last.pt'} not found; nothing to resume (start the run without --resume)")
+        return
+    if existing and not force:
+        raise DcslamError(f"run {run_dir} exists; pass --force to overwrite it or --resume to continue it")
+    for name in existing:
+        (run_dir / name).unlink()
+    run_dir.mkdir(parents=True, exist_ok=True)
+
+
+def _saved_config(run_dir: Path, config: TrainConfig) -> TrainConfig:
+    """On resume: the run's own configuration, with only the number of epochs taken from ``config``."""
+    try:
+        settings = json.loads((run_dir / "config.json").read_text())["settings"]
+    except (OSError, KeyError, json.JSONDecodeError) as exc:
+        raise DcslamError(f"{run_dir / 'config.json'}: cannot resume from it ({exc})") from None
+    known = {k: v for k, v in settings.items() if k in TrainConfig.__dataclass_fields__}
+    known["epochs"] = config.epochs
+    known["device"] = config.device
+    return TrainConfig(**known)
+
+
+def _plot_curves(run_dir: Path, metrics_path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [json.loads(line) for line in metrics_path.read_text().splitlines() if line.strip()]
+    train = [(r["step"], r["loss"]) for r in rows if r["kind"] == "train"]
+    val = [r for r in rows if r["kind"] == "val"]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    if train:
+        axes[0].plot(*zip(*train), lw=0.8, label="training loss")
+    axes[0].set_xlabel("step")
+    axes[0].set_ylabel("loss")
+    axes[0].set_yscale("log")
+    axes[0].legend()
+    if val:
+        steps = [r["step"] for r in val]
+        axes[1].plot(steps, [r["rmse_mm"] for r in val], "o-", label="val RMSE (mm)")
+        axes[1].plot(steps, [r["mae_mm"] for r in val], "s-", label="val MAE (mm)")
+        twin = axes[1].twinx()
+        twin.plot(steps, [r["chamfer"] for r in val], "^--", color="tab:green", label="val chamfer (m²)")
+        twin.set_ylabel("chamfer (m²)")
+        twin.legend(loc="upper center")
+    axes[1].set_xlabel("step")
+    axes[1].set_ylabel("mm")
+    axes[1].legend(loc="upper right")
+    fig.tight_layout()
+    with atomic_output(run_dir / "curves.png", force=True) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+
+
+def _chunks(drives: list[DriveFrames], chunk: int) -> list[tuple[int, range]]:
+    """(drive index, frame positions) of every optimisation step of one epoch: drives in turn."""
+    return [(d, window) for d, frames in enumerate(drives) for window in frame_windows(len(frames), chunk)]
+
+
+def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resume: bool = False,
+          map_builder=None) -> TrainResult:
+    """Train one run into ``run_dir`` (see the module docstring for what it writes) and return its summary."""
+    run_dir = Path(run_dir)
+    rank, world = _dist()
+    if rank == 0:
+        _prepare_run_dir(run_dir, force, resume)
+    _barrier()
+    if resume:
+        config = _saved_config(run_dir, config)
+    config.check()
+    device = resolve_device(config.device)
+    if world > 1 and device.type == "cuda":
+        device = torch.device("cuda", rank % torch.cuda.device_count())
+    _seed(config.seed)
+
+    open_drives = []
+    try:
+        train_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop)
+                        for p in config.train_drives]
+        open_drives += train_frames
+        val_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop)
+                      for p in config.val_drives]
+        open_drives += val_frames
+        return _train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world)
+    finally:
+        for frames in open_drives:
+            frames.close()
+
+
+def _train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world) -> TrainResult:
+    model = build_model(config.model, **config.model_hparams).to(device)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    metrics_path = run_dir / "metrics.jsonl"
+    epoch, next_chunk, step, best, last_val = 0, 0, 0, None, None
+    if resume:
+        state = torch.load(run_dir / "last.pt", map_location="cpu", weights_only=True)
+        model.load_state_dict(state["model"]["state_dict"])
+        optimizer.load_state_dict(state["optimizer"])
+        epoch, next_chunk, step = state["epoch"], state["next_chunk"], state["step"]
+        best = json.loads(state["best"]) if state["best"] else None
+        torch.set_rng_state(state["rng"])
+        if rank == 0:  # drop log lines written after the checkpoint
+            lines = metrics_path.read_text().splitlines(keepends=True) if metrics_path.exists() else []
+            metrics_path.write_text("".join(lines[:state["metrics_lines"]]))
+    elif rank == 0:
+        settings = asdict(config)
+        settings["train_drives"] = [str(p) for p in config.train_drives]
+        settings["val_drives"] = [str(p) for p in config.val_drives]
+        settings["resolved_device"] = str(device)
+        settings["world_size"] = world
+        write_json_atomic(run_dir / "config.json", stage_config("train", settings))
+        metrics_path.write_text("")
+
+    wrapped = model
+    if world > 1:
+        from torch.nn.parallel import DistributedDataParallel
+
+        wrapped = DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
+    objective = Objective(config, map_builder)
+    chunks = _chunks(train_frames, config.chunk)
+    per_rank = len(chunks) // world
+    if per_rank == 0:
+        raise DcslamError(f"{len(chunks)} training steps per epoch cannot be shared by {world} processes")
+    mine = chunks[rank::world][:per_rank]
+    map_frames_val = config.map_frames if config.loss == "chamfer" else 1
+    model.train()
+
+    def checkpoint(epoch_, next_chunk_):
+        if rank != 0:
+            return
+        state = {"model": model_record(model), "optimizer": optimizer.state_dict(), "epoch": epoch_,
+                 "next_chunk": next_chunk_, "step": step, "best": json.dumps(best) if best else "",
+                 "rng": torch.get_rng_state(), "metrics_lines": len(metrics_path.read_text().splitlines())}
+        with atomic_output(run_dir / "last.pt", force=True) as tmp:
+            torch.save(state, tmp)
+
+    total = (config.epochs - epoch) * per_rank - next_chunk
+    with Bar(f"train {run_dir.name}", total=max(total, 0)) as bar, open(metrics_path, "a") as log:
+        def write(row):
+            if rank == 0:
+                log.write(json.dumps(row) + "\n")
+                log.flush()
+
+        while epoch < config.epochs:
+            for position in range(next_chunk, per_rank):
+                d, window = mine[position]
+                batch = train_frames[d].load(window).to(device)
+                pred = wrapped(batch.sparse, (batch.sparse > 0).to(batch.sparse.dtype))
+                loss = objective(pred, batch)
+                if not torch.isfinite(loss):
+                    raise DcslamError(f"training loss became {float(loss)} at step {step} ({train_frames[d].name})")
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                optimizer.step()
+                write({"kind": "train", "epoch": epoch, "step": step, "drive": train_frames[d].name,
+                       "loss": float(loss.detach())})
+                step += 1
+                bar.advance(status=f"epoch {epoch} loss {float(loss.detach()):.4g}")
+                last_of_drive = position + 1 == per_rank or mine[position + 1][0] != d
+                if last_of_drive and position + 1 < per_rank:
+                    checkpoint(epoch, position + 1)
+            if rank == 0 and val_frames:
+                last_val = validate(model, val_frames, map_frames_val, device, map_builder)
+                write({"kind": "val", "epoch": epoch, "step": step, **last_val})
+                key = "chamfer" if config.loss == "chamfer" else "mse"
+                if best is None or last_val[key] < best[key]:
+                    best = {**last_val, "epoch": epoch, "step": step}
+                    save_model(run_dir / "model.pt", model, meta={"run": run_dir.name, "epoch": epoch, "step": step,
+                                                                  "selected_by": key, **last_val,
+                                                                  "scale": config.scale, "crop": config.crop})
+            elif rank == 0:  # no validation drives: keep the latest weights as the model
+                save_model(run_dir / "model.pt", model, meta={"run": run_dir.name, "epoch": epoch, "step": step,
+                                                              "selected_by": "last", "scale": config.scale,
+                                                              "crop": config.crop})
+            epoch, next_chunk = epoch + 1, 0
+            checkpoint(epoch, 0)
+            if rank == 0:
+                _plot_curves(run_dir, metrics_path)
+            _barrier()
+    return TrainResult(run_dir=run_dir, steps=step, epochs=epoch, best=best, last_val=last_val)
+
