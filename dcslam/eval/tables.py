@@ -251,7 +251,7 @@ def table_5_2_results(ws: Workspace, runs: list[RunSummary], drives: list[str]) 
     results.append(score_layer(ws, "dense depth", "dense", drives))
     found = [name for name in IP_BASIC if find_layer(ws, name) is not None]
     results += [score_layer(ws, "IP-Basic", name, drives) for name in found] or [
-        LayerResult(label="IP-Basic", layer="—", missing=["no ip-basic layer (dcslam predict --model ip-basic-fast)"])]
+        LayerResult(label="IP-Basic", layer="—", missing=[f"no layer {' or '.join(IP_BASIC)} (dcslam predict)"])]
     for run in runs:
         candidates = [score_layer(ws, f"{run.recipe} + best filter", name, drives) for name in filters_of(ws, run.name)]
         scored = [c for c in candidates if c.localisation is not None and c.depth is not None]
