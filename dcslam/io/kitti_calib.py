@@ -8,10 +8,10 @@ Files under ``raw/<date>/`` (``key: values`` lines; ``calib_time`` is text, ever
 - ``calib_imu_to_velo.txt``: ``R``, ``T``: ``T_velo_imu``, IMU/GPS (OXTS) → Velodyne.
 
 Camera 2 (left colour) through the chain ``T_cam2_velo = T(P_rect_02) · R_rect_00 · T_cam0_velo`` where
-``T(P_rect_02)`` translates by the camera-2 offset ``t = K⁻¹ · P_rect_02[:, 3]`` (all three components; pykitti keeps
-only ``t_x = P[0, 3] / P[0, 0]`` and drops ``t_y ≈ 0.3 mm`` and ``t_z ≈ 2.7 mm``, so its camera-2 poses differ from
-ours by those millimetres). With the full offset, ``K · T_cam2_velo`` equals ``P_rect_02 · R_rect_00 · T_cam0_velo``
-exactly, so projecting a point through the record agrees with KITTI's own projection.
+``T(P_rect_02)`` translates by the camera-2 offset ``t = K⁻¹ · P_rect_02[:, 3]``, taken exactly. pykitti instead
+uses ``(P[0, 3] / P[0, 0], 0, 0)``: for 2011_09_26 that is (62.17, 0, 0) mm against our (59.85, -0.36, 2.75) mm, so
+its camera-2 poses sit 3.6 mm from ours. With the exact offset, ``K · T_cam2_velo`` equals
+``P_rect_02 · R_rect_00 · T_cam0_velo``, so projecting a point through the record agrees with KITTI's projection.
 """
 from __future__ import annotations
 

@@ -74,7 +74,8 @@ def parse_oxts_line(line: str, where: str = "OXTS packet") -> OxtsPacket:
     """One text line of 30 numbers → :class:`OxtsPacket`; ``where`` names the file in error messages."""
     parts = line.split()
     if len(parts) != len(OXTS_FIELDS):
-        raise DcslamError(f"{where}: {len(parts)} fields, expected {len(OXTS_FIELDS)} ({' '.join(OXTS_FIELDS[:6])} ...)")
+        raise DcslamError(f"{where}: {len(parts)} fields, expected {len(OXTS_FIELDS)} "
+                          f"({' '.join(OXTS_FIELDS[:6])} ...)")
     try:
         numbers = [float(p) for p in parts]
     except ValueError:

@@ -111,6 +111,7 @@ class TestCalibration:
         assert t[0] == pytest.approx(pykitti_x - calib.K_cam2[0, 2] * t[2] / calib.K_cam2[0, 0])
         assert t[1] == pytest.approx(2.16379e-1 / 721.5377 - 172.854 * 2.745884e-3 / 721.5377, rel=1e-5)
         assert t[2] == pytest.approx(2.745884e-3)
+        assert np.linalg.norm(t - [pykitti_x, 0, 0]) == pytest.approx(3.6e-3, abs=0.05e-3)  # as documented
 
     def test_record_is_immutable(self, calib):
         with pytest.raises(ValueError):
@@ -281,7 +282,8 @@ class TestDrives:
         assert [f.frame_id for f in frames] == [5, 6]
         first = frames[0]
         assert first.rgb.shape == (375, 1242, 3)
-        assert np.array_equal(first.sparse, kitti.read_depth_png(DEPTH / "velodyne_raw" / "image_02" / "0000000005.png"))
+        sparse = kitti.read_depth_png(DEPTH / "velodyne_raw" / "image_02" / "0000000005.png")
+        assert np.array_equal(first.sparse, sparse)
         assert np.array_equal(first.dense, kitti.read_depth_png(DEPTH / "groundtruth" / "image_02" / "0000000005.png"))
         assert first.timestamp == index.timestamps[0]
 
