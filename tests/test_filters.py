@@ -161,3 +161,26 @@ def test_filter_drives_writes_layers_and_refuses_to_overwrite(tmp_path):
     assert out.stat().st_mtime_ns == before
     filter_drives([(drive, "sparse", out)], chain, made_by="x", settings={}, force=True)
     assert read_layer(out).made_by == "x"
+
+
+def test_on_real_kitti_lidar(data_dir):
+    """KITTI drive 0001, frame 5: LiDAR points seen through foreground objects disagree with the annotated depth;
+    hidden-point removal drops most of them, and the thesis's range keeps 5–15 m only."""
+    from dcslam.eval.depth import depth_errors
+    from dcslam.io.kitti import read_depth_png
+
+    base = data_dir / "kitti-sample/depth_completion/train/2011_09_26_drive_0001_sync/proj_depth"
+    sparse = read_depth_png(base / "velodyne_raw/image_02/0000000005.png")
+    gt = read_depth_png(base / "groundtruth/image_02/0000000005.png")
+    K_cam2 = np.array([[721.5377, 0, 609.5593], [0, 721.5377, 172.854], [0, 0, 1]])
+
+    def far_off(depth):  # fraction of scored pixels more than 1 m from the annotated depth
+        both = (depth > 0) & (gt > 0)
+        return float((np.abs(depth[both] - gt[both]) > 1.0).mean())
+
+    visible = HiddenPointFilter().apply(sparse, K_cam2)
+    assert (visible > 0).sum() > 0.5 * (sparse > 0).sum()
+    assert far_off(visible) < far_off(sparse) / 5
+    assert depth_errors(visible, gt, interpolate=False).mae_mm < depth_errors(sparse, gt, interpolate=False).mae_mm
+    ranged = PRESETS["thesis-range"].apply(sparse)
+    assert ranged[ranged > 0].min() >= 5 and ranged[ranged > 0].max() <= 15

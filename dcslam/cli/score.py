@@ -44,8 +44,8 @@ def depth_command(
     layer: Annotated[str, typer.Option(help="sparse, dense, a run or filter name, or a folder of layer files.")],
     drive: DriveOption = None,
     out: OutOption = None,
-    raw: Annotated[bool, typer.Option("--raw", help="Score holes as depth 0 instead of the devkit's "
-                                                    "background interpolation.")] = False,
+    raw: Annotated[bool, typer.Option("--raw", help="No devkit interpolation: score only the pixels where the "
+                                                    "layer has depth.")] = False,
     workspace: WorkspaceOption = None,
     force: ForceOption = False,
 ) -> None:

@@ -7,12 +7,16 @@ filled the prediction's holes:
 * iMAE = mean |1/d_gt − 1/d|, iRMSE = sqrt(mean (1/d_gt − 1/d)²), reported in 1/km.
 
 Over many images, the per-image values are averaged (the devkit's ``statMean``), so every image weighs the same
-whatever its number of ground-truth pixels. A prediction that is still 0 where there is ground truth (only
-possible when it has no depth in a whole interior row band, or none at all) gives an infinite iMAE/iRMSE there,
-which is reported as such rather than hidden.
+whatever its number of ground-truth pixels.
+
+One departure: holes that the interpolation cannot fill (rows without any depth lying between rows with depth — the
+gaps between LiDAR scan lines of raw sparse depth) are scored by the devkit against its invalid marker −1 m, which
+is meaningless; here they are left out, and ``coverage`` says what fraction of the ground-truth pixels was scored.
+A prediction with no depth at all scores ``inf``. Dense predictions are unaffected.
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 
@@ -29,7 +33,7 @@ def interpolate_background(depth_m: np.ndarray) -> np.ndarray:
     Row by row: a hole between two valid pixels takes the smaller (farther-back, "background") of the two depths;
     holes before the first / after the last valid pixel of a row take that pixel's depth. Then column by column,
     rows above the first / below the last row with any depth take that row's depth. Rows without depth that lie
-    between rows with depth stay 0, as in the devkit (which leaves them invalid).
+    between rows with depth stay 0 (the devkit leaves them invalid, at −1).
 
     Shapes: depth_m (H, W) → (H, W) float32 (a new array).
     """
@@ -59,8 +63,8 @@ def interpolate_background(depth_m: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class DepthErrors:
-    """Errors of one image (or the mean over images): millimetres and 1/km; ``pixels`` ground-truth pixels scored,
-    ``coverage`` the fraction of them where the prediction had depth before interpolation."""
+    """Errors of one image (or the mean over images): millimetres and 1/km; ``pixels`` the ground-truth pixels
+    scored, ``coverage`` their fraction of all ground-truth pixels."""
 
     mae_mm: float
     rmse_mm: float
@@ -76,28 +80,30 @@ class DepthErrors:
 def depth_errors(pred_m: np.ndarray, gt_m: np.ndarray, interpolate: bool = True) -> DepthErrors | None:
     """Errors of one predicted depth image against ground truth; ``None`` when ``gt_m`` has no depth at all.
 
-    Shapes: pred_m (H, W), gt_m (H, W), metres, 0 = none. ``interpolate=False`` scores the prediction as it is
-    (holes count as depth 0).
+    Shapes: pred_m (H, W), gt_m (H, W), metres, 0 = none. ``interpolate=False`` skips the devkit's interpolation
+    and scores only the pixels where the prediction has depth.
     """
     pred_m, gt_m = np.asarray(pred_m), np.asarray(gt_m)
     if pred_m.shape != gt_m.shape or pred_m.ndim != 2:
         raise DcslamError(f"prediction {pred_m.shape} and ground truth {gt_m.shape} must both be (H, W)")
-    mask = gt_m > 0
-    pixels = int(mask.sum())
-    if pixels == 0:
+    has_gt = gt_m > 0
+    if not has_gt.any():
         return None
-    coverage = float((pred_m[mask] > 0).mean())
     if interpolate:
         pred_m = interpolate_background(pred_m)
-    gt = gt_m[mask].astype(np.float64)
-    pred = pred_m[mask].astype(np.float64)
+    scored = has_gt & (pred_m > 0)
+    pixels = int(scored.sum())
+    coverage = pixels / int(has_gt.sum())
+    if pixels == 0:
+        return DepthErrors(mae_mm=math.inf, rmse_mm=math.inf, imae_per_km=math.inf, irmse_per_km=math.inf,
+                           pixels=0, coverage=0.0)
+    gt = gt_m[scored].astype(np.float64)
+    pred = pred_m[scored].astype(np.float64)
     err = np.abs(gt - pred)
-    with np.errstate(divide="ignore"):
-        inv_err = np.abs(1.0 / gt - 1.0 / pred)
+    inv_err = np.abs(1.0 / gt - 1.0 / pred)
     return DepthErrors(mae_mm=1000.0 * float(err.mean()), rmse_mm=1000.0 * float(np.sqrt((err ** 2).mean())),
                        imae_per_km=1000.0 * float(inv_err.mean()),
                        irmse_per_km=1000.0 * float(np.sqrt((inv_err ** 2).mean())), pixels=pixels, coverage=coverage)
-
 
 def mean_errors(errors: Iterable[DepthErrors | None]) -> DepthErrors:
     """The devkit's mean over images (images without ground truth skipped); ``pixels`` is the total."""

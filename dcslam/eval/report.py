@@ -43,7 +43,7 @@ def depth_table(ws: Workspace, layer_name: str, drives: list[str], interpolate: 
     table.rows.append({"drive": "all", "frames": sum(len(f) for f in per_drive.values()),
                        **{m: getattr(overall, m) for m in METRICS}, "coverage": overall.coverage})
     table.notes.append("KITTI devkit: holes of the prediction filled by background interpolation"
-                       if interpolate else "holes of the prediction scored as depth 0")
+                       if interpolate else "no interpolation: only pixels where the prediction has depth")
     return table
 
 

@@ -45,9 +45,18 @@ class TestDepthErrors:
         gt = np.array([[10.0, 10.0, 10.0]])
         pred = np.array([[10.0, 0.0, 12.0]])          # hole filled with min(10, 12) = 10
         e = depth_errors(pred, gt)
-        assert e.mae_mm == pytest.approx(2000 / 3) and e.coverage == pytest.approx(2 / 3)
-        raw = depth_errors(pred, gt, interpolate=False)
-        assert raw.mae_mm == pytest.approx(12000 / 3) and np.isinf(raw.imae_per_km)
+        assert e.mae_mm == pytest.approx(2000 / 3) and e.coverage == 1.0 and e.pixels == 3
+        raw = depth_errors(pred, gt, interpolate=False)          # only the pixels with predicted depth
+        assert raw.mae_mm == pytest.approx(1000.0) and raw.pixels == 2 and raw.coverage == pytest.approx(2 / 3)
+
+    def test_unfillable_rows_are_left_out_and_empty_prediction_is_infinite(self):
+        gt = np.full((3, 2), 10.0)
+        pred = np.array([[11.0, 11.0], [0.0, 0.0], [12.0, 0.0]])   # middle row cannot be filled
+        e = depth_errors(pred, gt)
+        assert e.pixels == 4 and e.coverage == pytest.approx(4 / 6)
+        assert e.mae_mm == pytest.approx(1000 * (1 + 1 + 2 + 2) / 4)
+        empty = depth_errors(np.zeros((3, 2)), gt)
+        assert np.isinf(empty.mae_mm) and empty.pixels == 0
 
     def test_no_ground_truth(self):
         assert depth_errors(np.ones((2, 2)), np.zeros((2, 2))) is None
@@ -85,7 +94,7 @@ def test_score_drive(tmp_path):
     drive = write_drive(tmp_path / "d.h5")
     assert mean_errors(score_drive(drive, "dense")).mae_mm == 0.0
     sparse = mean_errors(score_drive(drive, "sparse"))
-    assert sparse.mae_mm > 0 and 0.2 < sparse.coverage < 0.4
+    assert sparse.mae_mm > 0 and sparse.coverage == 1.0
     layer = tmp_path / "layer.h5"
     write_layer(layer, Layer(depth=np.full((2, 8, 12), 7.0, np.float32), drive="d", made_by="test"))
     with pytest.raises(DcslamError, match="2 frames but its drive has 3"):
