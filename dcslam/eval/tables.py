@@ -23,7 +23,7 @@ from pathlib import Path
 
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import DepthErrors, mean_errors
-from dcslam.eval.layers import (LayerRef, TrajectoryPair, find_layer, score_layer_depth, score_layer_trajectories)
+from dcslam.eval.layers import TrajectoryPair, find_layer, score_layer_depth, score_layer_trajectories
 from dcslam.workspace import Workspace
 
 THESIS_FIGURES = Path(__file__).with_name("thesis_tables.json")
