@@ -83,6 +83,7 @@ class TrainResult:
     epochs: int
     best: dict | None
     last_val: dict | None
+    model: object = None
 
 
 def resolve_device(device: str) -> torch.device:
@@ -346,5 +347,5 @@ def _train_loop(run_dir, config, device, train_frames, val_frames, resume, map_b
             if rank == 0:
                 _plot_curves(run_dir, metrics_path)
             _barrier()
-    return TrainResult(run_dir=run_dir, steps=step, epochs=epoch, best=best, last_val=last_val)
+    return TrainResult(run_dir=run_dir, steps=step, epochs=epoch, best=best, last_val=last_val, model=model)
 

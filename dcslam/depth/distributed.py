@@ -1,0 +1,57 @@
+"""Training on several processes or machines with PyTorch's own engine (DistributedDataParallel).
+
+Launch with ``torchrun --nproc-per-node N -m dcslam.depth.distributed train ...`` (any ``dcslam train`` options), or
+``dcslam train --nproc N``, which runs exactly that. Each process reads the ``RANK`` / ``WORLD_SIZE`` /
+``MASTER_ADDR`` variables torchrun sets, joins the group (``gloo`` on CPU, ``nccl`` on GPUs), and
+:func:`dcslam.depth.train.train` deals the steps of each epoch out to the ranks; DDP averages the gradients, so every
+rank holds the same weights after every step.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+from dcslam.errors import DcslamError
+
+
+def in_torchrun() -> bool:
+    """True inside a process started by torchrun with more than one process in the group."""
+    return int(os.environ.get("WORLD_SIZE", "1")) > 1
+
+
+def init_from_env(device_type: str = "cpu") -> tuple[int, int]:
+    """Join the process group described by torchrun's environment; returns (rank, world size)."""
+    import torch.distributed as dist
+
+    if dist.is_initialized():
+        return dist.get_rank(), dist.get_world_size()
+    backend = "nccl" if device_type == "cuda" else "gloo"
+    dist.init_process_group(backend=backend)
+    return dist.get_rank(), dist.get_world_size()
+
+
+def shutdown() -> None:
+    import torch.distributed as dist
+
+    if dist.is_initialized():
+        dist.destroy_process_group()
+
+
+def launch(nproc: int, args: list[str]) -> int:
+    """Run ``dcslam <args>`` on ``nproc`` local processes through torchrun; returns its exit code."""
+    if nproc < 1:
+        raise DcslamError(f"--nproc must be >= 1, got {nproc}")
+    command = [sys.executable, "-m", "torch.distributed.run", "--standalone", f"--nproc-per-node={nproc}",
+               "-m", "dcslam.depth.distributed", *args]
+    return subprocess.call(command)
+
+
+def main() -> None:
+    from dcslam.cli import app
+
+    app()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,58 @@
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from dcslam.cli import app
+
+_spec = importlib.util.spec_from_file_location(
+    "depth_fixtures", Path(__file__).parents[1] / "depth" / "depth_fixtures.py")
+fixtures = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(fixtures)
+
+
+@pytest.fixture
+def ws(tmp_path):
+    return fixtures.write_workspace(tmp_path / "ws", n=4)
+
+
+def _run(*args):
+    return CliRunner().invoke(app, list(args))
+
+
+def test_train_mse_dense_writes_the_run(ws):
+    result = _run("train", "-w", str(ws), "--loss", "mse", "--mask", "dense", "--batch-size", "2", "--device", "cpu")
+    assert result.exit_code == 0, result.output
+    run = ws / "runs" / "mse-dense"
+    assert {p.name for p in run.iterdir()} >= {"model.pt", "last.pt", "config.json", "metrics.jsonl", "curves.png"}
+    settings = json.loads((run / "config.json").read_text())["settings"]
+    assert (settings["loss"], settings["mask"], settings["model"], settings["map_frames"]) == \
+        ("mse", "dense", "sparse-conv", 1)
+    assert "best validation" in result.stdout
+
+    again = _run("train", "-w", str(ws), "--batch-size", "2")
+    assert again.exit_code == 1 and "--force" in again.output
+    resumed = _run("train", "-w", str(ws), "--batch-size", "2", "--epochs", "2", "--resume")
+    assert resumed.exit_code == 0, resumed.output
+    rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
+    assert [r["epoch"] for r in rows if r["kind"] == "val"] == [0, 1]
+
+
+def test_train_chamfer_and_sparse_names(ws):
+    result = _run("train", "-w", str(ws), "--loss", "chamfer", "--map-frames", "8", "--crop", "24",
+                  "--scale", "0.5")
+    assert result.exit_code == 0, result.output
+    assert (ws / "runs" / "chamfer-8" / "model.pt").exists()
+    result = _run("train", "-w", str(ws), "--mask", "sparse", "--max-frames", "2", "--name", "mine")
+    assert result.exit_code == 0, result.output
+    assert json.loads((ws / "runs" / "mine" / "config.json").read_text())["settings"]["mask"] == "sparse"
+
+
+def test_train_errors(ws, tmp_path):
+    assert _run("train", "-w", str(tmp_path / "empty")).exit_code == 1
+    result = _run("train", "-w", str(ws), "--loss", "l1")
+    assert result.exit_code == 1 and "unknown loss" in result.output
+    assert _run("train", "-w", str(ws), "--scale", "0.3").exit_code == 1
+    assert not (ws / "runs" / "mse-dense" / "model.pt").exists()
