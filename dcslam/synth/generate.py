@@ -1,0 +1,210 @@
+"""Write synthetic drives in the KITTI raw + depth-completion layout (see :mod:`dcslam.io.kitti`).
+
+Per drive ``2011_09_26_drive_<1000 + index>_sync``::
+
+    raw/2011_09_26/calib_*.txt                                  the real 2011-09-26 calibration, verbatim
+    raw/2011_09_26/<drive>/image_02/data/<frame>.png            1242 × 375 RGB, + timestamps.txt
+    raw/2011_09_26/<drive>/velodyne_points/data/<frame>.bin     (N, 4) float32 scans, + timestamps{,_start,_end}.txt
+    raw/2011_09_26/<drive>/oxts/data/<frame>.txt                30-field packets, + timestamps.txt, dataformat.txt
+    depth_completion/train/<drive>/proj_depth/velodyne_raw/image_02/<frame>.png   frames 5 … N − 6, like KITTI
+    depth_completion/train/<drive>/proj_depth/groundtruth/image_02/<frame>.png
+    SYNTHETIC, synth_config.json                                a marker for prepare-kitti, and the settings
+
+Each drive is written into hidden temporary folders and renamed when complete, so an interrupted run leaves no
+partial drive.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+from dcslam.errors import DcslamError
+from dcslam.io.kitti import frame_name, write_depth_png, write_image, write_timestamps, write_velodyne
+from dcslam.synth.calib import DATE, SensorRig, copy_calibration, load_rig
+from dcslam.synth.raycast import CameraGrid
+from dcslam.synth.scene import Scene, build_scene
+from dcslam.synth.sensors import (GroundTexture, consistent_groundtruth, make_lidar_grid, project_points,
+                                  render_camera, scan_lidar, stereo_valid)
+from dcslam.synth.trajectory import OXTS_DATAFORMAT, Drive, Motion, Path as StreetPath, Terrain, format_oxts, \
+    oxts_packets
+
+GT_WINDOW = 5  # ground truth accumulates the scans of frames i − 5 … i + 5; KITTI annotates frames 5 … N − 6
+FIRST_DRIVE_NUMBER = 1000
+
+
+def drive_name(index: int) -> str:
+    """``2011_09_26_drive_<1000 + index>_sync``: numbers that never collide with real KITTI drives."""
+    return f"{DATE}_drive_{FIRST_DRIVE_NUMBER + index:04d}_sync"
+
+
+@dataclass(frozen=True)
+class DriveTruth:
+    """What the generator knows about one drive: times (N,) in POSIX seconds, ``T_world_cam2`` (N, 4, 4) re-based
+    so the first pose is the identity, ``T_world_imu`` (N, 4, 4) in the generator's world, and the scene."""
+
+    name: str
+    timestamps: np.ndarray
+    T_world_cam2: np.ndarray
+    T_world_imu: np.ndarray
+    scene: Scene
+    oxts: np.ndarray  # (N, 30)
+
+
+@dataclass(frozen=True)
+class DriveReport:
+    """One written drive: its name, frames, depth frames, mean densities (fractions of pixels) and seconds taken."""
+
+    name: str
+    frames: int
+    depth_frames: int
+    sparse_density: float
+    groundtruth_density: float
+    seconds: float
+
+
+def make_drive(seed: int, index: int, frames: int, rig: SensorRig) -> tuple[DriveTruth, np.random.Generator]:
+    """The trajectory, timestamps, OXTS packets and scene of drive ``index`` of ``seed`` (deterministic)."""
+    rng = np.random.default_rng([seed, index])
+    dt = np.clip(rng.normal(0.1036, 0.0015, frames), 0.0998, 0.1102)
+    t_rel = np.concatenate([[0.0], np.cumsum(dt[:-1])])
+    start = datetime(2011, 9, 26, 11, 0, tzinfo=timezone.utc).timestamp() + rng.uniform(0, 4 * 3600)
+    motion = Motion.random(rng)
+    length = float(motion.arc_length(t_rel[-1] + 1.0))
+    drive = Drive(terrain=Terrain.random(rng), path=StreetPath.random(rng, -200.0, length + 250.0), motion=motion)
+    scene = build_scene(drive, rng, -130.0, length + 150.0)
+
+    def T_world_imu_of(t):
+        return drive.T_world_velo(t) @ rig.T_velo_imu
+
+    T_world_imu = T_world_imu_of(t_rel)
+    T_world_cam2 = T_world_imu @ np.linalg.inv(rig.T_cam2_imu)
+    T_world_cam2 = np.linalg.inv(T_world_cam2[0]) @ T_world_cam2
+    oxts = oxts_packets(T_world_imu_of, t_rel, lat0_deg=49.0 + rng.uniform(0.0, 0.05),
+                        lon0_deg=8.38 + rng.uniform(0.0, 0.08), alt0_m=110.0 + rng.uniform(0.0, 10.0), rng=rng)
+    return DriveTruth(drive_name(index), start + t_rel, T_world_cam2, T_world_imu, scene, oxts), rng
+
+
+def _t_rel(truth: DriveTruth) -> np.ndarray:
+    return truth.timestamps - truth.timestamps[0]
+
+
+def write_drive(truth: DriveTruth, rng: np.random.Generator, rig: SensorRig, raw_dir: Path, depth_dir: Path,
+                lidar_azimuth_step_deg: float = 0.08, on_frame=None) -> DriveReport:
+    """Render and write every file of one drive into ``raw_dir`` (the ``<drive>`` folder of ``raw/<date>``) and
+    ``depth_dir`` (its ``depth_completion/<split>/<drive>`` folder)."""
+    started = time.perf_counter()
+    scene = truth.scene
+    drive = scene.drive
+    t_rel = _t_rel(truth)
+    n = len(t_rel)
+    camera = CameraGrid(rig.K_cam2, rig.width, rig.height)
+    lidar = make_lidar_grid(lidar_azimuth_step_deg)
+    ground = GroundTexture(scene)
+    T_world_velo = drive.T_world_velo(t_rel)
+    T_world_cam = truth.T_world_imu @ np.linalg.inv(rig.T_cam2_imu)
+    T_cam_world = np.linalg.inv(T_world_cam)
+
+    for sensor in ("image_02", "oxts", "velodyne_points"):
+        write_timestamps(raw_dir / sensor / "timestamps.txt", truth.timestamps)
+    write_timestamps(raw_dir / "velodyne_points" / "timestamps_start.txt", truth.timestamps - 0.05)
+    write_timestamps(raw_dir / "velodyne_points" / "timestamps_end.txt", truth.timestamps + 0.05)
+    (raw_dir / "oxts" / "dataformat.txt").write_text(OXTS_DATAFORMAT)
+    (raw_dir / "oxts" / "data").mkdir(parents=True, exist_ok=True)
+    for k, packet in enumerate(truth.oxts):
+        (raw_dir / "oxts" / "data" / frame_name(k, ".txt")).write_text(format_oxts(packet) + "\n")
+
+    scans_world: dict[int, np.ndarray] = {}
+    scans_velo: dict[int, np.ndarray] = {}
+    true_depth: dict[int, np.ndarray] = {}
+    stereo: dict[int, np.ndarray] = {}
+    sparse, dense = [], []
+    for k in range(n):
+        depth, rgb = render_camera(scene, ground, camera, T_world_cam[k], float(t_rel[k]), rng)
+        write_image(raw_dir / "image_02" / "data" / frame_name(k, ".png"), rgb)
+        scan = scan_lidar(scene, lidar, T_world_velo[k], float(t_rel[k]), rng)
+        write_velodyne(raw_dir / "velodyne_points" / "data" / frame_name(k, ".bin"), scan)
+        scans_velo[k] = scan[:, :3]
+        scans_world[k] = scan[:, :3].astype(np.float64) @ T_world_velo[k][:3, :3].T + T_world_velo[k][:3, 3]
+        true_depth[k] = depth
+        stereo[k] = stereo_valid(rgb)
+        i = k - GT_WINDOW
+        if i >= GT_WINDOW:
+            raw_i = project_points(scans_velo[i] @ rig.T_cam2_velo[:3, :3].T.astype(np.float32)
+                                   + rig.T_cam2_velo[:3, 3].astype(np.float32), rig.K_cam2, rig.width, rig.height)
+            window = np.concatenate([scans_world[j] for j in range(i - GT_WINDOW, i + GT_WINDOW + 1)])
+            points_cam = (window @ T_cam_world[i][:3, :3].T + T_cam_world[i][:3, 3]).astype(np.float32)
+            gt_i = consistent_groundtruth(points_cam, true_depth[i], rig.K_cam2, stereo[i])
+            write_depth_png(depth_dir / "proj_depth" / "velodyne_raw" / "image_02" / frame_name(i, ".png"), raw_i)
+            write_depth_png(depth_dir / "proj_depth" / "groundtruth" / "image_02" / frame_name(i, ".png"), gt_i)
+            sparse.append(float(np.mean(raw_i > 0)))
+            dense.append(float(np.mean(gt_i > 0)))
+        for old in [j for j in scans_world if j < k - 2 * GT_WINDOW]:
+            del scans_world[old], scans_velo[old]
+        for old in [j for j in true_depth if j < k - GT_WINDOW]:
+            del true_depth[old], stereo[old]
+        if on_frame is not None:
+            on_frame()
+    return DriveReport(truth.name, n, len(sparse), float(np.mean(sparse)) if sparse else 0.0,
+                       float(np.mean(dense)) if dense else 0.0, time.perf_counter() - started)
+
+
+def _occupied(path: Path) -> bool:
+    return path.exists() and (not path.is_dir() or any(path.iterdir()))
+
+
+def generate(out_root: Path | str, drives: int = 6, frames: int = 60, seed: int = 0, force: bool = False,
+             lidar_azimuth_step_deg: float = 0.08, on_frame=None) -> list[DriveReport]:
+    """Generate ``drives`` synthetic drives of ``frames`` raw frames each under the KITTI root ``out_root``.
+
+    Refuses (:class:`DcslamError`) to replace a drive folder that exists and is not empty unless ``force``.
+    ``on_frame`` is called after each frame (progress). Returns one :class:`DriveReport` per drive.
+    """
+    if drives < 1:
+        raise DcslamError(f"--drives must be at least 1, got {drives}")
+    if frames < 1:
+        raise DcslamError(f"--frames must be at least 1, got {frames}")
+    if not 0.01 <= lidar_azimuth_step_deg <= 1.0:
+        raise DcslamError(f"LiDAR azimuth step {lidar_azimuth_step_deg}° is outside 0.01–1°")
+    out_root = Path(out_root)
+    date_dir = out_root / "raw" / DATE
+    depth_root = out_root / "depth_completion" / "train"
+    names = [drive_name(i) for i in range(drives)]
+    if not force:
+        taken = [p for name in names for p in (date_dir / name, depth_root / name) if _occupied(p)]
+        if taken:
+            raise DcslamError(f"{taken[0]} exists; pass --force to replace it")
+    rig = load_rig()
+    copy_calibration(date_dir, force)
+    from dcslam.workspace import stage_config, write_json_atomic, write_text_atomic
+
+    settings = {"out": out_root, "drives": drives, "frames": frames, "seed": seed,
+                "lidar_azimuth_step_deg": lidar_azimuth_step_deg, "groundtruth_window": GT_WINDOW}
+    write_text_atomic(out_root / "SYNTHETIC", f"generated by dcslam synth, seed {seed}, {drives} drives of "
+                                              f"{frames} frames ({', '.join(names)})\n")
+    write_json_atomic(out_root / "synth_config.json", stage_config("synth", settings))
+    reports = []
+    for index, name in enumerate(names):
+        truth, rng = make_drive(seed, index, frames, rig)
+        raw_tmp = date_dir / f".{name}.tmp-{os.getpid()}"
+        depth_tmp = depth_root / f".{name}.tmp-{os.getpid()}"
+        try:
+            for tmp in (raw_tmp, depth_tmp):
+                shutil.rmtree(tmp, ignore_errors=True)
+                tmp.mkdir(parents=True)
+            reports.append(write_drive(truth, rng, rig, raw_tmp, depth_tmp, lidar_azimuth_step_deg, on_frame))
+            for tmp, final in ((raw_tmp, date_dir / name), (depth_tmp, depth_root / name)):
+                if final.exists():
+                    shutil.rmtree(final)
+                os.replace(tmp, final)
+        finally:
+            for tmp in (raw_tmp, depth_tmp):
+                with contextlib.suppress(FileNotFoundError):
+                    shutil.rmtree(tmp)
+    return reports

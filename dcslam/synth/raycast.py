@@ -1,0 +1,221 @@
+"""Vectorised ray casting of a scene (terrain + boxes, cylinders, ellipsoids) on a regular grid of rays.
+
+A sensor is a :class:`RayGrid`: ray directions (R, C, 3) in the sensor frame on a regular grid (pixels for the
+camera, beams × azimuth steps for the LiDAR) and a rule that bounds which grid cells a box of corners may cover.
+Each shape is intersected only with the rays of that rectangle, so the cost follows what the sensor sees.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from dcslam.synth.scene import BOX, CYLINDER, ELLIPSOID, Shape
+from dcslam.synth.trajectory import Terrain
+
+_EDGES = [(i, j) for i in range(8) for j in range(i + 1, 8) if (i ^ j) in (1, 2, 4)]
+NO_HIT, GROUND = -2, -1
+
+
+class CameraGrid:
+    """Pixel rays ``((u - cx) / fx, (v - cy) / fy, 1)`` of a pinhole camera: the ray parameter is the depth z."""
+
+    def __init__(self, K: np.ndarray, width: int, height: int, near: float = 0.05):
+        self.K, self.width, self.height, self.near = np.asarray(K, dtype=np.float64), width, height, near
+        u, v = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
+        x = (u - self.K[0, 2]) / self.K[0, 0]
+        y = (v - self.K[1, 2]) / self.K[1, 1]
+        self.dirs = np.stack([x, y, np.ones_like(x)], -1).astype(np.float32)  # (H, W, 3)
+        self.lengths = np.linalg.norm(self.dirs, axis=-1)
+
+    def rects(self, corners: np.ndarray) -> list[tuple[int, int, int, int]]:
+        """Corners (8, 3) of a box in the camera frame → [(row0, row1, col0, col1)] that its image may cover."""
+        z = corners[:, 2]
+        points = [corners[z > self.near]]
+        for i, j in _EDGES:
+            if (z[i] > self.near) != (z[j] > self.near):
+                a = (self.near - z[i]) / (z[j] - z[i])
+                points.append((corners[i] + a * (corners[j] - corners[i]))[None])
+        points = np.concatenate(points)
+        if len(points) == 0:
+            return []
+        u = self.K[0, 0] * points[:, 0] / points[:, 2] + self.K[0, 2]
+        v = self.K[1, 1] * points[:, 1] / points[:, 2] + self.K[1, 2]
+        c0, c1 = max(int(np.floor(u.min())) - 1, 0), min(int(np.ceil(u.max())) + 2, self.width)
+        r0, r1 = max(int(np.floor(v.min())) - 1, 0), min(int(np.ceil(v.max())) + 2, self.height)
+        return [(r0, r1, c0, c1)] if r0 < r1 and c0 < c1 else []
+
+
+class LidarGrid:
+    """A spinning multi-beam LiDAR: unit rays for ``elevations_deg`` (R,) (descending) × ``columns`` azimuths
+    ``−π + (j + offset_r) · 2π / columns``, where odd beams are offset by half a column (``interleave``: neighbouring
+    lasers fire alternately); the ray parameter is the range."""
+
+    def __init__(self, elevations_deg: np.ndarray, columns: int, interleave: bool = True):
+        self.elevation = np.deg2rad(np.asarray(elevations_deg, dtype=np.float64))
+        self.columns = columns
+        self._step = 2 * np.pi / columns
+        offset = (np.arange(len(self.elevation)) % 2) * 0.5 if interleave else np.zeros(len(self.elevation))
+        az = -np.pi + (np.arange(columns)[None, :] + offset[:, None]) * self._step
+        el = self.elevation[:, None]
+        self.dirs = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el) + 0 * az],
+                             -1).astype(np.float32)
+        self.lengths = np.ones(self.dirs.shape[:2], dtype=np.float32)
+
+    def rects(self, corners: np.ndarray) -> list[tuple[int, int, int, int]]:
+        """Corners (8, 3) of a box in the LiDAR frame → grid rectangles that the box may cover.
+
+        Seen from outside its footprint, a convex box spans the azimuths of its corners, and its elevations are
+        bounded using the nearest and farthest horizontal distances of its footprint.
+        """
+        xy = corners[:, :2]
+        z_hi, z_lo = corners[:, 2].max(), corners[:, 2].min()
+        az_c = np.arctan2(*xy.mean(0)[::-1])
+        rel = np.angle(np.exp(1j * (np.arctan2(xy[:, 1], xy[:, 0]) - az_c)))
+        outside = rel.max() - rel.min() < np.pi - 1e-3
+        rho_max = float(np.linalg.norm(xy, axis=1).max())
+        if outside:
+            a, b = xy[[i for i, _ in _EDGES]], xy[[j for _, j in _EDGES]]
+            ab = b - a
+            u = np.clip(-np.einsum("ij,ij->i", a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12), 0, 1)
+            rho_min = float(np.linalg.norm(a + u[:, None] * ab, axis=1).min())
+            el_hi = np.arctan2(z_hi, rho_min if z_hi > 0 else rho_max)
+            el_lo = np.arctan2(z_lo, rho_max if z_lo > 0 else rho_min)
+        else:
+            el_hi = np.pi / 2 if z_hi > 0 else np.arctan2(z_hi, rho_max)
+            el_lo = -np.pi / 2 if z_lo < 0 else np.arctan2(z_lo, rho_max)
+        margin = 2e-3
+        rows = np.flatnonzero((self.elevation <= el_hi + margin) & (self.elevation >= el_lo - margin))
+        if len(rows) == 0:
+            return []
+        r0, r1 = int(rows[0]), int(rows[-1]) + 1
+        if not outside:
+            return [(r0, r1, 0, self.columns)]
+        lo = az_c + rel.min() - self._step
+        c0 = int(np.floor((lo + np.pi) / self._step))
+        c1 = int(np.ceil((az_c + rel.max() + self._step + np.pi) / self._step)) + 1
+        if c1 - c0 >= self.columns:
+            return [(r0, r1, 0, self.columns)]
+        c0 %= self.columns
+        c1 = c0 + (c1 - int(np.floor((lo + np.pi) / self._step)))
+        if c1 <= self.columns:
+            return [(r0, r1, c0, c1)]
+        return [(r0, r1, c0, self.columns), (r0, r1, 0, c1 - self.columns)]
+
+
+def intersect(shape: Shape, o: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Ray parameters (n,) float32 of the first hit of rays ``o + t d`` (o (3,), d (n, 3) in the shape's frame) from
+    outside the shape; ``inf`` where they miss."""
+    h = shape.half.astype(np.float32)
+    o = o.astype(np.float32)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        if shape.kind == BOX:
+            inv = 1.0 / d
+            t1, t2 = (-h - o) * inv, (h - o) * inv
+            t_near = np.minimum(t1, t2).max(1)
+            t_far = np.maximum(t1, t2).min(1)
+            hit = (t_near <= t_far) & (t_near > 0)
+            return np.where(hit, t_near, np.float32(np.inf))
+        if shape.kind == ELLIPSOID:
+            o_s, d_s = o / h, d / h
+            a = np.einsum("ij,ij->i", d_s, d_s)
+            b = d_s @ o_s
+            c = float(o_s @ o_s) - 1.0
+            disc = b * b - a * c
+            t = (-b - np.sqrt(np.maximum(disc, 0))) / a
+            return np.where((disc >= 0) & (t > 0), t, np.float32(np.inf))
+        if shape.kind == CYLINDER:
+            r, hz = h[0], h[2]
+            a = d[:, 0] ** 2 + d[:, 1] ** 2
+            b = d[:, 0] * o[0] + d[:, 1] * o[1]
+            c = o[0] ** 2 + o[1] ** 2 - r * r
+            disc = b * b - a * c
+            t = (-b - np.sqrt(np.maximum(disc, 0))) / a
+            z = o[2] + t * d[:, 2]
+            best = np.where((disc >= 0) & (t > 0) & (np.abs(z) <= hz), t, np.float32(np.inf))
+            if abs(o[2]) > hz:  # the cap facing the sensor
+                cap = np.sign(o[2]) * hz
+                tc = (cap - o[2]) / d[:, 2]
+                x, y = o[0] + tc * d[:, 0], o[1] + tc * d[:, 1]
+                best = np.where((tc > 0) & (x * x + y * y <= r * r) & (tc < best), tc, best)
+            return best
+    raise ValueError(f"unknown shape kind {shape.kind}")
+
+
+def local_normals(shape: Shape, p: np.ndarray) -> np.ndarray:
+    """Outward unit normals (n, 3) at surface points ``p`` (n, 3) given in the shape's frame."""
+    h = shape.half.astype(np.float32)
+    if shape.kind == BOX:
+        axis = np.argmax(np.abs(p) / h, axis=1)
+        n = np.zeros_like(p)
+        n[np.arange(len(p)), axis] = np.sign(p[np.arange(len(p)), axis])
+        return n
+    if shape.kind == ELLIPSOID:
+        n = p / (h * h)
+    else:
+        on_cap = np.abs(p[:, 2]) >= h[2] - 1e-3
+        n = np.where(on_cap[:, None], np.stack([0 * p[:, 0], 0 * p[:, 1], np.sign(p[:, 2])], -1),
+                     np.stack([p[:, 0], p[:, 1], 0 * p[:, 2]], -1))
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-9)
+
+
+def intersect_terrain(terrain: Terrain, o: np.ndarray, d: np.ndarray, max_t: np.ndarray) -> np.ndarray:
+    """Ray parameters (n,) float32 of rays ``o + t d`` (o (3,), d (n, 3) world) with the ground, ``inf`` where they
+    miss within ``max_t`` (n,). Newton's method from the hit with the tangent plane below ``o`` (the terrain is
+    gentle: slopes of a few per cent varying over hundreds of metres)."""
+    o = o.astype(np.float64)
+    h0 = float(terrain.height(o[0], o[1]))
+    g = terrain.gradient(o[0], o[1])
+    denominator = d[:, 2] - np.float32(g[0]) * d[:, 0] - np.float32(g[1]) * d[:, 1]
+    candidates = np.flatnonzero(denominator < -1e-6)
+    tv = np.float32(h0 - o[2]) / denominator[candidates]
+    keep = tv < max_t[candidates] * 1.5
+    valid, tv = candidates[keep], tv[keep]
+    dv, limit = d[valid], max_t[valid] * 2
+    height_above = np.float32(o[2])
+    for _ in range(3):
+        h, gx, gy = terrain.around(o[0], o[1], tv * dv[:, 0], tv * dv[:, 1])
+        f = height_above + tv * dv[:, 2] - h
+        slope = dv[:, 2] - gx * dv[:, 0] - gy * dv[:, 1]
+        tv = np.clip(tv - f / np.minimum(slope, np.float32(-1e-6)), 0, limit)
+    h, _, _ = terrain.around(o[0], o[1], tv * dv[:, 0], tv * dv[:, 1])
+    residual = np.abs(height_above + tv * dv[:, 2] - h)
+    ok = (residual < 5e-3) & (tv > 0) & (tv < max_t[valid])
+    out = np.full(len(d), np.inf, dtype=np.float32)
+    out[valid[ok]] = tv[ok]
+    return out
+
+
+def cast(grid, T_world_sensor: np.ndarray, shapes: list[Shape], terrain: Terrain, max_range_m: float):
+    """Cast every ray of ``grid`` from the sensor at pose ``T_world_sensor`` (4, 4).
+
+    Returns the ray parameter (R, C) float32 (``inf`` = no hit within ``max_range_m`` metres of range), the index of
+    the hit (R, C) int32 (shape index, ``GROUND`` or ``NO_HIT``) and the world ray directions (R, C, 3) float32.
+    """
+    R_ws = T_world_sensor[:3, :3]
+    o_world = T_world_sensor[:3, 3]
+    dirs = grid.dirs
+    rows, cols = dirs.shape[:2]
+    d_world = (dirs.reshape(-1, 3) @ R_ws.T.astype(np.float32))
+    lengths = grid.lengths
+    max_t = (max_range_m / lengths).astype(np.float32).ravel()
+    t_best = intersect_terrain(terrain, o_world, d_world, max_t).reshape(rows, cols)
+    index = np.where(np.isfinite(t_best), GROUND, NO_HIT).astype(np.int32)
+    T_sensor_world = np.linalg.inv(T_world_sensor)
+    for k, shape in enumerate(shapes):
+        corners = shape.corners() @ T_sensor_world[:3, :3].T + T_sensor_world[:3, 3]
+        rects = grid.rects(corners)
+        if not rects:
+            continue
+        M = (shape.R_world_obj.T @ R_ws).astype(np.float32)  # sensor → object rotation
+        o_local = shape.R_world_obj.T @ (o_world - shape.center)
+        for r0, r1, c0, c1 in rects:
+            sub = dirs[r0:r1, c0:c1].reshape(-1, 3)
+            t = intersect(shape, o_local, sub @ M.T).reshape(r1 - r0, c1 - c0)
+            view_t = t_best[r0:r1, c0:c1]
+            closer = t < view_t
+            if closer.any():
+                view_t[closer] = t[closer]
+                index[r0:r1, c0:c1][closer] = k
+    far = t_best * lengths > max_range_m
+    t_best[far] = np.inf
+    index[far] = NO_HIT
+    return t_best, index, d_world.reshape(rows, cols, 3)
