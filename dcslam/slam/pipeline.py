@@ -1,5 +1,9 @@
-"""Whole-sequence calls: :func:`build_map` (mapping with given poses)."""
+"""The SLAM frame loop (:class:`SLAM`, one frame at a time or a whole sequence) and :func:`build_map` (mapping
+with given poses)."""
 from __future__ import annotations
+
+import time
+from dataclasses import dataclass
 
 import torch
 
@@ -7,6 +11,7 @@ from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_depth
 from dcslam.slam.fusion import PointFusion
 from dcslam.slam.frame import FrameSettings, prepare_frame
+from dcslam.slam.odometry import GroundTruthOdometry, OdometryResult
 from dcslam.slam.pointmap import PointMap
 
 
@@ -33,3 +38,96 @@ def build_map(depth: torch.Tensor, K: torch.Tensor, T_world_cam: torch.Tensor, r
         frame = prepare_frame(depth[i:i + 1], K, None if rgb is None else rgb[i:i + 1], frame_settings)
         pm = mapper.integrate(frame, T_world_cam[i].to(depth.dtype))
     return pm
+
+
+@dataclass
+class StepReport:
+    """What one SLAM step did. Shape: T_world_cam (4, 4)."""
+
+    index: int
+    T_world_cam: torch.Tensor
+    accepted: bool
+    reason: str
+    iterations: int
+    inliers: int
+    rmse: float
+    points: int
+    seconds: float
+
+
+class SLAM:
+    """Dense SLAM, one frame at a time: odometry against the mapper's model, then mapping at the estimated pose.
+
+    >>> slam = SLAM(ICPOdometry(), PointFusion())
+    >>> for i in range(n):
+    ...     report = slam.step(depth[i:i + 1], K, rgb[i:i + 1])
+    >>> slam.poses, slam.map
+
+    The first frame is placed at ``T_world_cam0`` (identity by default). Each later frame starts from a
+    constant-velocity prediction; a rejected odometry step keeps that prediction and is listed in
+    :attr:`rejected`. With ``keep_graph`` (set on the mapper) poses and map stay connected to the inputs.
+    """
+
+    def __init__(self, odometry, mapper, frame_settings: FrameSettings = FrameSettings(),
+                 T_world_cam0: torch.Tensor | None = None):
+        self.odometry, self.mapper, self.frame_settings = odometry, mapper, frame_settings
+        self.T_world_cam0 = T_world_cam0
+        self.reset()
+
+    def reset(self) -> None:
+        self.mapper.reset()
+        self.poses: list[torch.Tensor] = []
+        self.reports: list[StepReport] = []
+
+    @property
+    def map(self) -> PointMap | None:
+        return self.mapper.map
+
+    @property
+    def rejected(self) -> list[dict]:
+        return [{"frame": r.index, "reason": r.reason} for r in self.reports if not r.accepted]
+
+    def trajectory(self) -> torch.Tensor:
+        """Estimated poses so far. Shape: (N, 4, 4)."""
+        return torch.stack(self.poses)
+
+    def _prediction(self, dtype, device) -> torch.Tensor:
+        if not self.poses:
+            T0 = self.T_world_cam0 if self.T_world_cam0 is not None else torch.eye(4)
+            return T0.to(dtype=dtype, device=device)
+        last = self.poses[-1].detach()
+        if len(self.poses) == 1:
+            return last
+        prev = self.poses[-2].detach()
+        return last @ torch.linalg.solve(prev, last)
+
+    def step(self, depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None = None,
+             T_gt: torch.Tensor | None = None) -> StepReport:
+        """Process one frame. Shape: depth (1, 1, H, W) metres, K (3, 3), rgb (1, 3, H, W) or None, T_gt (4, 4)."""
+        start = time.perf_counter()
+        frame = prepare_frame(depth, K, rgb, self.frame_settings)
+        T_init = self._prediction(frame.vertex.dtype, frame.vertex.device)
+        index = len(self.poses)
+        if index == 0:
+            T = T_gt.to(T_init.dtype) if (T_gt is not None and isinstance(self.odometry, GroundTruthOdometry)) \
+                else T_init
+            result = OdometryResult(T)
+        else:
+            H, W = frame.shape
+            model = self.mapper.model(T_init, frame.K, H, W)
+            result = self.odometry.estimate(frame, model, T_init, T_gt)
+        self.mapper.integrate(frame, result.T_world_cam)
+        self.poses.append(result.T_world_cam)
+        report = StepReport(index, result.T_world_cam, result.accepted, result.reason, result.iterations,
+                            result.inliers, result.rmse, len(self.mapper.map), time.perf_counter() - start)
+        self.reports.append(report)
+        return report
+
+    def run(self, depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None = None,
+            T_gt: torch.Tensor | None = None) -> torch.Tensor:
+        """Process a whole sequence. Shape: depth (N, 1, H, W), rgb (N, 3, H, W), T_gt (N, 4, 4) -> poses
+        (N, 4, 4)."""
+        N, _, _ = check_depth(depth)
+        for i in range(N):
+            self.step(depth[i:i + 1], K, None if rgb is None else rgb[i:i + 1], None if T_gt is None else T_gt[i])
+        return self.trajectory()

@@ -1,0 +1,85 @@
+"""Data association for point-to-plane ICP: which target point (and normal) each source point is compared with.
+
+A target is a :class:`~dcslam.slam.pointmap.ModelView`: a map rendered into a camera, or a frame's own vertex map
+(:func:`view_from_frame`). Associations return indices into the source points and the matched target points and
+normals in the world frame; the gates are applied by the ICP problem.
+"""
+from __future__ import annotations
+
+import torch
+
+from dcslam.geometry.camera import project
+from dcslam.geometry.se3 import inverse, rotate, transform_points
+from dcslam.slam.frame import Frame
+from dcslam.slam.pointmap import ModelView
+
+
+def view_from_frame(frame: Frame, T_world_cam: torch.Tensor) -> ModelView:
+    """A frame's vertex and normal maps as an ICP target seen from ``T_world_cam`` (frame-to-frame ICP)."""
+    T = T_world_cam.to(frame.vertex.dtype)
+    H, W = frame.shape
+    flat = frame.valid.reshape(-1)
+    index = torch.where(flat, torch.arange(H * W, device=flat.device), torch.full_like(flat, -1, dtype=torch.int64))
+    vertex = torch.where(frame.valid[..., None], transform_points(T, frame.vertex.reshape(-1, 3)).reshape(H, W, 3),
+                         torch.zeros((), dtype=T.dtype, device=T.device))
+    normal = rotate(T, frame.normal.reshape(-1, 3)).reshape(H, W, 3)
+    return ModelView(index.view(H, W), vertex, normal, frame.valid, T, frame.K)
+
+
+class ProjectiveAssociation:
+    """Project each source point (moved by the current pose) into the target view and take that pixel's point:
+    O(pixels), the association of KinectFusion and gradSLAM."""
+
+    def prepare(self, target: ModelView) -> "ProjectiveAssociation._Prepared":
+        return self._Prepared(target)
+
+    class _Prepared:
+        def __init__(self, target: ModelView):
+            self.target = target
+            self.T_ref_world = inverse(target.T_world_cam)
+            self.height, self.width = target.valid.shape
+
+        def __call__(self, points_world: torch.Tensor):
+            """points_world (F, 3) -> (source index (M,), target points (M, 3), target normals (M, 3))."""
+            tv = self.target
+            uv, z = project(transform_points(self.T_ref_world, points_world.detach()), tv.K)
+            px = torch.round(uv)
+            inside = (z > 0) & (px[:, 0] >= 0) & (px[:, 0] <= self.width - 1) & (px[:, 1] >= 0) & \
+                     (px[:, 1] <= self.height - 1)
+            src = torch.nonzero(inside).squeeze(1)
+            pix = px[src].to(torch.int64)
+            lin = pix[:, 1] * self.width + pix[:, 0]
+            hit = tv.valid.reshape(-1)[lin]
+            src, lin = src[hit], lin[hit]
+            return src, tv.vertex.reshape(-1, 3)[lin], tv.normal.reshape(-1, 3)[lin]
+
+
+class NearestNeighbourAssociation:
+    """The nearest target point in 3-D (a KD-tree, scipy ``cKDTree``, built once per target, searched without
+    gradient; residuals are then computed in torch), as in Open3D's ``registration_icp``."""
+
+    def __init__(self, workers: int = -1):
+        self.workers = workers
+
+    def prepare(self, target: ModelView) -> "NearestNeighbourAssociation._Prepared":
+        return self._Prepared(target, self.workers)
+
+    class _Prepared:
+        def __init__(self, target: ModelView, workers: int):
+            from scipy.spatial import cKDTree
+
+            flat = target.valid.reshape(-1)
+            self.points = target.vertex.reshape(-1, 3)[flat]
+            self.normals = target.normal.reshape(-1, 3)[flat]
+            self.workers = workers
+            self.tree = cKDTree(self.points.detach().cpu().double().numpy()) if len(self.points) else None
+
+        def __call__(self, points_world: torch.Tensor):
+            device = points_world.device
+            if self.tree is None:
+                empty = torch.zeros(0, dtype=torch.int64, device=device)
+                return empty, self.points, self.normals
+            _, nearest = self.tree.query(points_world.detach().cpu().double().numpy(), k=1, workers=self.workers)
+            nearest = torch.from_numpy(nearest).to(device)
+            src = torch.arange(points_world.shape[0], device=device)
+            return src, self.points[nearest], self.normals[nearest]

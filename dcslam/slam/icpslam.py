@@ -1,0 +1,47 @@
+"""The ICP-SLAM map (gradSLAM's ICPSLAM): every frame's points accumulated in the world frame, downsampled on a
+voxel grid (points falling in one voxel are averaged), and rendered for frame-to-model ICP. No confidence gating and
+no pruning: the plain accumulated model that PointFusion improves on.
+"""
+from __future__ import annotations
+
+import torch
+
+from dcslam.slam.frame import Frame
+from dcslam.slam.fusion import frame_surfels
+from dcslam.slam.pointmap import ModelView, PointMap, assign_voxels, merge, render, voxel_keys
+
+
+class ICPSLAM:
+    """Accumulated, voxel-downsampled point map; same interface as :class:`~dcslam.slam.fusion.PointFusion`.
+
+    Args:
+        voxel_size: metres (> 0); one point per voxel, so the map grows with the explored volume.
+        keep_graph: keep the autograd graph across frames; otherwise detach after every frame.
+        splat: rendering footprint (pixels each side) for odometry.
+    """
+
+    def __init__(self, voxel_size: float = 0.05, keep_graph: bool = False, splat: int = 1):
+        self.voxel_size, self.keep_graph, self.splat = voxel_size, keep_graph, splat
+        self.reset()
+
+    def reset(self) -> None:
+        self.map: PointMap | None = None
+        self.frames = 0
+
+    def model(self, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> ModelView | None:
+        if self.map is None or len(self.map) == 0:
+            return None
+        return render(self.map, T_world_cam, K, height, width, splat=self.splat)
+
+    def integrate(self, frame: Frame, T_world_cam: torch.Tensor) -> PointMap:
+        dtype, device = frame.vertex.dtype, frame.vertex.device
+        pm = self.map if self.map is not None else PointMap.empty(dtype, device)
+        pixels, p_w, n_w, colors, radius, _ = frame_surfels(frame, T_world_cam)
+        target, new_keys = assign_voxels(pm, voxel_keys(p_w, self.voxel_size), torch.full_like(pixels, -1),
+                                         self.voxel_size)
+        pm = merge(pm, target, new_keys, p_w, n_w, colors, radius, torch.ones_like(radius), self.frames)
+        if not self.keep_graph:
+            pm = pm.detach()
+        self.map = pm
+        self.frames += 1
+        return pm
