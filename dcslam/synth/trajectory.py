@@ -45,6 +45,7 @@ class Terrain:
 
     def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Heights (...) at points x, y (...)."""
+        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
         arg = x[..., None] * self.wave[:, 0] + y[..., None] * self.wave[:, 1] + self.phase
         return np.sin(arg) @ self.amplitude
 
@@ -61,6 +62,7 @@ class Terrain:
 
     def gradient(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(dh/dx, dh/dy) at points x, y (...)."""
+        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
         c = np.cos(x[..., None] * self.wave[:, 0] + y[..., None] * self.wave[:, 1] + self.phase) * self.amplitude
         return c @ self.wave[:, 0], c @ self.wave[:, 1]
 
