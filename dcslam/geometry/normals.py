@@ -30,13 +30,15 @@ def _nearest(vertex: torch.Tensor, valid: torch.Tensor, dy: int, dx: int, search
     z = vertex[:, 2:3]
     found = torch.zeros_like(valid)
     neighbour = torch.zeros_like(vertex)
+    steps = torch.zeros_like(z)
     for k in range(1, search + 1):
         cand_valid = _shift(valid, k * dy, k * dx) & ~found
         if not bool(cand_valid.any()):
             continue
         neighbour = torch.where(cand_valid, _shift(vertex, k * dy, k * dx), neighbour)
+        steps = torch.where(cand_valid, torch.full_like(steps, k), steps)
         found = found | cand_valid
-    same_surface = found & ((neighbour[:, 2:3] - z).abs() <= max_relative_gap * z)
+    same_surface = found & ((neighbour[:, 2:3] - z).abs() <= max_relative_gap * steps * z)
     return neighbour, same_surface
 
 
@@ -49,8 +51,8 @@ def vertex_normals(vertex: torch.Tensor, valid: torch.Tensor | None = None, sear
         valid: pixels with a point; default ``vertex z > 0``.
         search: how far (pixels) to look for the nearest valid neighbour in each direction; 1 for dense depth,
             about 8 for LiDAR-like sparse depth.
-        max_relative_gap: neighbours whose depth differs by more than this fraction of the centre depth are taken
-            to lie across a depth edge and are not used.
+        max_relative_gap: neighbours whose depth differs by more than this fraction of the centre depth per pixel
+            of distance are taken to lie across a depth edge and are not used.
 
     Shape: vertex (B, 3, H, W), valid (B, 1, H, W) bool -> (normals (B, 3, H, W), valid (B, 1, H, W) bool);
     normals are zero where not valid.

@@ -71,8 +71,9 @@ def so3_log(R: torch.Tensor) -> torch.Tensor:
     generic = vee * (theta / (2 * torch.sin(theta)))[..., None]
     # 1 - cos ~ t^2 / 2, so t / (2 sin t) ~ (1 + t^2 / 6) / 2 with t^2 ~ 2 (1 - cos).
     small = vee * (0.5 + (1 - cos) / 6)[..., None]
-    # Near pi: R + I = 2 a a^T (1 + cos) / ... ; take the axis from the largest diagonal entry of (R + I) / 2.
-    B = (R + torch.eye(3, dtype=R.dtype, device=R.device)) / 2
+    # Near pi: the symmetric part is cos I + (1 - cos) a a^T; take the axis from its largest diagonal entry.
+    eye = torch.eye(3, dtype=R.dtype, device=R.device)
+    B = ((R + R.transpose(-1, -2)) / 2 - cos[..., None, None] * eye) / (1 - cos).clamp_min(1e-12)[..., None, None]
     diag = torch.diagonal(B, dim1=-2, dim2=-1)
     k = diag.argmax(-1, keepdim=True)
     col = torch.gather(B, -1, k[..., None, :].expand(*B.shape[:-1], 1)).squeeze(-1)

@@ -1,0 +1,74 @@
+import pytest
+import torch
+
+from dcslam.errors import DcslamError
+from dcslam.geometry.camera import backproject
+from dcslam.geometry.normals import vertex_normals
+
+K = torch.tensor([[40.0, 0, 15.5], [0, 40.0, 11.5], [0, 0, 1]], dtype=torch.float64)
+
+
+def _plane_depth(normal, offset, H=24, W=32, dtype=torch.float64):
+    """Depth of the plane n . p = offset seen by K."""
+    v, u = torch.meshgrid(torch.arange(H, dtype=dtype), torch.arange(W, dtype=dtype), indexing="ij")
+    rays = torch.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], torch.ones_like(u)], -1)
+    n = torch.tensor(normal, dtype=dtype)
+    return (offset / (rays @ n))[None, None]
+
+
+class TestVertexNormals:
+    @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+    def test_plane_known_answer(self, dtype):
+        n = torch.tensor([0.3, -0.4, -1.0], dtype=torch.float64)
+        n = n / n.norm()
+        depth = _plane_depth(n.tolist(), -5.0).to(dtype)
+        normals, valid = vertex_normals(backproject(depth, K.to(dtype)))
+        assert valid.all()
+        tol = 1e-4 if dtype == torch.float32 else 1e-9
+        torch.testing.assert_close(normals[0].permute(1, 2, 0).reshape(-1, 3),
+                                   n.to(dtype).expand(24 * 32, 3), atol=tol, rtol=0)
+
+    def test_faces_camera(self):
+        depth = torch.full((2, 1, 8, 9), 3.0, dtype=torch.float64)
+        normals, _ = vertex_normals(backproject(depth, K))
+        assert (normals[:, 2] < 0).all()
+
+    def test_depth_edge_not_crossed(self):
+        depth = torch.full((1, 1, 10, 12), 2.0, dtype=torch.float64)
+        depth[..., 6:] = 8.0                       # two fronto-parallel planes meeting at a depth edge
+        normals, valid = vertex_normals(backproject(depth, K))
+        assert valid.all()
+        expected = torch.tensor([0.0, 0.0, -1.0], dtype=torch.float64)
+        torch.testing.assert_close(normals[0].permute(1, 2, 0).reshape(-1, 3), expected.expand(120, 3),
+                                   atol=1e-12, rtol=0)
+
+    def test_holes_and_isolated_pixels(self):
+        depth = torch.zeros(1, 1, 10, 12, dtype=torch.float64)
+        depth[0, 0, 5, 5] = 3.0
+        normals, valid = vertex_normals(backproject(depth, K))
+        assert not valid.any() and (normals == 0).all() and torch.isfinite(normals).all()
+
+    def test_sparse_scan_lines_need_search(self):
+        n = torch.tensor([0.0, -1.0, -0.5], dtype=torch.float64)
+        n = n / n.norm()
+        depth = _plane_depth(n.tolist(), -2.0)
+        mask = torch.zeros_like(depth, dtype=torch.bool)
+        mask[..., 1::4, ::2] = True
+        sparse = torch.where(mask, depth, torch.zeros_like(depth))
+        _, valid_near = vertex_normals(backproject(sparse, K), search=1)
+        normals, valid = vertex_normals(backproject(sparse, K), search=4)
+        assert not valid_near.any()
+        assert valid.sum() == mask.sum()
+        torch.testing.assert_close(normals[0].permute(1, 2, 0)[mask[0, 0]], n.expand(int(mask.sum()), 3))
+
+    def test_gradcheck(self):
+        depth = (torch.rand(1, 1, 5, 6, dtype=torch.float64) * 0.1 + 2).requires_grad_()
+        assert torch.autograd.gradcheck(lambda d: vertex_normals(backproject(d, K))[0], (depth,))
+
+    def test_errors(self):
+        with pytest.raises(DcslamError, match=r"\(B, 3, H, W\)"):
+            vertex_normals(torch.zeros(1, 2, 4, 4))
+        with pytest.raises(DcslamError, match="search"):
+            vertex_normals(torch.zeros(1, 3, 4, 4), search=0)
+        with pytest.raises(DcslamError, match="bool"):
+            vertex_normals(torch.zeros(1, 3, 4, 4), torch.ones(1, 1, 4, 4))
