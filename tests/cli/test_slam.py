@@ -1,0 +1,84 @@
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from dcslam.cli import app
+from dcslam.io.drive import DriveWriter, Frame, Layer, write_layer
+from dcslam.io.ply import read_ply
+from dcslam.io.tum import read_tum
+from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
+
+H, W, N = 48, 160, 5
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory):
+    ws = tmp_path_factory.mktemp("ws")
+    (ws / "drives").mkdir()
+    scene, K = StreetScene(1), kitti_K(H, W)
+    poses = street_trajectory(N, step=0.5)
+    with DriveWriter(ws / "drives" / "street_0001.h5", K.double().numpy(), H, W, source="synthetic",
+                     date="2011_09_26", drive="street_0001", split="test") as writer:
+        for i in range(N):
+            dense = scene.render(poses[i], K, H, W).float().numpy()
+            sparse = dense * lidar_mask(H, W).numpy()
+            rgb = np.full((H, W, 3), 40 * i, np.uint8)
+            writer.append(Frame(rgb, sparse, dense, poses[i].numpy(), 0.1 * i, i))
+    (ws / "drives" / "splits.json").write_text(json.dumps({"train": [], "val": [], "test": ["street_0001"]}))
+    return ws
+
+
+def _run(*args):
+    return CliRunner().invoke(app, ["slam", *args], catch_exceptions=False)
+
+
+def test_dense_icp_writes_trajectory_map_and_summary(workspace):
+    result = _run("--depth", "dense", "--odometry", "icp", "-w", str(workspace))
+    assert result.exit_code == 0, result.output
+    out = workspace / "slam" / "dense"
+    timestamps, poses = read_tum(out / "street_0001.txt")
+    assert poses.shape == (N, 4, 4) and np.allclose(timestamps, 0.1 * np.arange(N))
+    truth = street_trajectory(N, step=0.5).numpy()
+    assert np.abs(poses[:, :3, 3] - truth[:, :3, 3]).max() < 0.1
+    points, normals, colors = read_ply(out / "street_0001.ply")
+    assert len(points) > 1000 and normals is not None and colors is not None
+    record = json.loads((out / "street_0001.json").read_text())
+    assert record["frames"] == N and record["points"] == len(points)
+    assert record["settings"]["odometry"] == "icp" and record["seconds_per_frame"] > 0
+    assert record["rejected_steps"] == []
+    # Refuses to overwrite without --force, keeps the files, then overwrites with it.
+    again = _run("--depth", "dense", "-w", str(workspace))
+    assert again.exit_code == 1 and "--force" in again.output
+    assert _run("--depth", "dense", "-w", str(workspace), "--force", "--frames", "2").exit_code == 0
+    assert read_tum(out / "street_0001.txt")[1].shape == (2, 4, 4)
+
+
+def test_gt_icpslam_sparse_and_layer_path(workspace, tmp_path):
+    result = _run("--depth", "sparse", "--odometry", "gt", "--mapper", "icpslam", "-w", str(workspace),
+                  "--out", str(tmp_path / "o"))
+    assert result.exit_code == 0, result.output
+    _, poses = read_tum(tmp_path / "o" / "street_0001.txt")
+    np.testing.assert_allclose(poses, street_trajectory(N, step=0.5).numpy(), atol=1e-6)
+    layer_path = tmp_path / "mylayer.h5"
+    from dcslam.io.drive import DriveFile
+    with DriveFile(workspace / "drives" / "street_0001.h5") as drive:
+        write_layer(layer_path, Layer(np.stack([drive.depth("dense", i) for i in range(N)]), "street_0001", "test"))
+    result = _run("--depth", str(layer_path), "--odometry", "gradicp", "--frames", "3", "-w", str(workspace))
+    assert result.exit_code == 0, result.output
+    assert (workspace / "slam" / "mylayer" / "street_0001.ply").exists()
+
+
+def test_predicted_without_predictions_names_predict(workspace):
+    result = _run("--depth", "predicted", "-w", str(workspace))
+    assert result.exit_code == 1 and "dcslam predict" in result.output
+
+
+def test_missing_drives_name_prepare(tmp_path):
+    result = _run("-w", str(tmp_path))
+    assert result.exit_code == 1 and "dcslam prepare-kitti" in result.output
+
+
+def test_bad_choice_is_usage_error(workspace):
+    assert _run("--odometry", "magic", "-w", str(workspace)).exit_code == 2
