@@ -42,7 +42,7 @@ class DriveRun:
             "map_megabytes": round(self.map.nbytes() / 2 ** 20, 2),
             "rejected_steps": [{"frame": r.index, "reason": r.reason} for r in self.reports if not r.accepted],
             "translation_error_m": {"final": float(dt[-1]), "max": float(dt.max()), "mean": float(dt.mean())},
-            "rotation_error_deg": {"final": float(np.degrees(dr[-1])), "max": float(np.degrees(dr.max()))},
+            "rotation_error_deg": {"final": float(dr[-1]) * 180 / np.pi, "max": float(dr.max()) * 180 / np.pi},
             "settings": self.settings,
         }
 

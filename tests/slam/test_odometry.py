@@ -1,0 +1,108 @@
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from dcslam.geometry.se3 import pose_error, se3_exp
+from dcslam.slam.association import NearestNeighbourAssociation, ProjectiveAssociation, view_from_frame
+from dcslam.slam.frame import prepare_frame
+from dcslam.slam.odometry import GroundTruthOdometry, ICPOdometry
+from dcslam.slam.scene import StreetScene, kitti_K, street_trajectory
+from dcslam.slam.solvers import DifferentiableLM, GaussNewton, LevenbergMarquardt
+
+H, W = 64, 208
+
+
+@pytest.fixture(scope="module")
+def pair():
+    scene, K = StreetScene(0), kitti_K(H, W)
+    T = street_trajectory(2, step=0.6)
+    frames = [prepare_frame(scene.render(T[i], K, H, W).float(), K) for i in range(2)]
+    return frames, T.float(), K
+
+
+@pytest.mark.parametrize("solver", [GaussNewton(), LevenbergMarquardt(), DifferentiableLM()],
+                         ids=["gn", "lm", "dlm"])
+@pytest.mark.parametrize("association", [ProjectiveAssociation(), NearestNeighbourAssociation()],
+                         ids=["projective", "nn"])
+def test_recovers_known_motion(pair, solver, association):
+    (f0, f1), T, _ = pair
+    result = ICPOdometry(solver=solver, association=association).estimate(f1, view_from_frame(f0, T[0]), T[0])
+    assert result.accepted, result.reason
+    dt, dr = pose_error(result.T_world_cam.double(), T[1].double())
+    assert float(dt) < 0.02 and math.degrees(float(dr)) < 0.1
+
+
+def test_recovers_perturbation_of_same_frame(pair):
+    (f0, _), T, _ = pair
+    T_true = se3_exp(torch.tensor([0.05, -0.03, 0.2, 0.01, -0.02, 0.015]))
+    result = ICPOdometry().estimate(f0, view_from_frame(f0, torch.eye(4)), torch.linalg.inv(T_true))
+    dt, dr = pose_error(result.T_world_cam.double(), torch.eye(4, dtype=torch.float64))
+    assert result.accepted and float(dt) < 0.01 and math.degrees(float(dr)) < 0.05
+
+
+def test_agrees_with_open3d_point_to_plane(pair):
+    o3d = pytest.importorskip("open3d")
+    (f0, f1), T, _ = pair
+    target = view_from_frame(f0, T[0])
+    iterations, gate = 30, 0.5
+    ours = ICPOdometry(association=NearestNeighbourAssociation(), max_distance=gate, max_normal_angle_deg=180,
+                       iterations=iterations, coarse_to_fine=(1.0,)).estimate(f1, target, T[0])
+    src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(f1.vertex[f1.valid].double().numpy()))
+    tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target.vertex[target.valid].double().numpy()))
+    tgt.normals = o3d.utility.Vector3dVector(target.normal[target.valid].double().numpy())
+    reg = o3d.pipelines.registration.registration_icp(
+        src, tgt, gate, T[0].double().numpy(), o3d.pipelines.registration.TransformationEstimationPointToPlane(),
+        o3d.pipelines.registration.ICPConvergenceCriteria(1e-9, 1e-9, iterations))
+    dt, dr = pose_error(ours.T_world_cam.double(), torch.from_numpy(np.asarray(reg.transformation)))
+    assert float(dt) < 0.01 and math.degrees(float(dr)) < 0.1
+
+
+def test_empty_and_zero_frames_are_rejected_not_nan(pair):
+    (f0, _), T, K = pair
+    zero = prepare_frame(torch.zeros(1, 1, H, W), K)
+    for model in (None, view_from_frame(f0, T[0])):
+        result = ICPOdometry().estimate(zero, model, T[0])
+        assert not result.accepted and torch.equal(result.T_world_cam, T[0])
+    result = ICPOdometry().estimate(f0, view_from_frame(zero, T[0]), T[0])
+    assert not result.accepted and torch.isfinite(result.T_world_cam).all()
+
+
+@pytest.mark.parametrize("solver", [GaussNewton(), LevenbergMarquardt(), DifferentiableLM()], ids=["gn", "lm", "dlm"])
+def test_planar_scene_is_rejected_as_degenerate(solver):
+    K = kitti_K(H, W)
+    plane = prepare_frame(torch.full((1, 1, H, W), 6.0), K)
+    start = se3_exp(torch.tensor([0.1, 0.0, 0.0, 0.0, 0.0, 0.02]))
+    result = ICPOdometry(solver=solver).estimate(plane, view_from_frame(plane, torch.eye(4)), start)
+    assert not result.accepted and "degenerate" in result.reason
+    assert torch.isfinite(result.T_world_cam).all() and torch.equal(result.T_world_cam, start)
+
+
+def test_ground_truth_odometry(pair):
+    (f0, _), T, _ = pair
+    assert torch.equal(GroundTruthOdometry().estimate(f0, None, T[0], T[1]).T_world_cam, T[1])
+
+
+def test_differentiable_lm_pose_gradcheck():
+    """The pose estimated by ICP with the differentiable LM is a differentiable function of the source depth."""
+    h, w = 10, 14
+    K = torch.tensor([[12.0, 0, 6.5], [0, 12.0, 4.5], [0, 0, 1]], dtype=torch.float64)
+    v, u = torch.meshgrid(torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64), indexing="ij")
+    # A corner of three slanted planes (fully constrained) seen from two poses.
+    rays = torch.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], torch.ones_like(u)], -1)
+    normals = torch.tensor([[0.6, 0.1, -1.0], [-0.7, 0.2, -1.0], [0.1, -0.8, -1.0]], dtype=torch.float64)
+    depth_planes = 3.0 / (rays @ (-normals).T)
+    depth0 = depth_planes.min(-1).values[None, None]
+    target = view_from_frame(prepare_frame(depth0, K), torch.eye(4, dtype=torch.float64))
+    odometry = ICPOdometry(solver=DifferentiableLM(), iterations=3, min_inliers=10, min_conditioning=0,
+                           coarse_to_fine=(1.0,))
+    T_init = se3_exp(torch.tensor([0.01, -0.02, 0.01, 0.005, 0.0, -0.004], dtype=torch.float64))
+
+    def pose(depth):
+        return odometry.estimate(prepare_frame(depth, K), target, T_init).T_world_cam
+
+    depth = (depth0 * (1 + 0.001 * torch.sin(u + v))).requires_grad_()
+    assert torch.autograd.gradcheck(pose, (depth,), eps=1e-7, atol=1e-5)
+    grad = torch.autograd.grad(pose(depth)[:3, 3].sum(), depth)[0]
+    assert torch.isfinite(grad).all() and grad.abs().sum() > 0
