@@ -5,7 +5,7 @@ from dcslam.depth.models.ip_basic import IPBasic, complete_fast, cross_kernel, d
 from dcslam.errors import DcslamError
 from dcslam.io.kitti import read_depth_png
 
-SAMPLE = "/work/shared/kitti-sample/depth_completion/train/2011_09_26_drive_0001_sync/proj_depth"
+SAMPLE = "kitti-sample/depth_completion/train/2011_09_26_drive_0001_sync/proj_depth"
 
 
 def test_kernels():
@@ -61,9 +61,9 @@ def test_bad_input():
         complete_fast(np.ones((8, 8), np.float32), blur="box")
 
 
-def test_real_kitti_frame_accuracy():
-    sparse = read_depth_png(f"{SAMPLE}/velodyne_raw/image_02/0000000005.png")
-    gt = read_depth_png(f"{SAMPLE}/groundtruth/image_02/0000000005.png")
+def test_real_kitti_frame_accuracy(data_dir):
+    sparse = read_depth_png(data_dir / SAMPLE / "velodyne_raw/image_02/0000000005.png")
+    gt = read_depth_png(data_dir / SAMPLE / "groundtruth/image_02/0000000005.png")
     valid = gt > 0
     for variant in ("fast", "multiscale"):
         err = IPBasic(variant)(sparse)[valid] - gt[valid]
