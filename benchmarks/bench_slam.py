@@ -8,6 +8,8 @@
 
 Frames come from the analytic street scene (``dcslam.slam.scene``), so no dataset is needed. Figures depend on the
 machine and on its load: read them next to the machine line that ``benchmarks/run_all.py`` prints.
+On a shared machine run with ``OMP_NUM_THREADS=1`` (applies to torch and Open3D alike): with two threads on busy
+cores torch's small-tensor kernels thrash and every figure becomes several times slower.
 Usage: ``python benchmarks/bench_slam.py [--device cuda] [--frames 10] [--memory-frames 100]``.
 """
 from __future__ import annotations
@@ -59,7 +61,7 @@ def bench_icp(scene: StreetScene, K: torch.Tensor, device: str, iterations: int)
     result = reg.registration_icp(src, tgt, 0.5, T[0].numpy(), reg.TransformationEstimationPointToPlane(),
                                   reg.ICPConvergenceCriteria(0.0, 0.0, iterations))
     t_o3d = time.perf_counter() - start
-    dt, dr = pose_error(ours.T_world_cam.double().cpu(), torch.from_numpy(np.asarray(result.transformation)))
+    dt, dr = pose_error(ours.T_world_cam.double().cpu(), torch.from_numpy(np.array(result.transformation)))
     et, er = pose_error(ours.T_world_cam.double().cpu(), T[1])
     print(f"ICP point-to-plane, {W} x {H} dense ({len(src.points)} source points), {iterations} iterations, "
           f"device {device}")
