@@ -95,13 +95,16 @@ class GroundTexture:
 
     def __init__(self, scene: Scene):
         path = scene.drive.path
-        self.tree = cKDTree(path.xy)
-        self.path, self.right, self.left = path, scene.road_right_m, scene.road_left_m
+        every = max(int(round(1.0 / (path.s[1] - path.s[0]))), 1)  # path samples 1 m apart suffice
+        self.s, self.xy, self.heading = path.s[::every], path.xy[::every], path.heading[::every]
+        self.tree = cKDTree(self.xy)
+        self.right, self.left = scene.road_right_m, scene.road_left_m
 
     def albedo(self, p: np.ndarray) -> np.ndarray:
         _, i = self.tree.query(p[:, :2])
-        s, heading = self.path.s[i], self.path.heading[i]
-        delta = p[:, :2] - self.path.xy[i]
+        heading = self.heading[i]
+        delta = p[:, :2] - self.xy[i]
+        s = self.s[i] + np.cos(heading) * delta[:, 0] + np.sin(heading) * delta[:, 1]
         lateral = -np.sin(heading) * delta[:, 0] + np.cos(heading) * delta[:, 1]
         road = (lateral > self.right) & (lateral < self.left)
         asphalt = 0.3 * (0.8 + 0.35 * value_noise(p, 0.8) + 0.15 * cell_noise(p, 0.06))
