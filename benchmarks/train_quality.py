@@ -50,6 +50,8 @@ def main() -> None:
     parser.add_argument("--minutes", type=float, default=4.0)
     parser.add_argument("--scale", type=float, default=0.5)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--lr", type=float, default=1e-3)
+    parser.add_argument("--crop", type=int, default=0)
     args = parser.parse_args()
 
     from dcslam.depth.models import build_model
@@ -62,7 +64,8 @@ def main() -> None:
     ws = Workspace.resolve(args.workspace)
     splits = read_splits(ws.splits)
     paths = {k: [ws.drives / f"{name}.h5" for name in v] for k, v in splits.items()}
-    config = TrainConfig(loss="mse", mask="dense", scale=args.scale, seed=args.seed, device="cpu",
+    config = TrainConfig(loss="mse", mask="dense", scale=args.scale, crop=args.crop, seed=args.seed, device="cpu",
+                         lr=args.lr,
                          train_drives=paths["train"], val_drives=paths["val"], epochs=1)
     run = ws.runs / "quality-mse-dense"
     start = time.perf_counter()
