@@ -137,6 +137,9 @@ class _Builder:
     def tree(self, s, lateral):
         rng = self.rng
         trunk_h, crown = rng.uniform(1.8, 3.2), rng.uniform(1.4, 3.0)
+        # crowns stay out of the driving lanes (lateral −1.75 … 5.25 m)
+        clearance = lateral - 1.5 * LANE_WIDTH_M if lateral > 0 else -LANE_WIDTH_M / 2 - lateral
+        crown = float(np.clip(crown, 0.8, max(clearance - 0.1, 0.8)))
         self.cylinder(s, lateral, rng.uniform(0.12, 0.3), 0.0, trunk_h + crown * 0.5, BARK, [0.35, 0.25, 0.15])
         green = np.array([0.18, 0.38, 0.12]) * rng.uniform(0.7, 1.3)
         self.ellipsoid(s, lateral, [crown, crown, crown * rng.uniform(0.8, 1.3)], trunk_h + crown, FOLIAGE, green)
