@@ -9,7 +9,21 @@ import typer
 from dcslam.cli.app import ForceOption, WorkspaceOption, app, known_errors, summary
 
 
-@app.command("synth")
+HELP = (
+    "Generate synthetic drives in the KITTI raw + depth-completion layout, so that everything downstream runs "
+    "without downloading KITTI.\n\n"
+    "Each drive 2011_09_26_drive_<1000+i>_sync is a procedural street (façades with recesses and setbacks, "
+    "sidewalks with curbs, parked and moving cars, poles, trees, hedges, open stretches) on gentle slopes, driven "
+    "at KITTI-like speeds (0.5–1.5 m per frame). It is seen by camera 2 with the real 2011-09-26 calibration "
+    "(1242 × 375 RGB), a simulated 64-beam Velodyne 1.73 m above the road (.bin scans) and OXTS packets whose poses "
+    "match the true trajectory.\n\n"
+    "proj_depth/velodyne_raw is the scan projected into camera 2 (with KITTI's see-through errors); "
+    "proj_depth/groundtruth accumulates the scans of ±5 frames, kept where they agree with the view. "
+    "Read the result with `dcslam prepare-kitti`. About a second per frame on two cores."
+)
+
+
+@app.command("synth", help=HELP)
 @known_errors
 def synth_command(
     workspace: WorkspaceOption = None,
@@ -27,17 +41,6 @@ def synth_command(
                                      "second step, as the HDL-64E).")] = 0.08,
     force: ForceOption = False,
 ) -> None:
-    """Generate synthetic drives in the KITTI raw + depth-completion layout, so that everything downstream can run
-    without downloading KITTI.
-
-    Each drive ``2011_09_26_drive_<1000+i>_sync`` is a procedural street (façades with recesses and setbacks,
-    sidewalks with curbs, parked and moving cars, poles, trees, hedges, open stretches) on gentle slopes, driven at
-    KITTI-like speeds (0.5–1.5 m per frame). It is seen by camera 2 with the real 2011-09-26 calibration (1242 × 375
-    RGB), a simulated 64-beam Velodyne 1.73 m above the road (``.bin`` scans), and OXTS packets whose poses match
-    the true trajectory. ``proj_depth/velodyne_raw`` is the scan projected into camera 2 (with KITTI's see-through
-    errors), ``proj_depth/groundtruth`` accumulates the scans of ±5 frames, kept where they agree with the view.
-    Read it with ``dcslam prepare-kitti``.
-    """
     from dcslam.progress import Bar
     from dcslam.synth import generate
     from dcslam.workspace import Workspace
