@@ -5,7 +5,12 @@ PY     := $(VENV)/bin/python
 DCSLAM := $(VENV)/bin/dcslam
 STAMP  := $(VENV)/.dcslam-installed
 
-.PHONY: setup test bench clean
+PROFILE    ?= quick
+WORKSPACE  ?= workspace
+KITTI_ROOT ?=
+REPRO_ARGS  = --profile $(PROFILE) --workspace $(WORKSPACE) $(if $(KITTI_ROOT),--kitti $(KITTI_ROOT))
+
+.PHONY: setup test bench clean reproduce-table-5-2 reproduce-table-5-1
 
 setup: $(STAMP)
 
@@ -23,6 +28,14 @@ $(STAMP): pyproject.toml
 
 test: setup
 	$(PY) -m pytest -q tests
+
+# The main job: generate KITTI-format drives (or read KITTI_ROOT=...), train the four recipes, predict, filter,
+# run SLAM on every depth source, score, and print Table 5.2. PROFILE=thesis runs the thesis's scale (for a GPU).
+reproduce-table-5-2: setup
+	$(DCSLAM) reproduce --table 5.2 $(REPRO_ARGS)
+
+reproduce-table-5-1: setup
+	$(DCSLAM) reproduce --table 5.1 $(REPRO_ARGS)
 
 bench: setup
 	$(PY) benchmarks/run_all.py

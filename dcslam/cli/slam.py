@@ -60,17 +60,18 @@ def _resolve_depth(depth: str, ws, drive_name: str, run: str | None) -> tuple[st
 
     if depth in DEPTH_KINDS:
         return depth, depth
-    if depth == "predicted":
-        root = ws.predictions
+    if depth in ("predicted", "filtered"):
+        root = ws.predictions if depth == "predicted" else ws.filtered
+        maker = "dcslam predict" if depth == "predicted" else "dcslam filter"
         if run is None:
             runs = sorted((p for p in root.glob("*") if p.is_dir() and any(p.glob("*.h5"))),
                           key=lambda p: p.stat().st_mtime) if root.exists() else []
             if not runs:
-                raise DcslamError(f"no predictions in {root}; run `dcslam predict` first")
+                raise DcslamError(f"no layers in {root}; run `{maker}` first")
             run = runs[-1].name
         path = root / run / f"{drive_name}.h5"
         if not path.exists():
-            raise DcslamError(f"{path} not found; run `dcslam predict` first")
+            raise DcslamError(f"{path} not found; run `{maker}` first")
         return path, run
     path = Path(depth)
     if not path.exists():
@@ -82,8 +83,8 @@ def _resolve_depth(depth: str, ws, drive_name: str, run: str | None) -> tuple[st
                           "trajectory, a PLY map and a JSON summary under slam/<layer>/.")
 @known_errors
 def slam_command(
-    depth: Annotated[str, typer.Option(help="Depth input: sparse, dense, predicted (a `dcslam predict` layer) or "
-                                            "a layer file path.")] = "dense",
+    depth: Annotated[str, typer.Option(help="Depth input: sparse, dense, predicted (a `dcslam predict` layer), "
+                                            "filtered (a `dcslam filter` layer) or a layer file path.")] = "dense",
     drive: Annotated[Optional[list[str]], typer.Option(
         help="Drive name (in drives/) or .h5 path; repeatable. Default: the test drives of splits.json.")] = None,
     odometry: Annotated[OdometryChoice, typer.Option(help="gt: drive poses; icp: point-to-plane ICP; gradicp: "
@@ -98,8 +99,8 @@ def slam_command(
     max_normal_angle: Annotated[float, typer.Option(help="ICP normal-angle gate, degrees.", min=0.0)] = 30.0,
     iterations: Annotated[int, typer.Option(help="ICP iterations per gate stage.", min=1)] = 20,
     voxel_size: Annotated[float, typer.Option(help="Map voxel size, metres.", min=0.0)] = 0.05,
-    run: Annotated[Optional[str], typer.Option(help="Prediction run for --depth predicted (default: the most "
-                                                    "recent).")] = None,
+    run: Annotated[Optional[str], typer.Option(help="Prediction run (or filter name) for --depth predicted "
+                                                    "(filtered); default: the most recent.")] = None,
     out: Annotated[Optional[Path], typer.Option(help="Output folder (default: slam/<layer>/).")] = None,
     device: Annotated[str, typer.Option(help="torch device, e.g. cpu or cuda.")] = "cpu",
     workspace: WorkspaceOption = None,

@@ -1,0 +1,3 @@
+from dcslam.cli import main
+
+main()
