@@ -54,6 +54,12 @@ PROFILES = {
         filters={"edges": ["--filter", "edges"]},
         description="5 generated drives of 42 frames (3 train / 1 val / 1 test), models trained 2 epochs at half "
                     "resolution, SLAM on the first 30 frames, one outlier filter"),
+    "smoke": Profile(
+        name="smoke", drives=3, frames=14,
+        train=["--epochs", "1", "--max-frames", "2", "--scale", "0.25"],
+        slam_frames=3,
+        filters={"edges": ["--filter", "edges"]},
+        description="a check that every stage runs (3 drives of 14 frames, tiny training): numbers mean nothing"),
     "thesis": Profile(
         name="thesis", drives=24, frames=211,
         train=["--epochs", "5", "--max-frames", "200"],

@@ -13,7 +13,8 @@ from dcslam.cli.app import WorkspaceOption, app, known_errors, summary
 @known_errors
 def reproduce_command(
     table: Annotated[str, typer.Option(help="Table to print: 5.2 or 5.1 (5.1 stops after training).")] = "5.2",
-    profile: Annotated[str, typer.Option(help="quick (about 30 min on 2 CPU cores) or thesis (15/4/5 drives of 200 "
+    profile: Annotated[str, typer.Option(help="quick (about 30 min on 2 CPU cores), smoke (a few minutes; checks "
+                                              "the stages, its numbers mean nothing) or thesis (15/4/5 drives of 200 "
                                               "frames; for a GPU).")] = "quick",
     kitti: Annotated[Optional[Path], typer.Option(help="Real KITTI root (raw/ and depth_completion/); default: "
                                                        "generate KITTI-format drives with `dcslam synth`.")] = None,
