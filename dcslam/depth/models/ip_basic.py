@@ -49,36 +49,36 @@ def _fill_empty(inv: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     import cv2
 
     dilated = cv2.dilate(inv, kernel)
-    return np.where(inv > 0, inv, dilated)
+    np.copyto(dilated, inv, where=inv > 0)
+    return dilated
 
 
 def _extend_to_top(inv: np.ndarray) -> np.ndarray:
     """Pixels above each column's topmost valid pixel take that pixel's value (columns with none stay empty)."""
-    valid = inv > 0
-    has_any = valid.any(axis=0)
-    top = np.argmax(valid, axis=0)
-    cols = np.arange(inv.shape[1])
-    top_value = inv[top, cols]
-    rows = np.arange(inv.shape[0])[:, None]
-    above = (rows < top[None, :]) & has_any[None, :]
-    return np.where(above, top_value[None, :], inv)
+    top = np.argmax(inv > 0, axis=0)  # 0 for a column with no valid pixel: nothing above it changes
+    out = inv.copy()
+    reach = int(top.max()) if top.size else 0
+    if reach:
+        top_value = inv[top, np.arange(inv.shape[1])]
+        np.copyto(out[:reach], top_value[None, :], where=np.arange(reach)[:, None] < top[None, :])
+    return out
 
 
 def _blur_valid(inv: np.ndarray, blur: str) -> np.ndarray:
     import cv2
 
-    valid = inv > 0
-    smoothed = cv2.medianBlur(inv, 5)
-    inv = np.where(valid, smoothed, inv)
-    if blur == "gaussian":
-        smoothed = cv2.GaussianBlur(inv, (5, 5), 0)
-    elif blur == "bilateral":
-        smoothed = cv2.bilateralFilter(inv, 5, 1.5, 2.0)
-    elif blur == "none":
-        return inv
-    else:
+    if blur not in ("gaussian", "bilateral", "none"):
         raise DcslamError(f"unknown blur {blur!r}; expected gaussian, bilateral or none")
-    return np.where(valid, smoothed, inv).astype(np.float32)
+    # Smoothed values on valid pixels only, the others kept: OpenCV's masked copy into the filter's output (the same
+    # values as np.where, without its full-frame temporaries; a uint8 mask is what cv2 copies fastest with).
+    inv = np.ascontiguousarray(inv, dtype=np.float32)
+    invalid = cv2.bitwise_not(cv2.compare(inv, 0, cv2.CMP_GT))
+    smoothed = cv2.copyTo(inv, invalid, cv2.medianBlur(inv, 5))
+    if blur == "none":
+        return smoothed
+    inv = smoothed
+    smoothed = cv2.GaussianBlur(inv, (5, 5), 0) if blur == "gaussian" else cv2.bilateralFilter(inv, 5, 1.5, 2.0)
+    return cv2.copyTo(inv, invalid, smoothed)
 
 
 def _check(depth_m: np.ndarray) -> np.ndarray:
@@ -89,12 +89,19 @@ def _check(depth_m: np.ndarray) -> np.ndarray:
 
 
 def _invert(depth_m: np.ndarray, max_depth: float) -> np.ndarray:
-    clipped = np.minimum(depth_m, max_depth)
-    return np.where(depth_m > 0, max_depth - clipped + 1e-3, 0).astype(np.float32)
+    # float32 throughout, in place: (max_depth - min(d, max_depth)) + 1e-3 on valid pixels, 0 elsewhere.
+    inv = np.minimum(depth_m, np.float32(max_depth))
+    np.subtract(np.float32(max_depth), inv, out=inv)
+    inv += np.float32(1e-3)
+    inv[~(depth_m > 0)] = 0
+    return inv
 
 
 def _revert(inv: np.ndarray, max_depth: float) -> np.ndarray:
-    return np.where(inv > 0, max_depth + 1e-3 - inv, 0).clip(min=0).astype(np.float32)
+    depth = np.subtract(np.float32(max_depth + 1e-3), inv, dtype=np.float32)
+    depth[~(inv > 0)] = 0
+    np.maximum(depth, 0, out=depth)
+    return depth
 
 
 def complete_fast(depth_m: np.ndarray, max_depth: float = 100.0, extrapolate: bool = True,
