@@ -11,20 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dcslam.io.kitti_oxts import rotation_xyz
+
 EARTH_RADIUS_M = 6378137.0
 GRAVITY = 9.81
 LIDAR_HEIGHT_M = 1.73
-
-
-def rotation_xyz(roll, pitch, yaw) -> np.ndarray:
-    """Angles (N,) → (N, 3, 3) ``Rz(yaw) · Ry(pitch) · Rx(roll)`` (KITTI OXTS convention)."""
-    roll, pitch, yaw = (np.asarray(a, dtype=np.float64) for a in (roll, pitch, yaw))
-    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
-    return np.stack([
-        np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
-        np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
-        np.stack([-sp, cp * sr, cp * cr], -1),
-    ], -2)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,91 @@
+"""The reproduction pipeline: stage skipping (unit) and the whole experiment at the smoke profile (end to end)."""
+import json
+import os
+
+import pytest
+from typer.testing import CliRunner
+
+from dcslam.cli import app
+from dcslam.errors import DcslamError
+from dcslam.reproduce import PROFILES, Pipeline, Stage, reproduce
+from dcslam.workspace import Workspace
+
+runner = CliRunner()
+
+
+def _fake_dcslam(calls, outputs):
+    """Stand-in for running `dcslam ...` in a child process: records the call and writes the stage's outputs."""
+    def call(command):
+        calls.append(command)
+        for path in outputs:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text("made")
+        return 0
+    return call
+
+
+def test_stage_runs_once_then_is_skipped_until_its_inputs_or_arguments_change(tmp_path, monkeypatch):
+    ws = Workspace(tmp_path)
+    source, made = tmp_path / "in.txt", tmp_path / "out" / "made.txt"
+    source.write_text("input")
+    os.utime(source, (1_000_000, 1_000_000))
+    calls = []
+    monkeypatch.setattr("dcslam.reproduce.subprocess.call", _fake_dcslam(calls, [made]))
+    pipe = Pipeline(ws, log=lambda line: None)
+    stage = Stage("demo", ["slam", "--frames", "3"], outputs=lambda: [made], inputs=lambda: [source])
+
+    pipe.run(stage)
+    assert len(calls) == 1 and calls[0][-3:] == ["--workspace", str(tmp_path), "--force"]
+    assert json.loads((tmp_path / ".reproduce" / "demo.json").read_text())["args"] == ["slam", "--frames", "3"]
+    pipe.run(stage)
+    assert len(calls) == 1  # up to date: skipped
+
+    os.utime(source, None)  # the input changed after the output was made
+    os.utime(made, (1_000_000, 1_000_000))
+    pipe.run(stage)
+    assert len(calls) == 2
+
+    pipe.run(Stage("demo", ["slam", "--frames", "4"], outputs=lambda: [made], inputs=lambda: [source]))
+    assert len(calls) == 3  # other arguments: rerun
+
+    made.unlink()
+    pipe.run(stage)
+    assert len(calls) == 4  # output missing: rerun
+
+
+def test_failed_stage_stops_the_pipeline_with_one_line(tmp_path, monkeypatch):
+    monkeypatch.setattr("dcslam.reproduce.subprocess.call", lambda command: 1)
+    with pytest.raises(DcslamError, match="stage synth failed"):
+        reproduce(Workspace(tmp_path), PROFILES["smoke"], log=lambda line: None)
+    assert not (tmp_path / ".reproduce" / "synth.json").exists()
+
+
+def test_unknown_profile_and_table_fail_with_exit_code(tmp_path):
+    result = runner.invoke(app, ["reproduce", "--profile", "huge", "--workspace", str(tmp_path)])
+    assert result.exit_code == 1 and "unknown profile" in result.stderr
+    result = runner.invoke(app, ["reproduce", "--table", "9.9", "--workspace", str(tmp_path)])
+    assert result.exit_code == 1 and "unknown table" in result.stderr
+    result = runner.invoke(app, ["reproduce", "--kitti", str(tmp_path / "nowhere"), "--workspace", str(tmp_path)])
+    assert result.exit_code == 1 and "not found" in result.stderr
+
+
+def test_smoke_profile_runs_every_stage_and_writes_the_tables(tmp_path):
+    """The whole experiment on a few tiny generated drives: every stage, then a rerun that skips them all."""
+    result = runner.invoke(app, ["reproduce", "--profile", "smoke", "--workspace", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    results = tmp_path / "results"
+    for name in ("table_5_1.md", "table_5_1.csv", "table_5_2.md", "table_5_2.csv", "depth_examples.png"):
+        assert (results / name).stat().st_size > 0, name
+    assert list(results.glob("trajectories_*.png"))
+    table = (results / "table_5_2.md").read_text()
+    assert "Table 5.2" in result.stdout
+    for layer in ("chamfer-1", "chamfer-8", "mse-sparse", "mse-dense", "sparse", "dense", "ip-basic-fast",
+                  "mse-dense+edges"):
+        assert f"| {layer} |" in table, layer
+        assert list((tmp_path / "slam" / layer).glob("*.txt")), layer
+    rows = [line for line in table.splitlines() if line.startswith("| ") and not line.startswith("| method")]
+    assert len(rows) == 11 and all(row.rstrip(" |").endswith("—") for row in rows)  # no row lacks its inputs
+
+    again = runner.invoke(app, ["reproduce", "--profile", "smoke", "--workspace", str(tmp_path)])
+    assert again.exit_code == 0, again.output
+    assert "[run]" not in again.stderr and again.stderr.count("[skip]") >= 20
