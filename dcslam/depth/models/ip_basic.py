@@ -141,18 +141,19 @@ def complete_multiscale(depth_m: np.ndarray, max_depth: float = 100.0, extrapola
     dilated = {}
     for name, selected, kernel in (("far", far, diamond_kernel(5)), ("medium", medium, diamond_kernel(7)),
                                    ("near", near, diamond_kernel(9))):
-        dilated[name] = cv2.dilate(np.where(selected, inv, 0).astype(np.float32), kernel)
+        dilated[name] = cv2.dilate(np.where(selected, inv, np.float32(0)), kernel)
     merged = dilated["far"]
-    merged = np.where(dilated["medium"] > 0, dilated["medium"], merged)
-    merged = np.where(dilated["near"] > 0, dilated["near"], merged)
-    inv = cv2.morphologyEx(merged.astype(np.float32), cv2.MORPH_CLOSE, full_kernel(5))
-    valid = inv > 0
-    inv = np.where(valid, cv2.medianBlur(inv, 5), inv)
+    np.copyto(merged, dilated["medium"], where=dilated["medium"] > 0)
+    np.copyto(merged, dilated["near"], where=dilated["near"] > 0)
+    inv = cv2.morphologyEx(merged, cv2.MORPH_CLOSE, full_kernel(5))
+    smoothed = cv2.medianBlur(inv, 5)
+    np.copyto(smoothed, inv, where=~(inv > 0))
+    inv = smoothed
     if extrapolate:
         inv = _extend_to_top(inv)
     for size in (7, 15, 31):
         inv = _fill_empty(inv, full_kernel(size))
-    inv = _blur_valid(inv.astype(np.float32), blur)
+    inv = _blur_valid(inv, blur)
     return _revert(inv, max_depth)
 
 
