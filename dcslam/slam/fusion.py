@@ -20,7 +20,7 @@ import torch
 from dcslam.geometry.camera import project
 from dcslam.geometry.se3 import inverse, rotate, transform_points
 from dcslam.slam.frame import Frame
-from dcslam.slam.pointmap import ModelView, PointMap, assign_voxels, merge, render, voxel_keys
+from dcslam.slam.pointmap import Mapper, PointMap, assign_voxels, merge, voxel_keys
 
 
 def surfel_weights(frame: Frame, pixels: torch.Tensor, sigma: float) -> torch.Tensor:
@@ -58,7 +58,7 @@ def frame_surfels(frame: Frame, T_world_cam: torch.Tensor):
     return pixels, transform_points(T, v_cam), rotate(T, n_cam), colors, surfel_radius(frame, v_cam, n_cam), v_cam
 
 
-class PointFusion:
+class PointFusion(Mapper):
     """The PointFusion mapper: call :meth:`integrate` once per frame with its pose, read :attr:`map`.
 
     Args:
@@ -83,16 +83,6 @@ class PointFusion:
         self.min_observations, self.prune_after = min_observations, prune_after
         self.keep_graph, self.splat = keep_graph, splat
         self.reset()
-
-    def reset(self) -> None:
-        self.map: PointMap | None = None
-        self.frames = 0
-
-    def model(self, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> ModelView | None:
-        """The map rendered into a camera (what frame-to-model odometry aligns to); None while the map is empty."""
-        if self.map is None or len(self.map) == 0:
-            return None
-        return render(self.map, T_world_cam, K, height, width, splat=self.splat)
 
     def integrate(self, frame: Frame, T_world_cam: torch.Tensor) -> PointMap:
         """Fuse one frame seen from ``T_world_cam`` (4, 4) into the map; returns the new map."""

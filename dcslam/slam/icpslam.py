@@ -8,10 +8,10 @@ import torch
 
 from dcslam.slam.frame import Frame
 from dcslam.slam.fusion import frame_surfels
-from dcslam.slam.pointmap import ModelView, PointMap, assign_voxels, merge, render, voxel_keys
+from dcslam.slam.pointmap import Mapper, PointMap, assign_voxels, merge, voxel_keys
 
 
-class ICPSLAM:
+class ICPSLAM(Mapper):
     """Accumulated, voxel-downsampled point map; same interface as :class:`~dcslam.slam.fusion.PointFusion`.
 
     Args:
@@ -23,15 +23,6 @@ class ICPSLAM:
     def __init__(self, voxel_size: float = 0.05, keep_graph: bool = False, splat: int = 1):
         self.voxel_size, self.keep_graph, self.splat = voxel_size, keep_graph, splat
         self.reset()
-
-    def reset(self) -> None:
-        self.map: PointMap | None = None
-        self.frames = 0
-
-    def model(self, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> ModelView | None:
-        if self.map is None or len(self.map) == 0:
-            return None
-        return render(self.map, T_world_cam, K, height, width, splat=self.splat)
 
     def integrate(self, frame: Frame, T_world_cam: torch.Tensor) -> PointMap:
         dtype, device = frame.vertex.dtype, frame.vertex.device

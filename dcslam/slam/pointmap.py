@@ -202,3 +202,21 @@ def merge(pm: PointMap, target: torch.Tensor, new_keys: torch.Tensor, points: to
         + (observed > 0).to(torch.int64),
         voxel_key=torch.cat([pm.voxel_key, new_keys]),
     )
+
+
+class Mapper:
+    """What PointFusion and ICP-SLAM share: the current :attr:`map` (None until the first frame), the frame count,
+    and the map rendered into a camera for frame-to-model odometry. Subclasses set ``splat`` and implement
+    ``integrate(frame, T_world_cam) -> PointMap``."""
+
+    splat: int = 1
+
+    def reset(self) -> None:
+        self.map: PointMap | None = None
+        self.frames = 0
+
+    def model(self, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> ModelView | None:
+        """The map rendered into a camera (what frame-to-model odometry aligns to); None while the map is empty."""
+        if self.map is None or len(self.map) == 0:
+            return None
+        return render(self.map, T_world_cam, K, height, width, splat=self.splat)
