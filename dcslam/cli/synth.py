@@ -19,7 +19,14 @@ HELP = (
     "match the true trajectory.\n\n"
     "proj_depth/velodyne_raw is the scan projected into camera 2 (with KITTI's see-through errors); "
     "proj_depth/groundtruth accumulates the scans of ±5 frames, kept where they agree with the view. "
-    "Read the result with `dcslam prepare-kitti`. About a second per frame on two cores."
+    "Read the result with `dcslam prepare-kitti`. About a second per frame on two cores.\n\n"
+    "--indoor writes indoor sequences instead, in the ICL-NUIM TUM-compatible layout (default out "
+    "<workspace>/tum): living_room_traj<i>_frei_png/ with rgb/<k>.png, depth/<k>.png (16-bit, 5000 = 1 m), "
+    "associations.txt, livingRoom<i>.gt.freiburg and intrinsics.txt. A furnished room (walls, floor, ceiling, "
+    "shelves with books, sideboards, sofas, tables and chairs, plants, pictures, a door, a window) seen by "
+    "ICL-NUIM's 640 × 480 camera (fx 481.2, fy −480: its y axis points up) along a smooth hand-held path (1–3 cm "
+    "and under 1° per frame). --drives is then the number of sequences, --scale resizes the images. Read the "
+    "result with `dcslam prepare-tum`."
 )
 
 
@@ -39,11 +46,30 @@ def synth_command(
     azimuth_step: Annotated[float, typer.Option(
         "--lidar-azimuth-step", help="LiDAR azimuth step in degrees across the 64 beams (each laser fires every "
                                      "second step, as the HDL-64E).")] = 0.08,
+    indoor: Annotated[bool, typer.Option(
+        "--indoor", help="Write indoor sequences in the ICL-NUIM layout instead of KITTI drives.")] = False,
+    scale: Annotated[float, typer.Option(
+        "--scale", min=0.05, max=4.0, help="With --indoor: image size as a fraction of 640 × 480 (intrinsics "
+                                           "scaled to match).")] = 1.0,
     force: ForceOption = False,
 ) -> None:
     from dcslam.progress import Bar
-    from dcslam.synth import generate
     from dcslam.workspace import Workspace
+
+    if indoor:
+        from dcslam.synth.indoor import generate_indoor
+
+        root = out if out is not None else Workspace.resolve(workspace).root / "tum"
+        with Bar("synth --indoor", total=drives * frames) as bar:
+            result = generate_indoor(root, sequences=drives, frames=frames, seed=seed, force=force,
+                                     on_frame=bar.advance, scale=scale)
+        n = sum(s.frames for s in result.sequences)
+        seconds = sum(s.seconds for s in result.sequences)
+        density = sum(s.depth_density for s in result.sequences) / len(result.sequences)
+        summary(f"wrote {len(result.sequences)} indoor sequence(s) ({n} frames, {seconds / max(n, 1):.2f} s/frame, "
+                f"depth on {100 * density:.1f} % of pixels) to {root}")
+        return
+    from dcslam.synth import generate
 
     root = out if out is not None else Workspace.resolve(workspace).kitti
     if frames < 11:

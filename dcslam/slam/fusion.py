@@ -37,7 +37,7 @@ def surfel_weights(frame: Frame, pixels: torch.Tensor, sigma: float) -> torch.Te
 
 def surfel_radius(frame: Frame, points_cam: torch.Tensor, normals_cam: torch.Tensor) -> torch.Tensor:
     """Keller's surfel radius sqrt(2) z / f / |cos(view angle)| (cosine clamped at 0.2). Shape: (F, 3) -> (F,)."""
-    f = 0.5 * (frame.K[0, 0] + frame.K[1, 1])
+    f = 0.5 * (frame.K[0, 0].abs() + frame.K[1, 1].abs())  # fy < 0 for ICL-NUIM
     z = points_cam[:, 2]
     ray = points_cam / points_cam.norm(dim=1, keepdim=True).clamp_min(1e-9)
     cos = (ray * normals_cam).sum(1).abs().clamp_min(0.2)

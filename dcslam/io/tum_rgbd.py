@@ -1,0 +1,566 @@
+"""TUM RGB-D and ICL-NUIM sequences (images + timestamps + ground truth): readers and writers.
+
+Trajectory files (``groundtruth.txt``, ``*.gt.freiburg``: ``timestamp tx ty tz qx qy qz qw``) are read and written
+by :mod:`dcslam.io.tum`; this module handles the rest of a sequence folder.
+
+**TUM RGB-D** (``rgbd_dataset_freiburg1_xyz/`` …)::
+
+    rgb.txt, depth.txt     "timestamp relative/path.png" per line, "#" comments, timestamps increasing
+    rgb/*.png              8-bit colour
+    depth/*.png            16-bit, metres = value / 5000, 0 = no measurement (z-depth, registered to rgb)
+    groundtruth.txt        TUM trajectory of the colour camera (100 Hz motion capture)
+
+Colour and depth frames are paired as TUM's ``associate.py`` pairs them: every pair closer than ``max_difference``
+(0.02 s) is a candidate, candidates are taken in order of increasing difference, and each image is used at most
+once. Default intrinsics: TUM's ROS default ``fx = fy = 525, cx = 319.5, cy = 239.5`` (TUM's per-camera
+calibrations differ by a few per cent; pass your own with ``intrinsics``).
+
+**ICL-NUIM, TUM-compatible form** (``living_room_traj0_frei_png/`` …)::
+
+    associations.txt       "t depth/N.png t rgb/N.png" per line (t = the frame number N)
+    rgb/N.png, depth/N.png 640 x 480; depth 16-bit, metres = value / 5000
+    livingRoom0.gt.freiburg   TUM trajectory, timestamps = frame numbers (frame 0 has no pose in the download);
+                              in the folder, or in its parent folder as the separate download puts it
+
+Default intrinsics: ``fx = 481.2, fy = -480.0, cx = 319.5, cy = 239.5``. **The negative fy is real.** ICL-NUIM was
+rendered by POV-Ray, whose camera frame is x right, **y up**, z forward, so image rows grow as y falls:
+``v = fy · y / z + cy`` with ``fy < 0``. Back-projected with that negative fy, the depth images agree with the
+``.gt.freiburg`` poses (proper rotations, det +1). Such a frame (x right, y up, z forward) is left-handed when read
+as a physical camera, so the reconstruction is the room's mirror image; geometry does not care. dcslam keeps
+``K`` with its negative ``fy`` everywhere (drive files included): back-projection, projection, normals (oriented
+towards the camera by the sign of ``n · p``, not by the pixel grid's handedness), surfel radii (``|f|``) and ICP
+are written for either sign. Flipping the sign of fy alone would mirror every frame against its pose.
+
+Also read (a dcslam extension, written by ``dcslam synth --indoor``): ``intrinsics.txt`` in a sequence folder, one
+line ``fx fy cx cy``; it is used when no intrinsics are given.
+
+A frame's pose is the ground truth at the frame's **depth** timestamp (SLAM uses the depth): linearly interpolated
+(translation lerp, rotation slerp) between the two ground-truth poses around it when they are at most
+``max_pose_gap`` (0.1 s) apart, else the nearest pose when it is within ``max_difference`` (0.02 s), else the frame
+has no pose and is dropped (ICL-NUIM's frame 0, stretches where motion capture lost the camera). Interpolation
+rather than nearest: TUM's 100 Hz ground truth is then exact to the frame's time, not 5 ms off (2-5 mm at TUM's
+hand-held speeds).
+"""
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from dcslam.errors import DcslamError
+from dcslam.workspace import atomic_output
+
+DEPTH_SCALE = 5000.0  # 16-bit depth PNG: metres = value / 5000, 0 = no value
+MAX_DIFFERENCE_S = 0.02
+MAX_POSE_GAP_S = 0.1
+WIDTH, HEIGHT = 640, 480
+TUM_K = np.array([[525.0, 0.0, 319.5], [0.0, 525.0, 239.5], [0.0, 0.0, 1.0]])
+"""TUM RGB-D's ROS default intrinsics (640 x 480)."""
+ICL_K = np.array([[481.2, 0.0, 319.5], [0.0, -480.0, 239.5], [0.0, 0.0, 1.0]])
+"""ICL-NUIM's intrinsics (640 x 480); fy < 0: the camera's y axis points up (see the module docstring)."""
+
+TUM, ICL = "tum-rgbd", "icl-nuim"
+LIST_FORMAT = "'timestamp relative/path.png' per line, '#' comments"
+ASSOCIATION_FORMAT = "'timestamp depth/N.png timestamp rgb/N.png' per line"
+INTRINSICS_FILE = "intrinsics.txt"
+
+
+# ------------------------------------------------------------------------------------------------ intrinsics
+def make_K(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+    """(3, 3) float64 intrinsics; fy may be negative (ICL-NUIM), neither focal length may be zero."""
+    if not all(np.isfinite([fx, fy, cx, cy])) or fx == 0 or fy == 0:
+        raise DcslamError(f"intrinsics fx={fx}, fy={fy}, cx={cx}, cy={cy}: expected finite values, fx and fy != 0")
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+
+
+def parse_intrinsics(text: str, source: str = "intrinsics") -> np.ndarray:
+    """``"fx,fy,cx,cy"`` (commas and/or spaces) → (3, 3) K."""
+    fields = text.replace(",", " ").split()
+    try:
+        values = [float(f) for f in fields]
+    except ValueError:
+        values = []
+    if len(values) != 4:
+        raise DcslamError(f"{source}: {text.strip()!r} is not four numbers 'fx,fy,cx,cy'")
+    return make_K(*values)
+
+
+def write_intrinsics(path: Path | str, K: np.ndarray, force: bool = True) -> Path:
+    """``intrinsics.txt``: one line ``fx fy cx cy`` (a dcslam extension of the layouts)."""
+    K = np.asarray(K, dtype=np.float64)
+    with atomic_output(path, force=force) as tmp:
+        tmp.write_text("# fx fy cx cy (pixels; fy < 0: camera y axis up, as ICL-NUIM)\n"
+                       f"{K[0, 0]:.6f} {K[1, 1]:.6f} {K[0, 2]:.6f} {K[1, 2]:.6f}\n")
+    return Path(path)
+
+
+def read_intrinsics(path: Path | str) -> np.ndarray:
+    path = Path(path)
+    lines = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    if len(lines) != 1:
+        raise DcslamError(f"{path}: expected one line 'fx fy cx cy', found {len(lines)}")
+    return parse_intrinsics(lines[0], str(path))
+
+
+# ------------------------------------------------------------------------------------------------ lists
+def _data_lines(path: Path) -> Iterator[tuple[int, list[str]]]:
+    if not path.exists():
+        raise DcslamError(f"{path} not found")
+    for number, line in enumerate(path.read_text().splitlines(), 1):
+        line = line.strip()
+        if line and not line.startswith("#"):
+            yield number, line.split()
+
+
+def _timestamp(path: Path, number: int, text: str, fmt: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise DcslamError(f"{path}:{number}: timestamp {text!r} is not a number ({fmt})") from None
+    if not np.isfinite(value):
+        raise DcslamError(f"{path}:{number}: timestamp {text!r} is not finite ({fmt})")
+    return value
+
+
+def _check_increasing(path: Path, numbers: list[int], times: list[float]) -> None:
+    for k in range(1, len(times)):
+        if times[k] <= times[k - 1]:
+            raise DcslamError(f"{path}:{numbers[k]}: timestamp {times[k]!r} is not after the previous one "
+                              f"({times[k - 1]!r}); timestamps must be strictly increasing")
+
+
+def read_list(path: Path | str) -> tuple[np.ndarray, list[str]]:
+    """A TUM ``rgb.txt`` / ``depth.txt`` → (timestamps (N,) float64 s, relative paths [N])."""
+    path = Path(path)
+    numbers, times, names = [], [], []
+    for number, fields in _data_lines(path):
+        if len(fields) != 2:
+            raise DcslamError(f"{path}:{number}: {len(fields)} fields, expected 2 ({LIST_FORMAT})")
+        times.append(_timestamp(path, number, fields[0], LIST_FORMAT))
+        names.append(fields[1])
+        numbers.append(number)
+    if not times:
+        raise DcslamError(f"{path}: no entries ({LIST_FORMAT})")
+    _check_increasing(path, numbers, times)
+    return np.array(times), names
+
+
+def write_list(path: Path | str, timestamps: np.ndarray, names: list[str], what: str = "images",
+               force: bool = True) -> Path:
+    """Write a TUM ``rgb.txt`` / ``depth.txt`` (timestamps (N,) increasing, relative paths [N]), atomically."""
+    timestamps = np.asarray(timestamps, dtype=np.float64)
+    if timestamps.shape != (len(names),):
+        raise DcslamError(f"{len(names)} names but timestamps of shape {timestamps.shape}")
+    if np.any(np.diff(timestamps) <= 0):
+        raise DcslamError(f"{path}: timestamps must be strictly increasing")
+    lines = [f"# {what}", "# timestamp filename"]
+    lines += [f"{_format_time(t)} {name}" for t, name in zip(timestamps, names)]
+    with atomic_output(path, force=force) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    return Path(path)
+
+
+def _format_time(t: float) -> str:
+    return str(int(t)) if float(t).is_integer() and abs(t) < 1e9 else f"{t:.6f}"
+
+
+def _is(name: str, folder: str) -> bool:
+    return Path(name).parts[:1] == (folder,)
+
+
+def read_associations(path: Path | str) -> tuple[np.ndarray, list[str], np.ndarray, list[str]]:
+    """An association file → (depth timestamps (N,), depth paths [N], rgb timestamps (N,), rgb paths [N]).
+
+    ICL-NUIM's order is ``t depth/N.png t rgb/N.png``; a line whose first path lies under ``rgb/`` (or whose second
+    lies under ``depth/``) is read the other way round, as TUM's ``associate.py rgb.txt depth.txt`` writes it.
+    Depth timestamps must be strictly increasing.
+    """
+    path = Path(path)
+    numbers, depth_t, depth_n, rgb_t, rgb_n = [], [], [], [], []
+    for number, fields in _data_lines(path):
+        if len(fields) != 4:
+            raise DcslamError(f"{path}:{number}: {len(fields)} fields, expected 4 ({ASSOCIATION_FORMAT})")
+        a, b = (_timestamp(path, number, fields[i], ASSOCIATION_FORMAT) for i in (0, 2))
+        if _is(fields[1], "rgb") or _is(fields[3], "depth"):
+            a, b, fields = b, a, [fields[2], fields[3], fields[0], fields[1]]
+        depth_t.append(a)
+        depth_n.append(fields[1])
+        rgb_t.append(b)
+        rgb_n.append(fields[3])
+        numbers.append(number)
+    if not numbers:
+        raise DcslamError(f"{path}: no entries ({ASSOCIATION_FORMAT})")
+    _check_increasing(path, numbers, depth_t)
+    return np.array(depth_t), depth_n, np.array(rgb_t), rgb_n
+
+
+def write_associations(path: Path | str, depth_timestamps: np.ndarray, depth_names: list[str],
+                       rgb_timestamps: np.ndarray, rgb_names: list[str], force: bool = True) -> Path:
+    """Write an ICL-NUIM ``associations.txt`` (``t depth/N.png t rgb/N.png``), atomically."""
+    depth_timestamps = np.asarray(depth_timestamps, dtype=np.float64)
+    rgb_timestamps = np.asarray(rgb_timestamps, dtype=np.float64)
+    n = len(depth_names)
+    if depth_timestamps.shape != (n,) or rgb_timestamps.shape != (n,) or len(rgb_names) != n:
+        raise DcslamError("associations: depth and rgb timestamps and names must all have the same length")
+    if np.any(np.diff(depth_timestamps) <= 0):
+        raise DcslamError(f"{path}: depth timestamps must be strictly increasing")
+    lines = [f"{_format_time(td)} {nd} {_format_time(tr)} {nr}"
+             for td, nd, tr, nr in zip(depth_timestamps, depth_names, rgb_timestamps, rgb_names)]
+    with atomic_output(path, force=force) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    return Path(path)
+
+
+def associate(a: np.ndarray, b: np.ndarray, max_difference: float = MAX_DIFFERENCE_S) -> tuple[np.ndarray, np.ndarray]:
+    """TUM's ``associate.py``: one-to-one pairs of timestamps a (N,) and b (M,) closer than ``max_difference``,
+    chosen greedily by increasing difference → (index into a (P,), index into b (P,)), sorted by a."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    order_b = np.argsort(b, kind="stable")
+    sorted_b = b[order_b]
+    lo = np.searchsorted(sorted_b, a - max_difference, side="left")
+    hi = np.searchsorted(sorted_b, a + max_difference, side="right")
+    ia = np.repeat(np.arange(len(a)), hi - lo)
+    ib = order_b[np.concatenate([np.arange(s, e) for s, e in zip(lo, hi)] or [np.zeros(0, np.int64)]).astype(np.int64)]
+    diff = np.abs(a[ia] - b[ib])
+    keep = diff < max_difference
+    ia, ib, diff = ia[keep], ib[keep], diff[keep]
+    used_a, used_b = np.zeros(len(a), bool), np.zeros(len(b), bool)
+    pairs = []
+    for k in np.argsort(diff, kind="stable"):
+        i, j = ia[k], ib[k]
+        if not used_a[i] and not used_b[j]:
+            used_a[i] = used_b[j] = True
+            pairs.append((i, j))
+    pairs.sort()
+    out = np.array(pairs, dtype=np.int64).reshape(-1, 2)
+    return out[:, 0], out[:, 1]
+
+
+# ------------------------------------------------------------------------------------------------ images
+def read_depth_png(path: Path | str, scale: float = DEPTH_SCALE) -> np.ndarray:
+    """A 16-bit depth PNG → (H, W) float32 metres (value / ``scale``, 0 = no value)."""
+    import cv2
+
+    path = Path(path)
+    if not path.exists():
+        raise DcslamError(f"depth image {path} not found")
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise DcslamError(f"{path}: not a readable image (truncated or corrupt?)")
+    if image.dtype != np.uint16 or image.ndim != 2:
+        raise DcslamError(f"{path}: expected a 16-bit single-channel depth PNG (metres = value / {scale:g}), got "
+                          f"{image.dtype} with shape {image.shape}")
+    return image.astype(np.float32) / np.float32(scale)
+
+
+def write_depth_png(path: Path | str, depth_m: np.ndarray, scale: float = DEPTH_SCALE) -> Path:
+    """(H, W) metres → 16-bit PNG, value = round(scale · metres); depth beyond 65535 / scale (13.1 m at 5000) and
+    non-finite depth become 0 (no value)."""
+    import cv2
+
+    depth_m = np.asarray(depth_m, dtype=np.float64)
+    if depth_m.ndim != 2:
+        raise DcslamError(f"depth has shape {depth_m.shape}, expected (H, W)")
+    value = np.rint(np.nan_to_num(depth_m, nan=0.0, posinf=0.0, neginf=0.0) * scale)
+    value[(value < 0) | (value > 65535)] = 0
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(path), value.astype(np.uint16)):
+        raise DcslamError(f"could not write {path}")
+    return Path(path)
+
+
+def read_rgb_png(path: Path | str) -> np.ndarray:
+    """An 8-bit colour (or grey) image → (H, W, 3) uint8 RGB."""
+    import cv2
+
+    path = Path(path)
+    if not path.exists():
+        raise DcslamError(f"colour image {path} not found")
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise DcslamError(f"{path}: not a readable image (truncated or corrupt?)")
+    if image.dtype != np.uint8:
+        raise DcslamError(f"{path}: expected an 8-bit colour image, got {image.dtype} with shape {image.shape}")
+    if image.ndim == 2:
+        return np.repeat(image[..., None], 3, axis=2)
+    if image.ndim == 3 and image.shape[2] in (3, 4):
+        return cv2.cvtColor(image[..., :3], cv2.COLOR_BGR2RGB)
+    raise DcslamError(f"{path}: expected an 8-bit colour image, got shape {image.shape}")
+
+
+def write_rgb_png(path: Path | str, rgb: np.ndarray) -> Path:
+    """(H, W, 3) uint8 RGB → PNG."""
+    import cv2
+
+    rgb = np.asarray(rgb)
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
+        raise DcslamError(f"image has shape {rgb.shape} and dtype {rgb.dtype}, expected (H, W, 3) uint8")
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    if not cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_PNG_COMPRESSION, 1]):
+        raise DcslamError(f"could not write {path}")
+    return Path(path)
+
+
+# ------------------------------------------------------------------------------------------------ poses
+def interpolate_poses(times: np.ndarray, gt_times: np.ndarray, T_gt: np.ndarray,
+                      max_difference: float = MAX_DIFFERENCE_S,
+                      max_pose_gap: float = MAX_POSE_GAP_S) -> tuple[np.ndarray, np.ndarray]:
+    """Ground-truth poses at ``times`` (N,) from poses T_gt (M, 4, 4) at increasing ``gt_times`` (M,).
+
+    Between two poses at most ``max_pose_gap`` apart: interpolated (lerp, slerp); otherwise the nearest pose if
+    within ``max_difference``; otherwise none. Returns (T (N, 4, 4) float64, found (N,) bool).
+    """
+    from dcslam.io.tum import quaternion_to_rotation, rotation_to_quaternion
+
+    times = np.asarray(times, dtype=np.float64)
+    gt_times = np.asarray(gt_times, dtype=np.float64)
+    T = np.tile(np.eye(4), (len(times), 1, 1))
+    found = np.zeros(len(times), dtype=bool)
+    if len(gt_times) == 0:
+        return T, found
+    q_gt = rotation_to_quaternion(T_gt[:, :3, :3])
+    right = np.clip(np.searchsorted(gt_times, times, side="left"), 0, len(gt_times) - 1)
+    left = np.clip(right - 1, 0, len(gt_times) - 1)
+    for k, t in enumerate(times):
+        i, j = left[k], right[k]
+        nearest = i if abs(gt_times[i] - t) <= abs(gt_times[j] - t) else j
+        if gt_times[i] <= t <= gt_times[j] and i != j and gt_times[j] - gt_times[i] <= max_pose_gap:
+            w = (t - gt_times[i]) / (gt_times[j] - gt_times[i])
+            T[k, :3, 3] = (1 - w) * T_gt[i, :3, 3] + w * T_gt[j, :3, 3]
+            T[k, :3, :3] = quaternion_to_rotation(_slerp(q_gt[i], q_gt[j], w))
+            found[k] = True
+        elif abs(gt_times[nearest] - t) <= max_difference:
+            T[k] = T_gt[nearest]
+            found[k] = True
+    return T, found
+
+
+def _slerp(q0: np.ndarray, q1: np.ndarray, w: float) -> np.ndarray:
+    if float(q0 @ q1) < 0:
+        q1 = -q1
+    dot = min(float(q0 @ q1), 1.0)
+    angle = np.arccos(dot)
+    if angle < 1e-9:
+        return q0
+    return (np.sin((1 - w) * angle) * q0 + np.sin(w * angle) * q1) / np.sin(angle)
+
+
+# ------------------------------------------------------------------------------------------------ sequences
+@dataclass(frozen=True)
+class Sequence:
+    """One indexed sequence whose files have been checked: frame k is ``rgb_paths[k]`` + ``depth_paths[k]`` at
+    ``timestamps[k]`` (the depth image's) with pose ``T_world_cam[k]`` (4, 4) from the ground truth, as recorded
+    (not re-based). ``frame_ids`` (N,) number the frames in the full association (before any frame was dropped or
+    skipped); ``notes`` say what was dropped and why.
+    """
+
+    root: Path
+    name: str
+    format: str
+    K: np.ndarray
+    groundtruth: Path
+    rgb_paths: tuple[Path, ...]
+    depth_paths: tuple[Path, ...]
+    timestamps: np.ndarray
+    T_world_cam: np.ndarray
+    frame_ids: np.ndarray
+    depth_scale: float = DEPTH_SCALE
+    notes: tuple[str, ...] = ()
+
+    def __len__(self) -> int:
+        return len(self.timestamps)
+
+    def select(self, index: np.ndarray) -> "Sequence":
+        index = np.asarray(index, dtype=np.int64)
+        return replace(self, rgb_paths=tuple(self.rgb_paths[i] for i in index),
+                       depth_paths=tuple(self.depth_paths[i] for i in index), timestamps=self.timestamps[index],
+                       T_world_cam=self.T_world_cam[index], frame_ids=self.frame_ids[index])
+
+    def subsample(self, stride: int = 1, max_frames: int | None = None) -> "Sequence":
+        """Every ``stride``-th frame, then at most ``max_frames`` of them."""
+        if stride < 1:
+            raise DcslamError(f"stride is {stride}, expected at least 1")
+        index = np.arange(0, len(self), stride)
+        return self.select(index[:max_frames] if max_frames is not None else index)
+
+    def frames(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        """Yield (rgb (H, W, 3) uint8, depth (H, W) float32 metres) of every frame, checking sizes."""
+        for rgb_path, depth_path in zip(self.rgb_paths, self.depth_paths):
+            rgb, depth = read_rgb_png(rgb_path), read_depth_png(depth_path, self.depth_scale)
+            if rgb.shape[:2] != depth.shape:
+                raise DcslamError(f"{rgb_path} is {rgb.shape[1]}x{rgb.shape[0]} but {depth_path} is "
+                                  f"{depth.shape[1]}x{depth.shape[0]}")
+            yield rgb, depth
+
+
+def is_sequence(folder: Path | str) -> bool:
+    """A folder with ``associations.txt``, or with both ``rgb.txt`` and ``depth.txt``."""
+    folder = Path(folder)
+    return (folder / "associations.txt").is_file() or ((folder / "rgb.txt").is_file()
+                                                       and (folder / "depth.txt").is_file())
+
+
+def find_sequences(src: Path | str) -> list[Path]:
+    """``src`` itself if it is a sequence folder, else its sequence sub-folders sorted by name."""
+    src = Path(src)
+    if not src.is_dir():
+        raise DcslamError(f"{src} is not a folder; expected a TUM RGB-D / ICL-NUIM sequence folder or a folder of "
+                          f"them (run `dcslam synth --indoor` to generate one)")
+    if is_sequence(src):
+        return [src]
+    found = sorted(p for p in src.iterdir() if p.is_dir() and not p.name.startswith(".") and is_sequence(p))
+    if not found:
+        raise DcslamError(f"no TUM RGB-D or ICL-NUIM sequence in {src} (a sequence folder holds associations.txt, "
+                          f"or rgb.txt and depth.txt); run `dcslam synth --indoor` to generate one")
+    return found
+
+
+_ICL_NAME = re.compile(r"^(living_room_|office_room_)?traj(\d+)n?_frei_png$")
+
+
+def groundtruth_candidates(folder: Path) -> list[Path]:
+    """Where a sequence's trajectory may be, in order: ``groundtruth.txt`` and ``*.gt.freiburg`` in the folder,
+    then the ICL-NUIM name (``livingRoom<N>.gt.freiburg`` or ``traj<N>.gt.freiburg``) in the parent folder."""
+    folder = Path(folder)
+    names = [folder / "groundtruth.txt"] + sorted(folder.glob("*.gt.freiburg"))
+    match = _ICL_NAME.match(folder.name)
+    if match:
+        stem = f"livingRoom{match.group(2)}" if match.group(1) != "office_room_" else f"traj{match.group(2)}"
+        if match.group(1) is None:
+            stem = f"traj{match.group(2)}"
+        names.append(folder.parent / f"{stem}.gt.freiburg")
+        if match.group(1) is None:
+            names.append(folder.parent / f"livingRoom{match.group(2)}.gt.freiburg")
+    return names
+
+
+def index_sequence(folder: Path | str, *, intrinsics: np.ndarray | None = None, groundtruth: Path | str | None = None,
+                   max_difference: float = MAX_DIFFERENCE_S, max_pose_gap: float = MAX_POSE_GAP_S,
+                   depth_scale: float = DEPTH_SCALE) -> Sequence:
+    """Index a TUM RGB-D or ICL-NUIM sequence folder and check it: association, files present, ground truth.
+
+    ``associations.txt`` is used when present (ICL-NUIM), else ``rgb.txt`` + ``depth.txt`` are associated by
+    timestamp. Intrinsics: ``intrinsics`` (3, 3), else ``intrinsics.txt`` in the folder, else the format's default
+    (:data:`ICL_K` with an association file, :data:`TUM_K` otherwise). Frames without a ground-truth pose are
+    dropped (noted). Raises :class:`DcslamError` on malformed lines, unsorted timestamps, a missing image or
+    trajectory, or no frame left.
+    """
+    from dcslam.io.tum import read_tum
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise DcslamError(f"sequence folder {folder} not found")
+    notes: list[str] = []
+    if (folder / "associations.txt").is_file():
+        fmt = ICL
+        depth_t, depth_n, _, rgb_n = read_associations(folder / "associations.txt")
+    elif (folder / "rgb.txt").is_file() and (folder / "depth.txt").is_file():
+        fmt = TUM
+        rgb_t, rgb_all = read_list(folder / "rgb.txt")
+        depth_all_t, depth_all = read_list(folder / "depth.txt")
+        i_rgb, i_depth = associate(rgb_t, depth_all_t, max_difference)
+        if len(i_rgb) < len(depth_all_t):
+            notes.append(f"{len(depth_all_t) - len(i_rgb)} of {len(depth_all_t)} depth images have no colour image "
+                         f"within {max_difference} s, skipped")
+        depth_t = depth_all_t[i_depth]
+        depth_n = [depth_all[j] for j in i_depth]
+        rgb_n = [rgb_all[i] for i in i_rgb]
+    else:
+        raise DcslamError(f"{folder}: no associations.txt, nor rgb.txt and depth.txt; not a TUM RGB-D or ICL-NUIM "
+                          f"sequence")
+    if len(depth_t) == 0:
+        raise DcslamError(f"{folder}: no colour and depth images within {max_difference} s of each other")
+
+    rgb_paths = tuple(folder / n for n in rgb_n)
+    depth_paths = tuple(folder / n for n in depth_n)
+    for path in (*depth_paths, *rgb_paths):
+        if not path.is_file():
+            raise DcslamError(f"{path} not found (listed in {folder.name}/"
+                              f"{'associations.txt' if fmt == ICL else ('rgb.txt' if path in rgb_paths else 'depth.txt')})")
+
+    if groundtruth is None:
+        candidates = groundtruth_candidates(folder)
+        existing = [p for p in candidates if p.is_file()]
+        if not existing:
+            raise DcslamError(f"{folder}: no ground-truth trajectory (looked for "
+                              f"{', '.join(str(p) for p in dict.fromkeys(candidates))})")
+        groundtruth = existing[0]
+    gt_times, T_gt = read_tum(groundtruth)
+    T, found = interpolate_poses(depth_t, gt_times, T_gt, max_difference, max_pose_gap)
+    if not found.all():
+        missing = np.flatnonzero(~found)
+        shown = ", ".join(_format_time(depth_t[i]) for i in missing[:5]) + (" ..." if len(missing) > 5 else "")
+        notes.append(f"{len(missing)} frame(s) without a ground-truth pose in {Path(groundtruth).name}, dropped "
+                     f"(timestamps {shown})")
+    if not found.any():
+        raise DcslamError(f"{folder}: no frame has a ground-truth pose in {groundtruth} (timestamps "
+                          f"{_format_time(depth_t[0])}..{_format_time(depth_t[-1])} vs "
+                          f"{_format_time(gt_times[0])}..{_format_time(gt_times[-1])})")
+
+    if intrinsics is not None:
+        K = np.asarray(intrinsics, dtype=np.float64)
+        if K.shape != (3, 3):
+            raise DcslamError(f"intrinsics have shape {K.shape}, expected (3, 3)")
+    elif (folder / INTRINSICS_FILE).is_file():
+        K = read_intrinsics(folder / INTRINSICS_FILE)
+    else:
+        K = ICL_K.copy() if fmt == ICL else TUM_K.copy()
+    keep = np.flatnonzero(found)
+    sequence = Sequence(root=folder, name=folder.name, format=fmt, K=K, groundtruth=Path(groundtruth),
+                        rgb_paths=rgb_paths, depth_paths=depth_paths, timestamps=depth_t, T_world_cam=T,
+                        frame_ids=np.arange(len(depth_t), dtype=np.int64), depth_scale=depth_scale,
+                        notes=tuple(notes))
+    return sequence.select(keep)
+
+
+def check_image_size(sequence: Sequence, width: int, height: int, intrinsics_given: bool) -> None:
+    """Fail when a format's default intrinsics (for 640 x 480) meet images of another size."""
+    if intrinsics_given or (sequence.root / INTRINSICS_FILE).is_file():
+        return
+    if (width, height) != (WIDTH, HEIGHT):
+        raise DcslamError(f"{sequence.root}: images are {width}x{height} but the default {sequence.format} "
+                          f"intrinsics are for {WIDTH}x{HEIGHT}; pass intrinsics (--intrinsics fx,fy,cx,cy)")
+
+
+# ------------------------------------------------------------------------------------------------ writing
+class IclWriter:
+    """Write a sequence in the ICL-NUIM TUM-compatible layout, frame by frame, into ``folder``::
+
+        rgb/<i>.png, depth/<i>.png, associations.txt ("i depth/i.png i rgb/i.png"), <trajectory name>, and
+        intrinsics.txt when ``K`` is given
+
+    Frame timestamps are the frame numbers, as in ICL-NUIM. The text files are written by :meth:`close`.
+    """
+
+    def __init__(self, folder: Path | str, trajectory_name: str, K: np.ndarray | None = None,
+                 depth_scale: float = DEPTH_SCALE):
+        self.folder, self.trajectory_name, self.K, self.depth_scale = Path(folder), trajectory_name, K, depth_scale
+        self.times: list[float] = []
+        self.poses: list[np.ndarray] = []
+
+    def append(self, rgb: np.ndarray, depth_m: np.ndarray, T_world_cam: np.ndarray) -> None:
+        """rgb (H, W, 3) uint8, depth_m (H, W) metres, T_world_cam (4, 4)."""
+        i = len(self.times)
+        if np.asarray(rgb).shape[:2] != np.asarray(depth_m).shape:
+            raise DcslamError(f"frame {i}: rgb {np.asarray(rgb).shape} and depth {np.asarray(depth_m).shape} differ")
+        write_rgb_png(self.folder / "rgb" / f"{i}.png", rgb)
+        write_depth_png(self.folder / "depth" / f"{i}.png", depth_m, self.depth_scale)
+        self.times.append(float(i))
+        self.poses.append(np.asarray(T_world_cam, dtype=np.float64))
+
+    def close(self) -> Path:
+        from dcslam.io.tum import write_tum
+
+        n = len(self.times)
+        if n == 0:
+            raise DcslamError(f"{self.folder}: no frames to write")
+        names = [str(i) for i in range(n)]
+        write_associations(self.folder / "associations.txt", self.times, [f"depth/{k}.png" for k in names],
+                           self.times, [f"rgb/{k}.png" for k in names])
+        write_tum(self.folder / self.trajectory_name, np.array(self.times), np.stack(self.poses), force=True)
+        if self.K is not None:
+            write_intrinsics(self.folder / INTRINSICS_FILE, self.K)
+        return self.folder

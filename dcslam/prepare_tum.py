@@ -1,0 +1,149 @@
+"""``prepare-tum``: TUM RGB-D / ICL-NUIM sequences (real, or from ``dcslam synth --indoor``) → drive files + splits.
+
+Each sequence folder (reading: :mod:`dcslam.io.tum_rgbd`) becomes ``<out>/<sequence folder name>.h5``, the same
+drive file ``prepare-kitti`` writes (:mod:`dcslam.io.drive`, ``source = "tum"``), so ``slam``, ``train``,
+``predict`` and ``score`` run on it unchanged:
+
+- ``rgb``: the colour image; ``depth/dense``: the sensor's depth (value / 5000, metres, 0 = none);
+- ``depth/sparse``: a LiDAR-like subsample of that depth, every ``sparse_stride``-th row and column (starting at
+  ``sparse_stride // 2``): density ``1 / sparse_stride²`` of the valid pixels (4 % at the default 5, KITTI's
+  projected Velodyne covers about 4 %), so the depth-completion recipes also run indoors. It is a regular grid,
+  not a scan pattern: scores against it say how a network fills holes, not how it copes with a real LiDAR;
+- ``T_world_cam``: the ground-truth pose at each frame (see :func:`dcslam.io.tum_rgbd.index_sequence`), re-based
+  so that the first stored frame is the identity, as in ``prepare-kitti``;
+- ``K``: the given intrinsics, else the folder's ``intrinsics.txt``, else the format's default (ICL-NUIM: fy < 0,
+  kept as is);
+- ``timestamps``: the depth images' timestamps as written in the sequence (ICL-NUIM: frame numbers);
+- ``frame_ids``: each frame's position in the full association, before frames were dropped or skipped.
+
+Root attributes add ``format`` (``tum-rgbd`` or ``icl-nuim``), ``sparse_stride``, ``frame_stride`` and
+``sparse_depth`` (a sentence saying what ``depth/sparse`` is). ``<out>/splits.json`` divides the sequences in the
+thesis's proportion (:func:`dcslam.prepare.proportional_splits`: one sequence goes to test) unless a splits file is
+given; ``<out>/prepare-tum.json`` records the settings.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from dcslam.errors import DcslamError
+from dcslam.io.drive import DriveWriter, Frame, read_splits
+from dcslam.io.tum_rgbd import Sequence, check_image_size, find_sequences, index_sequence, read_depth_png
+from dcslam.prepare import SPLIT_NAMES, PreparedDrive, PrepareResult, proportional_splits
+from dcslam.progress import track
+from dcslam.workspace import stage_config, write_json_atomic
+
+DEFAULT_SPARSE_STRIDE = 5
+
+
+def sparse_subsample(depth_m: np.ndarray, stride: int) -> np.ndarray:
+    """Every ``stride``-th row and column of ``depth_m`` (from ``stride // 2``), zero elsewhere.
+
+    Shape: (H, W) → (H, W), same dtype; the input is not modified."""
+    if stride < 1:
+        raise DcslamError(f"--sparse-stride is {stride}, expected at least 1")
+    out = np.zeros_like(depth_m)
+    start = stride // 2
+    out[start::stride, start::stride] = depth_m[start::stride, start::stride]
+    return out
+
+
+def _splits(names: list[str], splits_file: Path | str | None, notes: list[str]) -> tuple[dict[str, str], str]:
+    if splits_file is None:
+        splits, label = proportional_splits(names), "the proportional split"
+    else:
+        splits, label = read_splits(splits_file), str(splits_file)
+    split_of: dict[str, str] = {}
+    for split in SPLIT_NAMES:
+        for name in splits.get(split, []):
+            if name in split_of and split_of[name] != split:
+                raise DcslamError(f"{label}: sequence {name} is in both {split_of[name]} and {split}")
+            split_of[name] = split
+    unsplit = [n for n in names if n not in split_of]
+    if unsplit:
+        notes.append(f"{len(unsplit)} sequence(s) in no split of {label}, not converted: {', '.join(unsplit)}")
+    return {n: split_of[n] for n in names if n in split_of}, label
+
+
+def _frames(sequence: Sequence, sparse_stride: int):
+    T0_inv = np.linalg.inv(sequence.T_world_cam[0])
+    for k, (rgb, depth) in enumerate(sequence.frames()):
+        yield Frame(rgb=rgb, sparse=sparse_subsample(depth, sparse_stride), dense=depth,
+                    T_world_cam=T0_inv @ sequence.T_world_cam[k], timestamp=float(sequence.timestamps[k]),
+                    frame_id=int(sequence.frame_ids[k]))
+
+
+def prepare_tum(src: Path | str, out_dir: Path | str, *, intrinsics: np.ndarray | None = None,
+                sparse_stride: int = DEFAULT_SPARSE_STRIDE, max_frames: int | None = None, stride: int = 1,
+                splits_file: Path | str | None = None, force: bool = False) -> PrepareResult:
+    """Convert TUM RGB-D / ICL-NUIM sequences into drive files and ``splits.json``.
+
+    Args:
+        src: a sequence folder, or a folder of sequence folders.
+        out_dir: where drive files, ``splits.json`` and ``prepare-tum.json`` are written.
+        intrinsics: (3, 3) K for every sequence (fy may be negative); default per sequence (see module docstring).
+        sparse_stride: ``depth/sparse`` keeps every ``sparse_stride``-th row and column of the depth.
+        max_frames: keep at most this many frames (after ``stride``) per sequence.
+        stride: keep every ``stride``-th associated frame.
+        splits_file: a ``{"train": [...], "val": [...], "test": [...]}`` file of sequence names.
+        force: overwrite drive files and ``splits.json`` that exist.
+
+    Every sequence is indexed and checked (association, files present, ground truth) before anything is written;
+    outputs that exist without ``force`` fail before anything is written; each drive file is written atomically.
+    Returns a :class:`dcslam.prepare.PrepareResult` with ``source = "tum"``.
+    """
+    out_dir = Path(out_dir)
+    if max_frames is not None and max_frames < 1:
+        raise DcslamError(f"--max-frames is {max_frames}, expected at least 1")
+    if stride < 1:
+        raise DcslamError(f"--stride is {stride}, expected at least 1")
+    if sparse_stride < 1:
+        raise DcslamError(f"--sparse-stride is {sparse_stride}, expected at least 1")
+    folders = find_sequences(src)
+    notes: list[str] = []
+    names = [f.name for f in folders]
+    if len(set(names)) != len(names):
+        raise DcslamError(f"two sequences under {src} share a folder name; drive names must be unique")
+    split_of, label = _splits(names, splits_file, notes)
+    if not split_of:
+        raise DcslamError(f"none of the {len(names)} sequence(s) under {src} is in {label}; nothing to convert")
+    chosen = [f for f in folders if f.name in split_of]
+    splits_path = out_dir / "splits.json"
+    targets = [out_dir / f"{f.name}.h5" for f in chosen]
+    if not force:
+        for path in (*targets, splits_path):
+            if path.exists():
+                raise DcslamError(f"{path} exists; pass --force to overwrite it")
+
+    sequences = []
+    for folder in chosen:
+        sequence = index_sequence(folder, intrinsics=intrinsics).subsample(stride, max_frames)
+        height, width = read_depth_png(sequence.depth_paths[0], sequence.depth_scale).shape
+        check_image_size(sequence, width, height, intrinsics is not None)
+        notes += [f"{sequence.name}: {note}" for note in sequence.notes]
+        sequences.append(sequence)
+
+    written = []
+    for sequence, path in zip(sequences, targets):
+        frames = track(_frames(sequence, sparse_stride), sequence.name, total=len(sequence))
+        first = next(frames)
+        height, width = first.rgb.shape[:2]
+        attrs = {"format": sequence.format, "sparse_stride": sparse_stride, "frame_stride": stride,
+                 "sparse_depth": f"every {sparse_stride}th row and column of depth/dense (LiDAR-like subsample)",
+                 "sequence": str(sequence.root), "groundtruth": str(sequence.groundtruth)}
+        with DriveWriter(path, sequence.K, height, width, source="tum", date="", drive=sequence.name,
+                         split=split_of[sequence.name], force=force, attrs=attrs) as writer:
+            writer.append(first)
+            for frame in frames:
+                writer.append(frame)
+        written.append(PreparedDrive(sequence.name, split_of[sequence.name], path, len(sequence)))
+
+    out_splits = {split: [d.name for d in written if d.split == split] for split in SPLIT_NAMES}
+    write_json_atomic(splits_path, out_splits, force=True)
+    config_path = write_json_atomic(out_dir / "prepare-tum.json", stage_config("prepare-tum", {
+        "src": str(src), "out_dir": str(out_dir), "splits": label, "max_frames": max_frames, "stride": stride,
+        "sparse_stride": sparse_stride, "intrinsics": None if intrinsics is None else np.asarray(intrinsics).tolist(),
+        "drives": {d.name: {"split": d.split, "frames": d.frames, "format": s.format, "K": s.K.tolist()}
+                   for d, s in zip(written, sequences)}}), force=True)
+    return PrepareResult("tum", tuple(written), out_splits, splits_path, config_path, tuple(notes))

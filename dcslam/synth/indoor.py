@@ -1,0 +1,534 @@
+"""Synthetic indoor sequences in the ICL-NUIM TUM-compatible layout (``dcslam synth --indoor``).
+
+Per sequence ``i`` under ``out_root``::
+
+    living_room_traj<i>_frei_png/rgb/<k>.png          640 x 480 colour (times ``scale``)
+    living_room_traj<i>_frei_png/depth/<k>.png        16-bit z-depth, metres = value / 5000, 0 = none
+    living_room_traj<i>_frei_png/associations.txt     "k depth/k.png k rgb/k.png"
+    living_room_traj<i>_frei_png/livingRoom<i>.gt.freiburg   T_world_cam of every frame (timestamps = k)
+    living_room_traj<i>_frei_png/intrinsics.txt       "fx fy cx cy" (ICL-NUIM's, fy = -480, scaled with ``scale``)
+    synth_indoor.json                                 the settings
+
+The room: walls, floor and ceiling (a flat :class:`~dcslam.synth.trajectory.Terrain` as the floor, slabs for the
+rest), furniture along the walls (bookshelves with rows of books, sideboards with doors and things on top, sofas
+with cushions, tables with chairs, plants), pictures, a door and a window on the walls, a rug and a low table in
+the middle, lit by a ceiling lamp. Shapes are the street generator's primitives (:class:`~dcslam.synth.scene.Shape`)
+and are ray cast by :func:`dcslam.synth.raycast.cast`, so depth is exact and colour edges fall on depth edges.
+
+The camera is ICL-NUIM's: ``fy < 0``, its y axis points *up* (see :mod:`dcslam.io.tum_rgbd`). Its poses are proper
+rotations in this generator's z-up world, so the images show the room mirrored left to right, exactly as ICL-NUIM's
+images relate to its poses; back-projecting with the negative fy puts every pixel back where it was. The hand-held
+trajectory is smooth: the camera wanders over the middle of the room at 1.1-1.6 m height (about 1-3 cm per frame,
+sums of slow sinusoids plus a millimetre of hand shake) while turning slowly (under about 1 degree per frame),
+looking a little down. Depth is noise-free (ICL-NUIM's ``living_room_traj<i>_frei_png``, not its noisy ``n``
+variant); colour has a little sensor noise.
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dcslam.errors import DcslamError
+from dcslam.io.tum_rgbd import HEIGHT, ICL_K, WIDTH, IclWriter
+from dcslam.synth.raycast import GROUND, CameraGrid, cast, local_normals
+from dcslam.synth.scene import BOX, CYLINDER, ELLIPSOID, Shape
+from dcslam.synth.sensors import cell_noise, value_noise
+from dcslam.synth.trajectory import Terrain
+
+# materials (indices into the albedo rules of :func:`albedo`)
+WALL, CEILING, WOOD, FABRIC, PAINTED, BOOKS, PICTURE, PLANT, METAL, RUG, GLASS, FLOOR = range(12)
+MAX_RANGE_M = 15.0
+FLAT_FLOOR = Terrain(amplitude=np.zeros(1), wave=np.zeros((1, 2)), phase=np.zeros(1))
+
+
+def sequence_name(index: int) -> str:
+    """``living_room_traj<index>_frei_png``, ICL-NUIM's folder name."""
+    return f"living_room_traj{index}_frei_png"
+
+
+def trajectory_name(index: int) -> str:
+    """``livingRoom<index>.gt.freiburg``, ICL-NUIM's trajectory file name."""
+    return f"livingRoom{index}.gt.freiburg"
+
+
+def camera_K(scale: float = 1.0) -> tuple[np.ndarray, int, int]:
+    """ICL-NUIM's intrinsics for images ``scale`` times 640 x 480 → (K (3, 3), width, height)."""
+    width, height = int(round(WIDTH * scale)), int(round(HEIGHT * scale))
+    if width < 16 or height < 12:
+        raise DcslamError(f"--scale {scale} gives {width}x{height} images; use at least 0.025")
+    sx, sy = width / WIDTH, height / HEIGHT
+    K = ICL_K.copy()
+    K[0, 0] *= sx
+    K[1, 1] *= sy
+    K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
+    K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
+    return K, width, height
+
+
+# ------------------------------------------------------------------------------------------------ the room
+@dataclass(frozen=True)
+class Room:
+    """An axis-aligned room ``[0, size_x] x [0, size_y] x [0, height]`` metres (z up, the floor at z = 0), its
+    shapes, and the ceiling lamp's position (3,)."""
+
+    size_x: float
+    size_y: float
+    height: float
+    shapes: list[Shape]
+    lamp: np.ndarray
+
+
+class _WallFrame:
+    """Coordinates along wall ``w`` (0: y = 0, 1: x = size_x, 2: y = size_y, 3: x = 0, counter-clockwise):
+    ``s`` metres along it, ``t`` metres out from it into the room, ``z`` up."""
+
+    def __init__(self, room_x: float, room_y: float, wall: int):
+        origins = [(0.0, 0.0), (room_x, 0.0), (room_x, room_y), (0.0, room_y)]
+        along = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)]
+        self.origin = np.array([*origins[wall], 0.0])
+        self.a = np.array([*along[wall], 0.0])
+        self.n = np.array([-self.a[1], self.a[0], 0.0])  # inward: a x n = z
+        self.R = np.stack([self.a, self.n, [0.0, 0.0, 1.0]], axis=1)
+        self.length = room_x if wall % 2 == 0 else room_y
+
+
+class _Builder:
+    def __init__(self, rng: np.random.Generator):
+        self.rng, self.shapes = rng, []
+
+    def box(self, frame: _WallFrame, s0, s1, t0, t1, z0, z1, material, color):
+        center = frame.origin + frame.a * (s0 + s1) / 2 + frame.n * (t0 + t1) / 2 + np.array([0, 0, (z0 + z1) / 2])
+        half = np.abs(np.array([s1 - s0, t1 - t0, z1 - z0])) / 2
+        self.shapes.append(Shape(BOX, frame.R, center, half, material, np.asarray(color, dtype=np.float64)))
+
+    def cylinder(self, frame: _WallFrame, s, t, z0, z1, radius, material, color):
+        center = frame.origin + frame.a * s + frame.n * t + np.array([0, 0, (z0 + z1) / 2])
+        self.shapes.append(Shape(CYLINDER, np.eye(3), center, np.array([radius, radius, (z1 - z0) / 2]), material,
+                                 np.asarray(color, dtype=np.float64)))
+
+    def ellipsoid(self, frame: _WallFrame, s, t, z, radii, material, color):
+        center = frame.origin + frame.a * s + frame.n * t + np.array([0, 0, z])
+        self.shapes.append(Shape(ELLIPSOID, frame.R, center, np.asarray(radii, dtype=np.float64), material,
+                                 np.asarray(color, dtype=np.float64)))
+
+    def color(self, base, spread=0.15):
+        return np.clip(np.asarray(base) * self.rng.uniform(1 - spread, 1 + spread, 3), 0, 1)
+
+    # furniture, each in wall coordinates from s0 over ``width`` metres -------------------------------------
+    def bookshelf(self, f, s0, width):
+        rng = self.rng
+        depth, height = rng.uniform(0.28, 0.4), rng.uniform(1.5, 2.1)
+        wood = self.color([0.55, 0.38, 0.22])
+        s1, th = s0 + width, 0.025
+        self.box(f, s0, s0 + th, 0, depth, 0, height, WOOD, wood)
+        self.box(f, s1 - th, s1, 0, depth, 0, height, WOOD, wood)
+        self.box(f, s0 + th, s1 - th, 0, th, 0, height, WOOD, wood * 0.8)
+        levels = np.linspace(0.08, height - th, rng.integers(4, 6))
+        for k, z in enumerate(levels):
+            self.box(f, s0 + th, s1 - th, th, depth, z - th, z, WOOD, wood)
+            if k + 1 < len(levels):  # blocks of books on this shelf
+                s, room_up = s0 + th + rng.uniform(0, 0.1), levels[k + 1] - z - th
+                while s < s1 - th - 0.1:
+                    w = min(rng.uniform(0.08, 0.35), s1 - th - s)
+                    h = min(rng.uniform(0.16, 0.3), room_up - 0.02)
+                    d = rng.uniform(0.15, depth - 0.05)
+                    if h > 0.08 and rng.random() < 0.85:
+                        self.box(f, s, s + w, th, th + d, z, z + h, BOOKS, self.color(rng.choice(_BOOK_COLOURS)))
+                    s += w + rng.uniform(0.0, 0.12)
+
+    def sideboard(self, f, s0, width):
+        rng = self.rng
+        depth, height = rng.uniform(0.4, 0.55), rng.uniform(0.7, 0.95)
+        paint = self.color(rng.choice(np.array([[0.85, 0.85, 0.82], [0.3, 0.32, 0.35], [0.6, 0.45, 0.3]])))
+        s1 = s0 + width
+        self.box(f, s0 + 0.04, s1 - 0.04, 0, depth - 0.05, 0, 0.1, PAINTED, paint * 0.5)          # plinth
+        self.box(f, s0, s1, 0, depth, 0.1, height - 0.03, PAINTED, paint)                       # body
+        self.box(f, s0 - 0.02, s1 + 0.02, 0, depth + 0.03, height - 0.03, height, WOOD, self.color([0.5, 0.35, 0.2]))
+        doors = max(1, int(round(width / 0.5)))
+        edges = np.linspace(s0, s1, doors + 1)
+        for a, b in zip(edges[:-1], edges[1:]):                                                 # doors and knobs
+            self.box(f, a + 0.01, b - 0.01, depth, depth + 0.018, 0.13, height - 0.06, PAINTED, paint * 0.95)
+            self.cylinder(f, (a + b) / 2, depth + 0.03, height - 0.2, height - 0.16, 0.015, METAL, [0.7, 0.7, 0.7])
+        self.things_on_top(f, s0, s1, 0.0, depth, height)
+
+    def things_on_top(self, f, s0, s1, t0, t1, z):
+        rng = self.rng
+        for _ in range(rng.integers(1, 4)):
+            s, t = rng.uniform(s0 + 0.15, s1 - 0.15), rng.uniform(t0 + 0.12, t1 - 0.12)
+            kind = rng.integers(4)
+            if kind == 0:    # vase
+                r = rng.uniform(0.04, 0.08)
+                self.cylinder(f, s, t, z, z + rng.uniform(0.15, 0.35), r, PAINTED, self.color(rng.choice(_ACCENTS)))
+            elif kind == 1:  # bowl / ball
+                r = rng.uniform(0.06, 0.12)
+                self.ellipsoid(f, s, t, z + r * 0.5, [r, r, r * 0.6], PAINTED, self.color(rng.choice(_ACCENTS)))
+            elif kind == 2:  # box / stack of books lying down
+                w, d = rng.uniform(0.12, 0.3), rng.uniform(0.1, 0.2)
+                self.box(f, s - w / 2, s + w / 2, t - d / 2, t + d / 2, z, z + rng.uniform(0.04, 0.15), BOOKS,
+                         self.color(rng.choice(_BOOK_COLOURS)))
+            else:            # lamp: base, stem, shade
+                self.cylinder(f, s, t, z, z + 0.03, 0.08, METAL, [0.3, 0.3, 0.3])
+                self.cylinder(f, s, t, z + 0.03, z + 0.35, 0.012, METAL, [0.6, 0.6, 0.6])
+                self.cylinder(f, s, t, z + 0.3, z + 0.5, rng.uniform(0.1, 0.16), FABRIC, self.color([0.9, 0.85, 0.7]))
+
+    def sofa(self, f, s0, width):
+        rng = self.rng
+        depth = rng.uniform(0.8, 0.95)
+        cloth = self.color(rng.choice(np.array([[0.45, 0.5, 0.6], [0.6, 0.3, 0.25], [0.5, 0.5, 0.45],
+                                                [0.25, 0.35, 0.3]])))
+        s1, arm = s0 + width, 0.18
+        self.box(f, s0 + 0.05, s1 - 0.05, 0.05, depth - 0.05, 0, 0.1, WOOD, [0.2, 0.15, 0.1])
+        self.box(f, s0, s1, 0, depth, 0.1, 0.42, FABRIC, cloth)
+        self.box(f, s0 + arm, s1 - arm, 0, 0.22, 0.42, 0.85, FABRIC, cloth * 0.95)
+        for a in (s0, s1 - arm):
+            self.box(f, a, a + arm, 0, depth, 0.42, 0.62, FABRIC, cloth * 0.9)
+        seats = max(2, int(round((width - 2 * arm) / 0.65)))
+        edges = np.linspace(s0 + arm, s1 - arm, seats + 1)
+        for a, b in zip(edges[:-1], edges[1:]):
+            self.box(f, a + 0.01, b - 0.01, 0.22, depth - 0.02, 0.42, 0.55, FABRIC, cloth * 1.05)
+        for _ in range(rng.integers(0, 3)):
+            s = rng.uniform(s0 + arm + 0.25, s1 - arm - 0.25)
+            self.ellipsoid(f, s, 0.32, 0.72, [0.2, 0.09, 0.18], FABRIC, self.color(rng.choice(_ACCENTS)))
+
+    def table(self, f, s0, width):
+        rng = self.rng
+        depth, height = rng.uniform(0.7, 0.9), rng.uniform(0.72, 0.78)
+        wood = self.color([0.6, 0.42, 0.25])
+        s1, t0, t1 = s0 + width, 0.08, 0.08 + depth
+        self.box(f, s0, s1, t0, t1, height - 0.035, height, WOOD, wood)
+        for s in (s0 + 0.05, s1 - 0.1):
+            for t in (t0 + 0.05, t1 - 0.1):
+                self.box(f, s, s + 0.05, t, t + 0.05, 0, height - 0.035, WOOD, wood * 0.85)
+        self.things_on_top(f, s0, s1, t0, t1, height)
+        for s in rng.uniform(s0 + 0.3, s1 - 0.3, rng.integers(1, 3)):  # chairs in front
+            self.chair(f, s, t1 + rng.uniform(0.05, 0.25), wood)
+
+    def chair(self, f, s, t, wood):
+        self.box(f, s - 0.22, s + 0.22, t, t + 0.42, 0.43, 0.47, WOOD, wood)
+        for ds in (-0.2, 0.16):
+            for dt in (0.0, 0.38):
+                self.box(f, s + ds, s + ds + 0.04, t + dt, t + dt + 0.04, 0, 0.43, WOOD, wood * 0.85)
+        self.box(f, s - 0.22, s + 0.22, t + 0.38, t + 0.42, 0.47, 0.92, WOOD, wood)
+
+    def plant(self, f, s0, width):
+        rng = self.rng
+        s, r = s0 + width / 2, rng.uniform(0.12, 0.2)
+        h = rng.uniform(0.3, 0.5)
+        self.cylinder(f, s, r + 0.05, 0, h, r, PAINTED, self.color(rng.choice(_ACCENTS)))
+        self.ellipsoid(f, s, r + 0.05, h + rng.uniform(0.2, 0.4), [r * 1.4, r * 1.4, rng.uniform(0.25, 0.45)], PLANT,
+                       self.color([0.2, 0.4, 0.15]))
+
+    def wall_things(self, f, height):
+        """Pictures, sometimes a door or a window, a skirting board."""
+        rng = self.rng
+        self.box(f, 0, f.length, 0, 0.015, 0, 0.08, PAINTED, [0.9, 0.9, 0.88])
+        s = rng.uniform(0.4, 1.2)
+        while s < f.length - 0.8:
+            kind = rng.random()
+            if kind < 0.15 and s < f.length - 1.2:     # door with its frame
+                self.box(f, s - 0.06, s + 0.96, 0, 0.02, 0, 2.1, PAINTED, [0.92, 0.92, 0.9])
+                self.box(f, s, s + 0.9, 0.02, 0.045, 0, 2.03, WOOD, self.color([0.7, 0.55, 0.4]))
+                self.cylinder(f, s + 0.8, 0.07, 1.0, 1.02, 0.02, METAL, [0.75, 0.75, 0.7])
+                s += 1.1
+            elif kind < 0.3 and s < f.length - 1.4:    # window: frame, pane and sill
+                w, z0 = rng.uniform(0.9, 1.3), rng.uniform(0.85, 1.0)
+                z1 = min(z0 + rng.uniform(1.1, 1.4), height - 0.2)
+                self.box(f, s, s + w, 0, 0.05, z0, z1, PAINTED, [0.95, 0.95, 0.95])
+                self.box(f, s + 0.06, s + w - 0.06, 0.05, 0.06, z0 + 0.06, z1 - 0.06, GLASS, [0.75, 0.85, 0.95])
+                self.box(f, s - 0.05, s + w + 0.05, 0, 0.18, z0 - 0.04, z0, PAINTED, [0.9, 0.9, 0.9])
+                s += w + 0.3
+            else:                                      # picture
+                w, h = rng.uniform(0.3, 0.9), rng.uniform(0.25, 0.7)
+                z0 = rng.uniform(1.3, 1.7)
+                self.box(f, s, s + w, 0, rng.uniform(0.02, 0.05), z0, min(z0 + h, height - 0.1), PICTURE,
+                         self.color(rng.choice(_ACCENTS)))
+                s += w + rng.uniform(0.3, 1.0)
+
+
+_BOOK_COLOURS = np.array([[0.7, 0.15, 0.12], [0.15, 0.25, 0.55], [0.2, 0.45, 0.25], [0.85, 0.75, 0.3],
+                          [0.9, 0.88, 0.82], [0.3, 0.2, 0.15], [0.5, 0.2, 0.45]])
+_ACCENTS = np.array([[0.8, 0.3, 0.2], [0.2, 0.4, 0.7], [0.9, 0.75, 0.2], [0.3, 0.6, 0.4], [0.85, 0.85, 0.85],
+                     [0.25, 0.25, 0.3]])
+_FURNITURE = ("bookshelf", "sideboard", "sofa", "table", "plant")
+_FURNITURE_ODDS = (0.25, 0.25, 0.2, 0.2, 0.1)
+_WIDTHS = {"bookshelf": (0.8, 1.6), "sideboard": (1.0, 2.0), "sofa": (1.7, 2.4), "table": (1.0, 1.6),
+           "plant": (0.5, 0.7)}
+CORNER_M = 0.55  # furniture keeps this far from the corners, so pieces on adjacent walls never overlap
+
+
+def build_room(rng: np.random.Generator) -> Room:
+    """A furnished room of 5.5-7.5 x 4.8-6 x 2.6-3 m (deterministic given ``rng``)."""
+    size_x, size_y, height = rng.uniform(5.5, 7.5), rng.uniform(4.8, 6.0), rng.uniform(2.6, 3.0)
+    b = _Builder(rng)
+    wall_paint = b.color(rng.choice(np.array([[0.88, 0.86, 0.8], [0.75, 0.82, 0.85], [0.9, 0.8, 0.7],
+                                              [0.8, 0.85, 0.75]])), 0.05)
+    slab = 0.3
+    shell = [  # walls and ceiling: slabs outside the room (the camera is outside every shape)
+        ((-slab / 2, size_y / 2, height / 2), (slab / 2, size_y / 2 + slab, height / 2 + slab), WALL, wall_paint),
+        ((size_x + slab / 2, size_y / 2, height / 2), (slab / 2, size_y / 2 + slab, height / 2 + slab), WALL,
+         wall_paint * 0.97),
+        ((size_x / 2, -slab / 2, height / 2), (size_x / 2 + slab, slab / 2, height / 2 + slab), WALL, wall_paint),
+        ((size_x / 2, size_y + slab / 2, height / 2), (size_x / 2 + slab, slab / 2, height / 2 + slab), WALL,
+         wall_paint * 0.97),
+        ((size_x / 2, size_y / 2, height + slab / 2), (size_x / 2 + slab, size_y / 2 + slab, slab / 2), CEILING,
+         np.array([0.95, 0.95, 0.93])),
+    ]
+    for center, half, material, color in shell:
+        b.shapes.append(Shape(BOX, np.eye(3), np.array(center), np.array(half), material, np.asarray(color)))
+    for wall in range(4):
+        f = _WallFrame(size_x, size_y, wall)
+        b.wall_things(f, height)
+        s = CORNER_M + rng.uniform(0.0, 0.4)
+        while True:
+            kind = _FURNITURE[rng.choice(len(_FURNITURE), p=_FURNITURE_ODDS)]
+            width = rng.uniform(*_WIDTHS[kind])
+            if s + width > f.length - CORNER_M:
+                break
+            getattr(b, kind)(f, s, width)
+            s += width + rng.uniform(0.1, 0.6)
+    centre = _WallFrame(size_x, size_y, 0)
+    cx, cy = size_x / 2 + rng.uniform(-0.5, 0.5), size_y / 2 + rng.uniform(-0.4, 0.4)
+    rug_x, rug_y = rng.uniform(1.2, 1.6), rng.uniform(0.8, 1.1)
+    b.box(centre, cx - rug_x, cx + rug_x, cy - rug_y, cy + rug_y, 0, 0.012, RUG, b.color([0.6, 0.25, 0.2]))
+    w, d, h = rng.uniform(0.4, 0.6), rng.uniform(0.3, 0.45), rng.uniform(0.38, 0.45)     # low table
+    b.box(centre, cx - w, cx + w, cy - d, cy + d, h - 0.04, h, WOOD, b.color([0.45, 0.3, 0.18]))
+    b.box(centre, cx - w + 0.05, cx + w - 0.05, cy - d + 0.05, cy + d - 0.05, 0.012, h - 0.04, WOOD,
+          b.color([0.35, 0.25, 0.15]))
+    b.things_on_top(centre, cx - w, cx + w, cy - d, cy + d, h)
+    lamp = np.array([size_x / 2, size_y / 2, height - 0.45])
+    b.cylinder(centre, lamp[0], lamp[1], height - 0.4, height, 0.01, METAL, [0.5, 0.5, 0.5])
+    b.cylinder(centre, lamp[0], lamp[1], height - 0.6, height - 0.38, 0.22, FABRIC, [0.95, 0.92, 0.8])
+    return Room(size_x, size_y, height, b.shapes, lamp)
+
+
+# ------------------------------------------------------------------------------------------------ the camera path
+def look_rotation(forward: np.ndarray, roll: np.ndarray) -> np.ndarray:
+    """R_world_cam (N, 3, 3) of an ICL-NUIM camera (x right, **y up**, z forward) looking along ``forward`` (N, 3)
+    with the world's z axis up, rolled by ``roll`` (N,) radians about the optical axis. Columns x = y × z, so the
+    rotation is proper (det +1)."""
+    z = forward / np.linalg.norm(forward, axis=1, keepdims=True)
+    up = np.array([0.0, 0.0, 1.0])
+    y0 = up - (z @ up)[:, None] * z
+    y0 /= np.linalg.norm(y0, axis=1, keepdims=True)
+    c, s = np.cos(roll)[:, None], np.sin(roll)[:, None]
+    y = c * y0 + s * np.cross(z, y0)
+    x = np.cross(y, z)
+    return np.stack([x, y, z], axis=2)
+
+
+def handheld_trajectory(room: Room, frames: int, rng: np.random.Generator) -> np.ndarray:
+    """A smooth hand-held path over the middle of the room: T_world_cam (N, 4, 4) float64.
+
+    Position: slow sinusoids (periods of 250-450 frames) over the free middle of the room (at least 1.6 m from the
+    walls, where the furniture stands) at 1.1-1.6 m height, plus about a millimetre of hand shake; about 1-3 cm per
+    frame. Heading: a slow turn (0.2-0.5 degrees per frame) plus a swing; the camera looks 8-20 degrees down and
+    rolls a few degrees.
+    """
+    k = np.arange(frames, dtype=np.float64)
+    centre = np.array([room.size_x / 2, room.size_y / 2, 1.35])
+    amplitude = np.array([max(room.size_x / 2 - 1.6, 0.2), max(room.size_y / 2 - 1.6, 0.2), 0.2])
+    period = rng.uniform(250.0, 450.0, 3)
+    phase = rng.uniform(0, 2 * np.pi, 3)
+    position = centre + amplitude * np.sin(2 * np.pi * k[:, None] / period + phase)
+    shake = rng.normal(0, 1.0, (3, 3))  # three slow-ish sinusoids per axis, ~1 mm
+    for j, p in enumerate((9.0, 13.0, 21.0)):
+        position += 0.001 * shake[j] * np.sin(2 * np.pi * k[:, None] / p + phase[j])
+    turn = np.deg2rad(rng.uniform(0.2, 0.5)) * rng.choice([-1.0, 1.0])
+    yaw = rng.uniform(-np.pi, np.pi) + turn * k + 0.25 * np.sin(2 * np.pi * k / rng.uniform(180, 320)
+                                                                 + rng.uniform(0, 2 * np.pi))
+    pitch = -np.deg2rad(14.0) + np.deg2rad(6.0) * np.sin(2 * np.pi * k / rng.uniform(120, 240) + rng.uniform(0, 6))
+    roll = np.deg2rad(3.0) * np.sin(2 * np.pi * k / rng.uniform(100, 200) + rng.uniform(0, 6))
+    forward = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], axis=1)
+    T = np.tile(np.eye(4), (frames, 1, 1))
+    T[:, :3, :3] = look_rotation(forward, roll)
+    T[:, :3, 3] = position
+    return T
+
+
+# ------------------------------------------------------------------------------------------------ rendering
+def albedo(shape: Shape, p_world: np.ndarray, p_local: np.ndarray) -> np.ndarray:
+    """Surface colours (n, 3) float32 in [0, 1] of ``shape`` at world points / local points (n, 3)."""
+    m, base = shape.material, shape.color.astype(np.float32)
+    if m == WALL:
+        return base * (0.93 + 0.1 * value_noise(p_world, 0.9))[:, None]
+    if m == CEILING:
+        return base * (0.97 + 0.03 * cell_noise(p_world, 0.05))[:, None]
+    if m == WOOD:
+        grain = np.sin(p_local[:, 0] * 40.0 + 6.0 * cell_noise(p_world, 0.3)) * 0.06
+        return base * (0.92 + grain + 0.06 * cell_noise(p_world, 0.04))[:, None]
+    if m in (FABRIC, RUG):
+        weave = 0.9 + 0.12 * cell_noise(p_world, 0.01 if m == FABRIC else 0.02)
+        if m == RUG:
+            stripes = (np.floor(p_local[:, 0] / 0.15) % 2) * 0.25 + ((np.abs(p_local[:, 1]) % 0.4) < 0.05) * 0.3
+            weave = weave * (0.75 + stripes)
+        return base * weave[:, None]
+    if m == BOOKS:  # spines: a colour per few centimetres
+        spine = cell_noise(np.stack([p_local[:, 0] * 30.0, 0 * p_local[:, 1], 0 * p_local[:, 2]], 1), 1.0)
+        return np.clip(base * (0.55 + 0.9 * spine)[:, None], 0, 1)
+    if m == PICTURE:
+        return base * (0.3 + 1.0 * value_noise(p_world, 0.12))[:, None]
+    if m == PLANT:
+        return base * (0.5 + 0.9 * cell_noise(p_world, 0.04))[:, None]
+    return base * (0.95 + 0.05 * cell_noise(p_world, 0.1))[:, None]
+
+
+def floor_albedo(p: np.ndarray, tint: np.ndarray, along_x: bool) -> np.ndarray:
+    """Wooden planks (0.18 x 1.2 m, staggered), one shade per plank."""
+    u, v = (p[:, 0], p[:, 1]) if along_x else (p[:, 1], p[:, 0])
+    row = np.floor(v / 0.18)
+    col = np.floor((u + 0.37 * row) / 1.2)
+    shade = cell_noise(np.stack([row, col, 0 * row], 1), 1.0)
+    seam = ((v % 0.18) < 0.006) | (((u + 0.37 * row) % 1.2) < 0.006)
+    grain = 0.04 * np.sin(u * 55.0 + 9.0 * shade)
+    return tint[None, :] * ((0.75 + 0.35 * shade + grain) * np.where(seam, 0.55, 1.0))[:, None]
+
+
+@dataclass(frozen=True)
+class _Look:
+    floor_tint: np.ndarray
+    planks_along_x: bool
+
+
+def render(room: Room, look: _Look, grid: CameraGrid, T_world_cam: np.ndarray,
+           rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """True z-depth (H, W) float32 metres (0 = nothing within 15 m) and RGB (H, W, 3) uint8 of one view."""
+    depth, index, d_world = cast(grid, T_world_cam, room.shapes, FLAT_FLOOR, MAX_RANGE_M)
+    H, W = depth.shape
+    t = depth.ravel()
+    d = d_world.reshape(-1, 3)
+    hit = np.isfinite(t)
+    rgb = np.zeros((H * W, 3), dtype=np.float32)
+    p = (T_world_cam[:3, 3].astype(np.float32) + t[hit, None] * d[hit])
+    idx = index.ravel()[hit]
+    normal = np.zeros_like(p)
+    colour = np.zeros_like(p)
+    order = np.argsort(idx, kind="stable")
+    values, starts = np.unique(idx[order], return_index=True)
+    for value, a, b in zip(values, starts, np.append(starts[1:], len(order))):
+        pos = order[a:b]
+        if value == GROUND:
+            normal[pos] = (0.0, 0.0, 1.0)
+            colour[pos] = floor_albedo(p[pos], look.floor_tint, look.planks_along_x)
+            continue
+        shape = room.shapes[value]
+        p_local = ((p[pos] - shape.center) @ shape.R_world_obj).astype(np.float32)
+        n_local = local_normals(shape, p_local)
+        normal[pos] = n_local @ shape.R_world_obj.T.astype(np.float32)
+        colour[pos] = albedo(shape, p[pos], p_local)
+    to_lamp = room.lamp.astype(np.float32) - p
+    distance = np.linalg.norm(to_lamp, axis=1)
+    facing = np.sign(-np.einsum("ij,ij->i", normal, d[hit]))[:, None]
+    lambert = np.clip(np.einsum("ij,ij->i", normal * facing, to_lamp) / np.maximum(distance, 1e-6), 0, 1)
+    light = 0.3 + 0.8 * lambert / (1.0 + (distance / 3.0) ** 2)
+    rgb[hit] = colour * light[:, None]
+    image = np.clip(rgb.reshape(H, W, 3) * 255 + rng.normal(0, 1.2, (H, W, 1)).astype(np.float32), 0, 255)
+    depth = np.where(np.isfinite(depth), depth, 0).astype(np.float32)
+    return depth, image.astype(np.uint8)
+
+
+# ------------------------------------------------------------------------------------------------ writing
+@dataclass(frozen=True)
+class IndoorSequence:
+    """One written sequence: its folder, trajectory file, frame count, fraction of pixels with depth, seconds."""
+
+    name: str
+    path: Path
+    trajectory: Path
+    frames: int
+    depth_density: float
+    seconds: float
+
+
+@dataclass(frozen=True)
+class IndoorResult:
+    """What :func:`generate_indoor` wrote: one :class:`IndoorSequence` per sequence, and the settings file."""
+
+    sequences: tuple[IndoorSequence, ...]
+    config_path: Path
+
+    @property
+    def paths(self) -> tuple[Path, ...]:
+        """The sequence folders, in order."""
+        return tuple(s.path for s in self.sequences)
+
+
+def _occupied(path: Path) -> bool:
+    return path.exists() and (not path.is_dir() or any(path.iterdir()))
+
+
+def write_sequence(folder: Path, index: int, frames: int, seed: int, scale: float = 1.0,
+                   on_frame: Callable[[], None] | None = None) -> IndoorSequence:
+    """Render and write sequence ``index`` of ``seed`` (``frames`` frames) into ``folder``."""
+    started = time.perf_counter()
+    rng = np.random.default_rng([seed, index, 7])
+    room = build_room(rng)
+    look = _Look(floor_tint=np.clip(np.array([0.62, 0.45, 0.3]) * rng.uniform(0.8, 1.2, 3), 0, 1).astype(np.float32),
+                 planks_along_x=bool(rng.random() < 0.5))
+    T_world_cam = handheld_trajectory(room, frames, rng)
+    K, width, height = camera_K(scale)
+    grid = CameraGrid(K, width, height)
+    writer = IclWriter(folder, trajectory_name(index), K)
+    density = []
+    for k in range(frames):
+        depth, rgb = render(room, look, grid, T_world_cam[k], rng)
+        writer.append(rgb, depth, T_world_cam[k])
+        density.append(float(np.mean(depth > 0)))
+        if on_frame is not None:
+            on_frame()
+    writer.close()
+    return IndoorSequence(sequence_name(index), folder, folder / trajectory_name(index), frames,
+                          float(np.mean(density)), time.perf_counter() - started)
+
+
+def generate_indoor(out_root: Path | str, sequences: int = 1, frames: int = 60, seed: int = 0, force: bool = False,
+                    on_frame: Callable[[], None] | None = None, scale: float = 1.0) -> IndoorResult:
+    """Write ``sequences`` synthetic indoor sequences of ``frames`` frames under ``out_root`` (ICL-NUIM layout).
+
+    Sequence ``i`` is ``living_room_traj<i>_frei_png`` and follows from (``seed``, ``i``) alone. ``scale`` resizes
+    the 640 x 480 images (and the intrinsics; ``intrinsics.txt`` records them). Refuses (:class:`DcslamError`) to
+    replace a sequence folder that exists and is not empty unless ``force``; each sequence is written into a hidden
+    temporary folder and renamed when complete. ``on_frame`` is called after each frame (progress).
+    """
+    from dcslam.workspace import stage_config, write_json_atomic
+
+    if sequences < 1:
+        raise DcslamError(f"sequences must be at least 1, got {sequences}")
+    if frames < 1:
+        raise DcslamError(f"frames must be at least 1, got {frames}")
+    if not 0 < scale <= 4:
+        raise DcslamError(f"scale must be in (0, 4], got {scale}")
+    camera_K(scale)
+    out_root = Path(out_root)
+    names = [sequence_name(i) for i in range(sequences)]
+    if not force:
+        taken = [out_root / name for name in names if _occupied(out_root / name)]
+        if taken:
+            raise DcslamError(f"{taken[0]} exists; pass --force to replace it")
+    out_root.mkdir(parents=True, exist_ok=True)
+    written = []
+    for index, name in enumerate(names):
+        tmp = out_root / f".{name}.tmp-{os.getpid()}"
+        try:
+            shutil.rmtree(tmp, ignore_errors=True)
+            tmp.mkdir(parents=True)
+            report = write_sequence(tmp, index, frames, seed, scale, on_frame)
+            final = out_root / name
+            if final.exists():
+                shutil.rmtree(final)
+            os.replace(tmp, final)
+            written.append(IndoorSequence(name, final, final / report.trajectory.name, report.frames,
+                                          report.depth_density, report.seconds))
+        finally:
+            with contextlib.suppress(FileNotFoundError):
+                shutil.rmtree(tmp)
+    config = write_json_atomic(out_root / "synth_indoor.json", stage_config("synth --indoor", {
+        "out": out_root, "sequences": sequences, "frames": frames, "seed": seed, "scale": scale,
+        "camera": "ICL-NUIM (fy < 0)", "depth_scale": 5000}))
+    return IndoorResult(tuple(written), config)
