@@ -24,8 +24,8 @@ HELP = (
     "<workspace>/tum): living_room_traj<i>_frei_png/ with rgb/<k>.png, depth/<k>.png (16-bit, 5000 = 1 m), "
     "associations.txt, livingRoom<i>.gt.freiburg and intrinsics.txt. A furnished room (walls, floor, ceiling, "
     "shelves with books, sideboards, sofas, tables and chairs, plants, pictures, a door, a window) seen by "
-    "ICL-NUIM's 640 × 480 camera (fx 481.2, fy −480: its y axis points up) along a smooth hand-held path (1–3 cm "
-    "and under 1° per frame). --drives is then the number of sequences, --scale resizes the images. Read the "
+    "ICL-NUIM's 640 × 480 camera (fx 481.2, fy −480: its y axis points up) along a smooth hand-held path (at most "
+    "3 cm and about 1° per frame). --drives is then the number of sequences, --scale resizes the images. Read the "
     "result with `dcslam prepare-tum`."
 )
 

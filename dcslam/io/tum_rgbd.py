@@ -418,23 +418,34 @@ def find_sequences(src: Path | str) -> list[Path]:
     return found
 
 
-_ICL_NAME = re.compile(r"^(living_room_|office_room_)?traj(\d+)n?_frei_png$")
+_ICL_NAME = re.compile(r"^(?P<room>living_room_|office_room_)?traj(?P<number>\d+)n?_frei_png$")
+_ICL_STEMS = {"living_room_": ("livingRoom",), "office_room_": ("traj",), None: ("traj", "livingRoom")}
 
 
-def groundtruth_candidates(folder: Path) -> list[Path]:
-    """Where a sequence's trajectory may be, in order: ``groundtruth.txt`` and ``*.gt.freiburg`` in the folder,
-    then the ICL-NUIM name (``livingRoom<N>.gt.freiburg`` or ``traj<N>.gt.freiburg``) in the parent folder."""
+def find_groundtruth(folder: Path | str) -> Path:
+    """A sequence's trajectory: ``groundtruth.txt`` in the folder, else its one ``*.gt.freiburg``, else the
+    ICL-NUIM name in the parent folder (``living_room_traj2[n]_frei_png`` → ``livingRoom2.gt.freiburg``; the office
+    sequences ``traj2[n]_frei_png`` → ``traj2.gt.freiburg``), where the separate download puts it."""
     folder = Path(folder)
-    names = [folder / "groundtruth.txt"] + sorted(folder.glob("*.gt.freiburg"))
+    if (folder / "groundtruth.txt").is_file():
+        return folder / "groundtruth.txt"
     match = _ICL_NAME.match(folder.name)
-    if match:
-        stem = f"livingRoom{match.group(2)}" if match.group(1) != "office_room_" else f"traj{match.group(2)}"
-        if match.group(1) is None:
-            stem = f"traj{match.group(2)}"
-        names.append(folder.parent / f"{stem}.gt.freiburg")
-        if match.group(1) is None:
-            names.append(folder.parent / f"livingRoom{match.group(2)}.gt.freiburg")
-    return names
+    expected = [f"{stem}{match['number']}.gt.freiburg" for stem in _ICL_STEMS[match["room"]]] if match else []
+    inside = sorted(folder.glob("*.gt.freiburg"))
+    if len(inside) > 1:
+        named = [p for p in inside if p.name in expected]
+        if len(named) != 1:
+            raise DcslamError(f"{folder}: {len(inside)} *.gt.freiburg files ({', '.join(p.name for p in inside)}); "
+                              f"keep one, or name the trajectory groundtruth.txt")
+        return named[0]
+    if inside:
+        return inside[0]
+    for name in expected:
+        if (folder.parent / name).is_file():
+            return folder.parent / name
+    looked = [str(folder / "groundtruth.txt"), str(folder / "*.gt.freiburg")] + [str(folder.parent / n)
+                                                                                for n in expected]
+    raise DcslamError(f"{folder}: no ground-truth trajectory (looked for {', '.join(looked)})")
 
 
 def index_sequence(folder: Path | str, *, intrinsics: np.ndarray | None = None, groundtruth: Path | str | None = None,
@@ -476,18 +487,14 @@ def index_sequence(folder: Path | str, *, intrinsics: np.ndarray | None = None, 
 
     rgb_paths = tuple(folder / n for n in rgb_n)
     depth_paths = tuple(folder / n for n in depth_n)
-    for path in (*depth_paths, *rgb_paths):
-        if not path.is_file():
-            raise DcslamError(f"{path} not found (listed in {folder.name}/"
-                              f"{'associations.txt' if fmt == ICL else ('rgb.txt' if path in rgb_paths else 'depth.txt')})")
+    for paths, listed in ((depth_paths, "depth.txt"), (rgb_paths, "rgb.txt")):
+        for path in paths:
+            if not path.is_file():
+                raise DcslamError(f"{path} not found (listed in "
+                                  f"{folder / ('associations.txt' if fmt == ICL else listed)})")
 
     if groundtruth is None:
-        candidates = groundtruth_candidates(folder)
-        existing = [p for p in candidates if p.is_file()]
-        if not existing:
-            raise DcslamError(f"{folder}: no ground-truth trajectory (looked for "
-                              f"{', '.join(str(p) for p in dict.fromkeys(candidates))})")
-        groundtruth = existing[0]
+        groundtruth = find_groundtruth(folder)
     gt_times, T_gt = read_tum(groundtruth)
     T, found = interpolate_poses(depth_t, gt_times, T_gt, max_difference, max_pose_gap)
     if not found.all():

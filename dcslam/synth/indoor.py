@@ -18,8 +18,8 @@ and are ray cast by :func:`dcslam.synth.raycast.cast`, so depth is exact and col
 The camera is ICL-NUIM's: ``fy < 0``, its y axis points *up* (see :mod:`dcslam.io.tum_rgbd`). Its poses are proper
 rotations in this generator's z-up world, so the images show the room mirrored left to right, exactly as ICL-NUIM's
 images relate to its poses; back-projecting with the negative fy puts every pixel back where it was. The hand-held
-trajectory is smooth: the camera wanders over the middle of the room at 1.1-1.6 m height (about 1-3 cm per frame,
-sums of slow sinusoids plus a millimetre of hand shake) while turning slowly (under about 1 degree per frame),
+trajectory is smooth: the camera wanders over the middle of the room at 1.1-1.6 m height (at most 3 cm per frame,
+sums of slow sinusoids plus a millimetre of hand shake) while turning slowly (at most about 1 degree per frame),
 looking a little down. Depth is noise-free (ICL-NUIM's ``living_room_traj<i>_frei_png``, not its noisy ``n``
 variant); colour has a little sensor noise.
 """
@@ -159,24 +159,26 @@ class _Builder:
         self.things_on_top(f, s0, s1, 0.0, depth, height)
 
     def things_on_top(self, f, s0, s1, t0, t1, z):
+        """One to three things standing on the surface [s0, s1] x [t0, t1] at height z, clear of the wall."""
         rng = self.rng
         for _ in range(rng.integers(1, 4)):
-            s, t = rng.uniform(s0 + 0.15, s1 - 0.15), rng.uniform(t0 + 0.12, t1 - 0.12)
             kind = rng.integers(4)
+            r = (rng.uniform(0.04, 0.08), rng.uniform(0.06, 0.12), rng.uniform(0.06, 0.15), rng.uniform(0.1, 0.16))[kind]
+            if t1 - t0 < 2 * r + 0.04 or s1 - s0 < 2 * r + 0.04:
+                continue
+            s, t = rng.uniform(s0 + r + 0.02, s1 - r - 0.02), rng.uniform(t0 + r + 0.02, t1 - r - 0.02)
             if kind == 0:    # vase
-                r = rng.uniform(0.04, 0.08)
                 self.cylinder(f, s, t, z, z + rng.uniform(0.15, 0.35), r, PAINTED, self.color(rng.choice(_ACCENTS)))
             elif kind == 1:  # bowl / ball
-                r = rng.uniform(0.06, 0.12)
                 self.ellipsoid(f, s, t, z + r * 0.5, [r, r, r * 0.6], PAINTED, self.color(rng.choice(_ACCENTS)))
             elif kind == 2:  # box / stack of books lying down
-                w, d = rng.uniform(0.12, 0.3), rng.uniform(0.1, 0.2)
-                self.box(f, s - w / 2, s + w / 2, t - d / 2, t + d / 2, z, z + rng.uniform(0.04, 0.15), BOOKS,
+                w = rng.uniform(r, 2 * r)
+                self.box(f, s - w, s + w, t - r, t + r, z, z + rng.uniform(0.04, 0.15), BOOKS,
                          self.color(rng.choice(_BOOK_COLOURS)))
             else:            # lamp: base, stem, shade
                 self.cylinder(f, s, t, z, z + 0.03, 0.08, METAL, [0.3, 0.3, 0.3])
                 self.cylinder(f, s, t, z + 0.03, z + 0.35, 0.012, METAL, [0.6, 0.6, 0.6])
-                self.cylinder(f, s, t, z + 0.3, z + 0.5, rng.uniform(0.1, 0.16), FABRIC, self.color([0.9, 0.85, 0.7]))
+                self.cylinder(f, s, t, z + 0.3, z + 0.5, r, FABRIC, self.color([0.9, 0.85, 0.7]))
 
     def sofa(self, f, s0, width):
         rng = self.rng
@@ -221,8 +223,9 @@ class _Builder:
         rng = self.rng
         s, r = s0 + width / 2, rng.uniform(0.12, 0.2)
         h = rng.uniform(0.3, 0.5)
-        self.cylinder(f, s, r + 0.05, 0, h, r, PAINTED, self.color(rng.choice(_ACCENTS)))
-        self.ellipsoid(f, s, r + 0.05, h + rng.uniform(0.2, 0.4), [r * 1.4, r * 1.4, rng.uniform(0.25, 0.45)], PLANT,
+        t = 1.4 * r + 0.05  # the foliage clears the wall
+        self.cylinder(f, s, t, 0, h, r, PAINTED, self.color(rng.choice(_ACCENTS)))
+        self.ellipsoid(f, s, t, h + rng.uniform(0.2, 0.4), [r * 1.4, r * 1.4, rng.uniform(0.25, 0.45)], PLANT,
                        self.color([0.2, 0.4, 0.15]))
 
     def wall_things(self, f, height):
@@ -245,7 +248,7 @@ class _Builder:
                 self.box(f, s - 0.05, s + w + 0.05, 0, 0.18, z0 - 0.04, z0, PAINTED, [0.9, 0.9, 0.9])
                 s += w + 0.3
             else:                                      # picture
-                w, h = rng.uniform(0.3, 0.9), rng.uniform(0.25, 0.7)
+                w, h = min(rng.uniform(0.3, 0.9), f.length - 0.1 - s), rng.uniform(0.25, 0.7)
                 z0 = rng.uniform(1.3, 1.7)
                 self.box(f, s, s + w, 0, rng.uniform(0.02, 0.05), z0, min(z0 + h, height - 0.1), PICTURE,
                          self.color(rng.choice(_ACCENTS)))
@@ -326,15 +329,15 @@ def look_rotation(forward: np.ndarray, roll: np.ndarray) -> np.ndarray:
 def handheld_trajectory(room: Room, frames: int, rng: np.random.Generator) -> np.ndarray:
     """A smooth hand-held path over the middle of the room: T_world_cam (N, 4, 4) float64.
 
-    Position: slow sinusoids (periods of 250-450 frames) over the free middle of the room (at least 1.6 m from the
-    walls, where the furniture stands) at 1.1-1.6 m height, plus about a millimetre of hand shake; about 1-3 cm per
-    frame. Heading: a slow turn (0.2-0.5 degrees per frame) plus a swing; the camera looks 8-20 degrees down and
-    rolls a few degrees.
+    Position: slow sinusoids (periods of 250-450 frames, longer in big rooms so that no axis moves more than 2 cm per
+    frame) over the free middle of the room (at least 1.6 m from the walls, where the furniture stands) at
+    1.15-1.55 m height, plus about a millimetre of hand shake: at most 3 cm per frame. Heading: a slow turn (0.2-0.5
+    degrees per frame) plus a swing; the camera looks 8-20 degrees down and rolls up to 3 degrees.
     """
     k = np.arange(frames, dtype=np.float64)
     centre = np.array([room.size_x / 2, room.size_y / 2, 1.35])
     amplitude = np.array([max(room.size_x / 2 - 1.6, 0.2), max(room.size_y / 2 - 1.6, 0.2), 0.2])
-    period = rng.uniform(250.0, 450.0, 3)
+    period = np.maximum(rng.uniform(250.0, 450.0, 3), 2 * np.pi * amplitude / 0.02)  # at most 2 cm/frame per axis
     phase = rng.uniform(0, 2 * np.pi, 3)
     position = centre + amplitude * np.sin(2 * np.pi * k[:, None] / period + phase)
     shake = rng.normal(0, 1.0, (3, 3))  # three slow-ish sinusoids per axis, ~1 mm
