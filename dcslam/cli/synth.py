@@ -35,9 +35,10 @@ HELP = (
 def synth_command(
     workspace: WorkspaceOption = None,
     out: Annotated[Optional[Path], typer.Option(
-        "--out", "-o", help="KITTI root to write into (raw/ and depth_completion/).",
-        show_default="<workspace>/kitti")] = None,
-    drives: Annotated[int, typer.Option("--drives", "-n", min=1, help="Number of drives to generate.")] = 6,
+        "--out", "-o", help="KITTI root to write into (raw/ and depth_completion/); with --indoor, the folder of "
+                            "the sequences.", show_default="<workspace>/kitti, with --indoor <workspace>/tum")] = None,
+    drives: Annotated[int, typer.Option("--drives", "-n", min=1,
+                                        help="Number of drives (with --indoor: sequences) to generate.")] = 6,
     frames: Annotated[int, typer.Option(
         "--frames", "-f", min=1,
         help="Raw frames per drive (10 Hz). Like KITTI, only frames 5 … N−6 get depth maps, so N ≥ 11.")] = 60,

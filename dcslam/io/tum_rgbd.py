@@ -38,8 +38,8 @@ A frame's pose is the ground truth at the frame's **depth** timestamp (SLAM uses
 (translation lerp, rotation slerp) between the two ground-truth poses around it when they are at most
 ``max_pose_gap`` (0.1 s) apart, else the nearest pose when it is within ``max_difference`` (0.02 s), else the frame
 has no pose and is dropped (ICL-NUIM's frame 0, stretches where motion capture lost the camera). Interpolation
-rather than nearest: TUM's 100 Hz ground truth is then exact to the frame's time, not 5 ms off (2-5 mm at TUM's
-hand-held speeds).
+rather than nearest: with TUM's 100 Hz ground truth the nearest pose can be 5 ms off the frame's time, a few
+millimetres at hand-held speeds.
 """
 from __future__ import annotations
 

@@ -114,3 +114,23 @@ def test_bad_input_writes_nothing(workspace, tmp_path):
     empty = run("prepare-tum", "--workspace", tmp_path / "nothing")
     assert empty.exit_code == 1 and "run `dcslam synth --indoor`" in empty.stderr
     assert len(empty.stderr.strip().splitlines()) == 1
+
+
+def test_wrong_depth_png_mid_sequence_leaves_no_drive_file(workspace, tmp_path):
+    import cv2
+
+    src = tmp_path / "tum" / SEQ
+    src.mkdir(parents=True)
+    for item in (workspace / "tum" / SEQ).iterdir():
+        if item.name != "depth":
+            (src / item.name).symlink_to(item)
+    (src / "depth").mkdir()
+    for item in (workspace / "tum" / SEQ / "depth").iterdir():
+        (src / "depth" / item.name).symlink_to(item)
+    (src / "depth" / "3.png").unlink()
+    cv2.imwrite(str(src / "depth" / "3.png"), np.zeros((72, 96), np.uint8))
+    result = run("prepare-tum", "--tum", src, "--out", tmp_path / "drives")
+    assert result.exit_code == 1
+    assert result.stderr.strip() == (f"error: {src / 'depth' / '3.png'}: expected a 16-bit single-channel depth PNG "
+                                     "(metres = value / 5000), got uint8 with shape (72, 96)")
+    assert _files(tmp_path / "drives") == []
