@@ -8,8 +8,9 @@ nearest-neighbour assignment is piecewise constant, so this is the exact gradien
 
 Speed: each tree is built once per cloud (unbalanced, non-compact nodes: a faster build, the same exact answers), the
 two builds run in parallel threads, and each cloud queries the other's tree in its *own* tree's leaf order, which is
-spatially coherent and several times faster than querying in arbitrary order. Maps of a million points per cloud
-take about a second on two CPU cores (see ``benchmarks/bench_depth.py``).
+spatially coherent and several times faster than querying in arbitrary order. The search is bounded by a distance
+estimated from a sample, which prunes most of the tree; points beyond it are searched again without a bound, so the
+answer stays exact. See ``benchmarks/bench_depth.py`` for the speed against a plain cKDTree query.
 """
 from __future__ import annotations
 
@@ -35,6 +36,16 @@ def _build_tree(points: np.ndarray):
     return cKDTree(points, balanced_tree=False, compact_nodes=False)
 
 
+def _search_radius(tree, points: np.ndarray, sample: int = 2048, quantile: float = 0.95) -> float:
+    """A distance bound that most nearest neighbours lie within: 1.5 × the 95th percentile of the exact distances of
+    an evenly spread sample. A bounded search prunes far more of the tree; the few points beyond it are searched
+    again without a bound, so the result is exact whatever the bound."""
+    step = max(1, len(points) // sample)
+    distance = tree.query(points[::step], k=1)[0]
+    bound = 1.5 * float(np.quantile(distance, quantile))
+    return bound if bound > 0 else np.inf
+
+
 def nearest_neighbours(a: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Exact nearest neighbours both ways, without gradient.
 
@@ -50,8 +61,14 @@ def nearest_neighbours(a: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, 
 
     def query(tree, own_tree, points):
         order = own_tree.indices  # the query cloud's own leaf order: spatially coherent queries
+        ordered = points[order]
+        bound = _search_radius(tree, ordered)
+        distance, found = tree.query(ordered, k=1, workers=-1, distance_upper_bound=bound)
+        missed = np.flatnonzero(np.isinf(distance))
+        if missed.size:  # farther than the bound: search those again without one, so the answer stays exact
+            found[missed] = tree.query(ordered[missed], k=1, workers=-1)[1]
         index = np.empty(len(points), np.int64)
-        index[order] = tree.query(points[order], k=1, workers=-1)[1]
+        index[order] = found
         return index
 
     idx_ab = query(tree_b, tree_a, a_np)

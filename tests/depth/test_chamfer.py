@@ -46,6 +46,18 @@ class TestChamfer:
         d = torch.cdist(a.double(), b.double())
         assert torch.equal(ia, d.argmin(dim=1)) and torch.equal(ib, d.argmin(dim=0))
 
+    def test_exact_beyond_the_search_bound(self):
+        # A dense cloud plus far outliers: the sampled search bound is small, so the outliers' neighbours (and the
+        # neighbours of the points they are nearest to) are found only by the second, unbounded search.
+        g = torch.Generator().manual_seed(3)
+        a = torch.cat([torch.rand(3000, 3, generator=g), 50 + 10 * torch.rand(20, 3, generator=g)]).double()
+        b = torch.cat([torch.rand(2500, 3, generator=g), -40 - 5 * torch.rand(15, 3, generator=g)]).double()
+        ia, ib = nearest_neighbours(a, b)
+        d = torch.cdist(a, b)
+        assert torch.allclose(d.gather(1, ia[:, None])[:, 0], d.min(dim=1).values)
+        assert torch.allclose(d.gather(0, ib[None])[0], d.min(dim=0).values)
+        assert chamfer_distance(a, b).item() == pytest.approx(brute_force(a, b).item(), rel=1e-12)
+
     def test_bad_input(self):
         with pytest.raises(DcslamError):
             chamfer_distance(torch.rand(5, 2), torch.rand(5, 3))
