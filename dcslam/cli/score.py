@@ -37,6 +37,25 @@ def _slug(text: str) -> str:
     return "".join(c if c.isalnum() or c in "-_+." else "_" for c in text)
 
 
+def _file_or_layer_output(ws, kind: str, path: Optional[Path], gt: Optional[Path], layer: Optional[str],
+                          out: Optional[Path], force: bool, usage: str) -> tuple[str, Path]:
+    """The preamble of the commands that score either ``--<file> FILE --gt REFERENCE`` or ``--layer NAME``.
+
+    Fails with ``usage`` unless exactly one of the two forms is given; returns the name the scores go by (the
+    layer's, or the file's stem) and the CSV to write (``out``, or ``results/<kind>_<name>.csv``), checked not to
+    exist unless ``force``.
+    """
+    from dcslam.errors import DcslamError
+    from dcslam.eval.report import check_outputs
+
+    if (path is None) == (layer is None) or (path is not None and gt is None):
+        raise DcslamError(usage)
+    name = _slug(layer) if layer else _slug(path.stem)
+    out = out or ws.results / f"{kind}_{name}.csv"
+    check_outputs([out], force)
+    return name, out
+
+
 @score_app.command("depth", help="MAE, RMSE (mm), iMAE, iRMSE (1/km) of a depth layer against the dense depth, "
                                  "as the KITTI devkit computes them (per image, then averaged).")
 @known_errors
@@ -76,18 +95,14 @@ def trajectory_command(
     workspace: WorkspaceOption = None,
     force: ForceOption = False,
 ) -> None:
-    from dcslam.errors import DcslamError
     from dcslam.eval.layers import load_pair, score_layer_trajectories, select_drives
-    from dcslam.eval.report import TRAJECTORY_SHOWN, check_outputs, trajectory_table, write_table_csv
+    from dcslam.eval.report import TRAJECTORY_SHOWN, trajectory_table, write_table_csv
     from dcslam.eval.tables import Table
     from dcslam.workspace import Workspace
 
     ws = Workspace.resolve(workspace)
-    if (est is None) == (layer is None) or (est is not None and gt is None):
-        raise DcslamError("give either --est X.txt --gt REFERENCE, or --layer NAME")
-    name = _slug(layer) if layer else _slug(est.stem)
-    out = out or ws.results / f"trajectory_{name}.csv"
-    check_outputs([out], force)
+    name, out = _file_or_layer_output(ws, "trajectory", est, gt, layer, out, force,
+                                      "give either --est X.txt --gt REFERENCE, or --layer NAME")
     if layer:
         pairs = score_layer_trajectories(ws, layer, select_drives(ws, drive))
     else:
@@ -114,18 +129,14 @@ def map_command(
     workspace: WorkspaceOption = None,
     force: ForceOption = False,
 ) -> None:
-    from dcslam.errors import DcslamError
     from dcslam.eval.layers import select_drives
     from dcslam.eval.maps import score_map
-    from dcslam.eval.report import check_outputs, map_table, write_table_csv
+    from dcslam.eval.report import map_table, write_table_csv
     from dcslam.workspace import Workspace
 
     ws = Workspace.resolve(workspace)
-    if (map_path is None) == (layer is None) or (map_path is not None and gt is None):
-        raise DcslamError("give either --map X.ply --gt Y.ply, or --layer NAME")
-    name = _slug(layer) if layer else _slug(map_path.stem)
-    out = out or ws.results / f"map_{name}.csv"
-    check_outputs([out], force)
+    name, out = _file_or_layer_output(ws, "map", map_path, gt, layer, out, force,
+                                      "give either --map X.ply --gt Y.ply, or --layer NAME")
     if layer:
         scores = {d: score_map(ws.slam / layer / f"{d}.ply", ws.slam / gt_layer / f"{d}.ply")
                   for d in select_drives(ws, drive)}

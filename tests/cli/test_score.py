@@ -130,6 +130,24 @@ def test_score_map(ws):
     assert float(rows[0]["chamfer_m2"]) == pytest.approx(2 / 3, rel=1e-6)
 
 
+@pytest.mark.parametrize("command, file_option, file_name, usage", [
+    ("trajectory", "--est", "slam/dense/d0.txt", "give either --est X.txt --gt REFERENCE, or --layer NAME"),
+    ("map", "--map", "slam/dense/d0.ply", "give either --map X.ply --gt Y.ply, or --layer NAME"),
+])
+def test_score_file_or_layer_preamble(ws, command, file_option, file_name, usage):
+    """trajectory and map take either FILE --gt REFERENCE or --layer NAME: anything else is one line, exit 1."""
+    path, ref = ws / file_name, ws / file_name.replace("dense", "sparse")
+    for args in ([], [file_option, path], [file_option, path, "--gt", ref, "--layer", "dense"], ["--gt", ref]):
+        result = invoke("score", command, "-w", ws, *args)
+        assert result.exit_code == 1 and usage in result.output, args
+    assert not (ws / "results").exists()
+    result = invoke("score", command, "-w", ws, file_option, path, "--gt", ref)
+    assert result.exit_code == 0, result.output
+    assert (ws / "results" / f"{command}_d0.csv").exists()             # named after the file's stem
+    again = invoke("score", command, "-w", ws, file_option, path, "--gt", ref)
+    assert again.exit_code == 1 and "--force" in again.output
+
+
 def test_score_tables(ws):
     result = invoke("score", "tables", "-w", ws)
     assert result.exit_code == 0, result.output
