@@ -9,10 +9,18 @@ filled the prediction's holes:
 Over many images, the per-image values are averaged (the devkit's ``statMean``), so every image weighs the same
 whatever its number of ground-truth pixels.
 
-One departure: holes that the interpolation cannot fill (rows without any depth lying between rows with depth — the
-gaps between LiDAR scan lines of raw sparse depth) are scored by the devkit against its invalid marker −1 m, which
-is meaningless; here they are left out, and ``coverage`` says what fraction of the ground-truth pixels was scored.
-A prediction with no depth at all scores ``inf``. Dense predictions are unaffected.
+Two departures:
+
+* Holes that the interpolation cannot fill (rows without any depth lying between rows with depth — the gaps between
+  LiDAR scan lines of raw sparse depth) are scored by the devkit against its invalid marker −1 m, which is
+  meaningless; here they are left out, and ``coverage`` says what fraction of the ground-truth pixels was scored.
+  A prediction with no depth at all scores ``inf``. Dense predictions are unaffected.
+* Predicted depths below :data:`MIN_DEPTH_M` (0.1 m) are holes, not depths. No KITTI sensor measures that near, and
+  dcslam's SLAM ignores such pixels (``FrameSettings.min_depth``), so a network that outputs them is saying
+  nothing — typically a constant ~1 mm wherever no LiDAR input reaches (the top of the image). The devkit would
+  score them, and its fill spreads them: a hole next to a 1 mm pixel takes the smaller flanking depth, and each
+  ground-truth pixel there adds ~|1/d_gt − 1/0.001| ≈ 10⁶ /km to the inverse errors. (A filter that removes the
+  network's ramp from that plateau into the scene, such as ``edges``, opens exactly those holes.)
 """
 from __future__ import annotations
 
@@ -25,15 +33,18 @@ import numpy as np
 from dcslam.errors import DcslamError
 
 METRICS = ("mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km")
+#: Predicted depths below this (metres) are holes when scored; the same bound as SLAM's ``FrameSettings.min_depth``.
+MIN_DEPTH_M = 0.1
 
 
 def interpolate_background(depth_m: np.ndarray) -> np.ndarray:
     """Fill holes (0) of a predicted depth image the way the KITTI devkit does before scoring.
 
-    Row by row: a hole between two valid pixels takes the smaller (farther-back, "background") of the two depths;
-    holes before the first / after the last valid pixel of a row take that pixel's depth. Then column by column,
-    rows above the first / below the last row with any depth take that row's depth. Rows without depth that lie
-    between rows with depth stay 0 (the devkit leaves them invalid, at −1).
+    Row by row: a hole between two valid pixels takes the smaller, i.e. nearer, of the two depths (the devkit's
+    ``std::min``, whatever the function's name says); holes before the first / after the last valid pixel of a row
+    take that pixel's depth. Then column by column, rows above the first / below the last row with any depth take
+    that row's depth. Rows without depth that lie between rows with depth stay 0 (the devkit leaves them invalid,
+    at −1).
 
     Shapes: depth_m (H, W) → (H, W) float32 (a new array).
     """
@@ -80,8 +91,9 @@ class DepthErrors:
 def depth_errors(pred_m: np.ndarray, gt_m: np.ndarray, interpolate: bool = True) -> DepthErrors | None:
     """Errors of one predicted depth image against ground truth; ``None`` when ``gt_m`` has no depth at all.
 
-    Shapes: pred_m (H, W), gt_m (H, W), metres, 0 = none. ``interpolate=False`` skips the devkit's interpolation
-    and scores only the pixels where the prediction has depth.
+    Shapes: pred_m (H, W), gt_m (H, W), metres, 0 = none; predicted depths below :data:`MIN_DEPTH_M` count as
+    none. ``interpolate=False`` skips the devkit's interpolation and scores only the pixels where the prediction
+    has depth.
     """
     pred_m, gt_m = np.asarray(pred_m), np.asarray(gt_m)
     if pred_m.shape != gt_m.shape or pred_m.ndim != 2:
@@ -89,6 +101,7 @@ def depth_errors(pred_m: np.ndarray, gt_m: np.ndarray, interpolate: bool = True)
     has_gt = gt_m > 0
     if not has_gt.any():
         return None
+    pred_m = np.where(pred_m >= MIN_DEPTH_M, pred_m, 0)
     if interpolate:
         pred_m = interpolate_background(pred_m)
     scored = has_gt & (pred_m > 0)

@@ -2,12 +2,14 @@ import numpy as np
 import pytest
 
 from dcslam.errors import DcslamError
-from dcslam.eval.depth import depth_errors, interpolate_background, mean_errors, score_drive, score_frames
+from dcslam.eval.depth import (MIN_DEPTH_M, depth_errors, interpolate_background, mean_errors, score_drive,
+                               score_frames)
+from dcslam.filters import DiscontinuityFilter
 from dcslam.io.drive import DriveWriter, Frame, Layer, write_layer
 
 
 class TestInterpolateBackground:
-    def test_row_gaps_take_the_farther_neighbour_and_ends_extend(self):
+    def test_row_gaps_take_the_nearer_neighbour_and_ends_extend(self):
         row = np.array([[0, 2, 0, 0, 5, 0]], np.float32)
         np.testing.assert_array_equal(interpolate_background(row), [[2, 2, 2, 2, 5, 5]])
 
@@ -57,6 +59,39 @@ class TestDepthErrors:
         assert e.mae_mm == pytest.approx(1000 * (1 + 1 + 2 + 2) / 4)
         empty = depth_errors(np.zeros((3, 2)), gt)
         assert np.isinf(empty.mae_mm) and empty.pixels == 0
+
+    def test_depths_below_the_minimum_are_holes(self):
+        """A depth no sensor measures (a network's ~1 mm output where no input reached) is no prediction: the
+        devkit fill takes the smaller flanking depth, so a 1.3 mm pixel next to a hole would give the hole's
+        ground-truth pixels |1/d_gt − 1/0.0013| ≈ 770 1/m."""
+        gt = np.array([[10.0, 10.0, 10.0, 10.0]])
+        pred = np.array([[0.0013, 0.0, 0.0, 10.0]])
+        e = depth_errors(pred, gt)
+        assert e.irmse_per_km == pytest.approx(0.0) and e.mae_mm == pytest.approx(0.0) and e.coverage == 1.0
+        raw = depth_errors(pred, gt, interpolate=False)          # the tiny pixel is not scored at all
+        assert raw.pixels == 1 and raw.coverage == pytest.approx(1 / 4) and raw.irmse_per_km == 0.0
+        at_minimum = depth_errors(np.array([[MIN_DEPTH_M, 10.0]]), np.array([[10.0, 10.0]]), interpolate=False)
+        assert at_minimum.pixels == 2                              # the bound itself is a depth
+
+    def test_edges_filtered_prediction_with_a_near_zero_plateau(self):
+        """The quick reproduction's chamfer-8+edges row (iRMSE 707 /km against 11 unfiltered): the trained network
+        outputs a constant 0.18 mm where no LiDAR input reaches (above the scan), ramping up to the scene. The
+        edges filter drops the ramp; the devkit fill then gave the holes between plateau and scene the plateau's
+        depth, on pixels with ground truth (one such pixel made one frame's iRMSE 22 285 /km). Depths below
+        MIN_DEPTH_M are holes, so the holes take the scene's depth."""
+        h, w = 24, 40
+        top = 8 + (np.arange(w) // 8) * 2                      # first scene row of each column: a staircase
+        rows = np.arange(h)[:, None]
+        pred = np.where(rows < top - 3, 0.0013, 10.0).astype(np.float32)
+        for k, ramp in enumerate((0.05, 0.6, 4.0)):              # the network's smooth ramp into the scene
+            pred[rows == top - 3 + k] = ramp
+        gt = np.where(rows >= top - 1, 10.0, 0.0)               # accumulated ground truth reaches the last ramp row
+        raw = depth_errors(pred, gt)
+        filtered = DiscontinuityFilter().apply(pred)
+        assert ((filtered > 0) & (filtered < 0.01)).any()       # the plateau survives the edges filter
+        edges = depth_errors(filtered, gt)
+        assert edges.coverage == 1.0
+        assert edges.irmse_per_km <= raw.irmse_per_km           # removing the ramp must not make it worse
 
     def test_no_ground_truth(self):
         assert depth_errors(np.ones((2, 2)), np.zeros((2, 2))) is None
