@@ -1,0 +1,83 @@
+"""`dcslam demo-icl`: exit codes, files written, bad input (one line on stderr, exit code 1)."""
+import importlib.util
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from dcslam.cli import app
+
+_spec = importlib.util.spec_from_file_location(
+    "depth_fixtures", Path(__file__).parents[1] / "depth" / "depth_fixtures.py")
+fixtures = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(fixtures)
+
+RESULTS = {"model.pt", "results.json", "results.csv", "results.md", "denoising.png"}
+TINY = ["--steps", "2", "--batch-size", "2", "--features", "4", "--layers", "3", "--device", "cpu"]
+
+
+def _run(*args):
+    return CliRunner().invoke(app, ["demo-icl", *map(str, args)])
+
+
+def _one_error_line(result, *words):
+    assert result.exit_code == 1, result.output
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+    for word in words:
+        assert word in lines[0], lines[0]
+
+
+@pytest.fixture
+def drives(tmp_path):
+    """A drives folder with splits.json (train a, b; val c; test d): small analytic street drives."""
+    return fixtures.write_workspace(tmp_path / "data", n=4) / "drives"
+
+
+def test_demo_on_given_drives_writes_results(drives, tmp_path):
+    ws = tmp_path / "ws"
+    result = _run("-w", ws, "--drives", drives, "--scale", "0.5", "--patch", "0", "--sigma", "0.1", *TINY)
+    assert result.exit_code == 0, result.output
+    out = ws / "results" / "demo-icl"
+    assert {p.name for p in out.iterdir()} == RESULTS
+    assert "noisy input" in result.stdout and "DnCNN (chamfer only)" in result.stdout and str(out) in result.stdout
+    record = json.loads((out / "results.json").read_text())
+    assert record["settings"]["sigma_m"] == 0.1 and record["settings"]["scale"] == 0.5
+    assert list(record["frames"]["test"]) == ["drive_d"]  # the test split is held out
+    assert set(record["frames"]["train"]) == {"drive_a", "drive_b", "drive_c"}
+    assert (out / "results.csv").read_text().splitlines()[0] == "depth,mae_mm,rmse_mm,psnr_db,chamfer_m2"
+
+    again = _run("-w", ws, "--drives", drives, *TINY)
+    _one_error_line(again, "--force")
+    assert _run("-w", ws, "--drives", drives, "--force", *TINY).exit_code == 0
+
+
+def test_demo_generates_indoor_rooms_once(tmp_path):
+    ws = tmp_path / "ws"
+    result = _run("-w", ws, "--sequences", "2", "--frames", "2", "--scale", "0.125", *TINY)
+    assert result.exit_code == 0, result.output
+    splits = json.loads((ws / "demo-icl" / "drives" / "splits.json").read_text())
+    assert len(splits["train"]) == 1 and len(splits["test"]) == 1
+    assert {p.name for p in (ws / "results" / "demo-icl").iterdir()} == RESULTS
+    record = json.loads((ws / "results" / "demo-icl" / "results.json").read_text())
+    assert record["scores"]["frames"] == 2
+
+    made = (ws / "demo-icl" / "data.json").stat().st_mtime_ns
+    kept = _run("-w", ws, "--sequences", "2", "--frames", "2", "--scale", "0.125", "--force", *TINY)
+    assert kept.exit_code == 0, kept.output
+    assert (ws / "demo-icl" / "data.json").stat().st_mtime_ns == made  # same settings: the data is reused
+    shutil.rmtree(ws / "results")
+    _one_error_line(_run("-w", ws, "--sequences", "2", "--frames", "3", *TINY), "other settings", "--force")
+
+
+def test_bad_input(drives, tmp_path):
+    ws = tmp_path / "ws"
+    _one_error_line(_run("-w", ws, "--drives", tmp_path / "nowhere", *TINY), "not found")
+    _one_error_line(_run("-w", ws, "--drives", drives, "--sigma", "-0.1", *TINY), "--sigma")
+    _one_error_line(_run("-w", ws, "--scale", "0.3", *TINY), "--scale")
+    _one_error_line(_run("-w", ws, "--sequences", "1", *TINY), "at least 2 sequences")
+    (tmp_path / "bad.h5").write_text("not a drive")
+    _one_error_line(_run("-w", ws, "--drives", tmp_path / "bad.h5", *TINY), "bad.h5")
+    assert not (ws / "results").exists()
