@@ -15,6 +15,7 @@ import numpy as np
 from dcslam.depth.data import check_view, downscale_depth
 from dcslam.depth.models import IP_BASIC_NAMES
 from dcslam.errors import DcslamError
+from dcslam.eval.depth import MIN_DEPTH_M
 
 
 class NetworkCompleter:
@@ -25,7 +26,11 @@ class NetworkCompleter:
         self.factor = check_view(scale, 0)
 
     def __call__(self, sparse_m: np.ndarray) -> np.ndarray:
-        """(H, W) float32 metres → (H, W) float32 metres (≥ 0, finite)."""
+        """(H, W) float32 metres → (H, W) float32 metres (finite; 0 = none, else ≥ :data:`MIN_DEPTH_M`).
+
+        Outputs below 0.1 m become holes: no depth sensor here measures that near, and a network that outputs them
+        (a chamfer-trained one settles on ~0.2 mm where no LiDAR reaches) is saying nothing.
+        """
         import cv2
         import torch
 
@@ -36,7 +41,8 @@ class NetworkCompleter:
         with torch.no_grad():
             x = torch.from_numpy(small)[None, None].to(self.device)
             pred = self.model(x, (x > 0).to(x.dtype))[0, 0].float().cpu().numpy()
-        pred = np.nan_to_num(pred, nan=0.0, posinf=0.0, neginf=0.0).clip(min=0)
+        pred = np.nan_to_num(pred, nan=0.0, posinf=0.0, neginf=0.0)
+        pred[pred < MIN_DEPTH_M] = 0
         if pred.shape != (h, w):
             pred = cv2.resize(pred, (w, h), interpolation=cv2.INTER_NEAREST)
         return pred.astype(np.float32)

@@ -46,3 +46,21 @@ def test_network_completer_full_resolution():
     out = NetworkCompleter(model, "cpu", scale=1.0)(sparse)
     assert out.shape == (20, 30) and (out >= 0).all()
     assert NetworkCompleter(model, "cpu", scale=0.5)(sparse).shape == (20, 30)
+
+
+class _Constant(torch.nn.Module):
+    """A stand-in network whose output is a fixed map, to test what the completer does with it."""
+
+    def __init__(self, out):
+        super().__init__()
+        self.out = torch.as_tensor(out)
+
+    def forward(self, x, mask):
+        return self.out[None, None].to(x.dtype)
+
+
+def test_network_completer_turns_near_zero_depth_into_holes():
+    out = np.array([[0.0, 0.0002, 0.0999], [0.1, 5.0, float("nan")]], np.float32)
+    sparse = np.zeros((2, 3), np.float32)
+    pred = NetworkCompleter(_Constant(out), "cpu")(sparse)
+    np.testing.assert_array_equal(pred, np.array([[0, 0, 0], [0.1, 5.0, 0]], np.float32))
