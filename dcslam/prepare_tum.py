@@ -1,6 +1,6 @@
 """``prepare-tum``: TUM RGB-D / ICL-NUIM sequences (real, or from ``dcslam synth --indoor``) → drive files + splits.
 
-Each sequence folder (reading: :mod:`dcslam.io.tum_rgbd`) becomes ``<out>/<sequence folder name>.h5``, the same
+Each sequence folder (reading: :mod:`dcslam.io.tum_sequence`) becomes ``<out>/<sequence folder name>.h5``, the same
 drive file ``prepare-kitti`` writes (:mod:`dcslam.io.drive`, ``source = "tum"``), so ``slam``, ``train``,
 ``predict`` and ``score`` run on it unchanged:
 
@@ -9,7 +9,7 @@ drive file ``prepare-kitti`` writes (:mod:`dcslam.io.drive`, ``source = "tum"``)
   ``sparse_stride // 2``): density ``1 / sparse_stride²`` of the valid pixels (4 % at the default 5, KITTI's
   projected Velodyne covers about 4 %), so the depth-completion recipes also run indoors. It is a regular grid,
   not a scan pattern: scores against it say how a network fills holes, not how it copes with a real LiDAR;
-- ``T_world_cam``: the ground-truth pose at each frame (see :func:`dcslam.io.tum_rgbd.index_sequence`), re-based
+- ``T_world_cam``: the ground-truth pose at each frame (see :func:`dcslam.io.tum_sequence.index_sequence`), re-based
   so that the first stored frame is the identity, as in ``prepare-kitti``;
 - ``K``: the given intrinsics, else the folder's ``intrinsics.txt``, else the format's default (ICL-NUIM: fy < 0,
   kept as is);
@@ -29,7 +29,8 @@ import numpy as np
 
 from dcslam.errors import DcslamError
 from dcslam.io.drive import DriveWriter, Frame, read_splits
-from dcslam.io.tum_rgbd import Sequence, check_image_size, find_sequences, index_sequence, read_depth_png
+from dcslam.io.tum_rgbd import read_depth_png
+from dcslam.io.tum_sequence import Sequence, check_image_size, find_sequences, index_sequence
 from dcslam.prepare import SPLIT_NAMES, PreparedDrive, PrepareResult, proportional_splits
 from dcslam.progress import track
 from dcslam.workspace import stage_config, write_json_atomic

@@ -34,18 +34,11 @@ are written for either sign. Flipping the sign of fy alone would mirror every fr
 Also read (a dcslam extension, written by ``dcslam synth --indoor``): ``intrinsics.txt`` in a sequence folder, one
 line ``fx fy cx cy``; it is used when no intrinsics are given.
 
-A frame's pose is the ground truth at the frame's **depth** timestamp (SLAM uses the depth): linearly interpolated
-(translation lerp, rotation slerp) between the two ground-truth poses around it when they are at most
-``max_pose_gap`` (0.1 s) apart, else the nearest pose when it is within ``max_difference`` (0.02 s), else the frame
-has no pose and is dropped (ICL-NUIM's frame 0, stretches where motion capture lost the camera). Interpolation
-rather than nearest: with TUM's 100 Hz ground truth the nearest pose can be 5 ms off the frame's time, a few
-millimetres at hand-held speeds.
+Sequence folders are indexed (paired, checked, given poses) by :mod:`dcslam.io.tum_sequence`.
 """
 from __future__ import annotations
 
-import re
 from collections.abc import Iterator
-from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -157,13 +150,14 @@ def write_list(path: Path | str, timestamps: np.ndarray, names: list[str], what:
     if np.any(np.diff(timestamps) <= 0):
         raise DcslamError(f"{path}: timestamps must be strictly increasing")
     lines = [f"# {what}", "# timestamp filename"]
-    lines += [f"{_format_time(t)} {name}" for t, name in zip(timestamps, names)]
+    lines += [f"{format_time(t)} {name}" for t, name in zip(timestamps, names)]
     with atomic_output(path, force=force) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
     return Path(path)
 
 
-def _format_time(t: float) -> str:
+def format_time(t: float) -> str:
+    """A timestamp as these files write it: a whole number as an integer (ICL-NUIM's frame numbers), else 6 decimals."""
     return str(int(t)) if float(t).is_integer() and abs(t) < 1e9 else f"{t:.6f}"
 
 
@@ -207,7 +201,7 @@ def write_associations(path: Path | str, depth_timestamps: np.ndarray, depth_nam
         raise DcslamError("associations: depth and rgb timestamps and names must all have the same length")
     if np.any(np.diff(depth_timestamps) <= 0):
         raise DcslamError(f"{path}: depth timestamps must be strictly increasing")
-    lines = [f"{_format_time(td)} {nd} {_format_time(tr)} {nr}"
+    lines = [f"{format_time(td)} {nd} {format_time(tr)} {nr}"
              for td, nd, tr, nr in zip(depth_timestamps, depth_names, rgb_timestamps, rgb_names)]
     with atomic_output(path, force=force) as tmp:
         tmp.write_text("\n".join(lines) + "\n")
@@ -302,234 +296,6 @@ def write_rgb_png(path: Path | str, rgb: np.ndarray) -> Path:
     if not cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_PNG_COMPRESSION, 1]):
         raise DcslamError(f"could not write {path}")
     return Path(path)
-
-
-# ------------------------------------------------------------------------------------------------ poses
-def interpolate_poses(times: np.ndarray, gt_times: np.ndarray, T_gt: np.ndarray,
-                      max_difference: float = MAX_DIFFERENCE_S,
-                      max_pose_gap: float = MAX_POSE_GAP_S) -> tuple[np.ndarray, np.ndarray]:
-    """Ground-truth poses at ``times`` (N,) from poses T_gt (M, 4, 4) at increasing ``gt_times`` (M,).
-
-    Between two poses at most ``max_pose_gap`` apart: interpolated (lerp, slerp); otherwise the nearest pose if
-    within ``max_difference``; otherwise none. Returns (T (N, 4, 4) float64, found (N,) bool).
-    """
-    from dcslam.io.tum import quaternion_to_rotation, rotation_to_quaternion
-
-    times = np.asarray(times, dtype=np.float64)
-    gt_times = np.asarray(gt_times, dtype=np.float64)
-    T = np.tile(np.eye(4), (len(times), 1, 1))
-    found = np.zeros(len(times), dtype=bool)
-    if len(gt_times) == 0:
-        return T, found
-    q_gt = rotation_to_quaternion(T_gt[:, :3, :3])
-    right = np.clip(np.searchsorted(gt_times, times, side="left"), 0, len(gt_times) - 1)
-    left = np.clip(right - 1, 0, len(gt_times) - 1)
-    for k, t in enumerate(times):
-        i, j = left[k], right[k]
-        nearest = i if abs(gt_times[i] - t) <= abs(gt_times[j] - t) else j
-        if gt_times[i] <= t <= gt_times[j] and i != j and gt_times[j] - gt_times[i] <= max_pose_gap:
-            w = (t - gt_times[i]) / (gt_times[j] - gt_times[i])
-            T[k, :3, 3] = (1 - w) * T_gt[i, :3, 3] + w * T_gt[j, :3, 3]
-            T[k, :3, :3] = quaternion_to_rotation(_slerp(q_gt[i], q_gt[j], w))
-            found[k] = True
-        elif abs(gt_times[nearest] - t) <= max_difference:
-            T[k] = T_gt[nearest]
-            found[k] = True
-    return T, found
-
-
-def _slerp(q0: np.ndarray, q1: np.ndarray, w: float) -> np.ndarray:
-    if float(q0 @ q1) < 0:
-        q1 = -q1
-    dot = min(float(q0 @ q1), 1.0)
-    angle = np.arccos(dot)
-    if angle < 1e-9:
-        return q0
-    return (np.sin((1 - w) * angle) * q0 + np.sin(w * angle) * q1) / np.sin(angle)
-
-
-# ------------------------------------------------------------------------------------------------ sequences
-@dataclass(frozen=True)
-class Sequence:
-    """One indexed sequence whose files have been checked: frame k is ``rgb_paths[k]`` + ``depth_paths[k]`` at
-    ``timestamps[k]`` (the depth image's) with pose ``T_world_cam[k]`` (4, 4) from the ground truth, as recorded
-    (not re-based). ``frame_ids`` (N,) number the frames in the full association (before any frame was dropped or
-    skipped); ``notes`` say what was dropped and why.
-    """
-
-    root: Path
-    name: str
-    format: str
-    K: np.ndarray
-    groundtruth: Path
-    rgb_paths: tuple[Path, ...]
-    depth_paths: tuple[Path, ...]
-    timestamps: np.ndarray
-    T_world_cam: np.ndarray
-    frame_ids: np.ndarray
-    depth_scale: float = DEPTH_SCALE
-    notes: tuple[str, ...] = ()
-
-    def __len__(self) -> int:
-        return len(self.timestamps)
-
-    def select(self, index: np.ndarray) -> "Sequence":
-        index = np.asarray(index, dtype=np.int64)
-        return replace(self, rgb_paths=tuple(self.rgb_paths[i] for i in index),
-                       depth_paths=tuple(self.depth_paths[i] for i in index), timestamps=self.timestamps[index],
-                       T_world_cam=self.T_world_cam[index], frame_ids=self.frame_ids[index])
-
-    def subsample(self, stride: int = 1, max_frames: int | None = None) -> "Sequence":
-        """Every ``stride``-th frame, then at most ``max_frames`` of them."""
-        if stride < 1:
-            raise DcslamError(f"stride is {stride}, expected at least 1")
-        index = np.arange(0, len(self), stride)
-        return self.select(index[:max_frames] if max_frames is not None else index)
-
-    def frames(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        """Yield (rgb (H, W, 3) uint8, depth (H, W) float32 metres) of every frame, checking sizes."""
-        for rgb_path, depth_path in zip(self.rgb_paths, self.depth_paths):
-            rgb, depth = read_rgb_png(rgb_path), read_depth_png(depth_path, self.depth_scale)
-            if rgb.shape[:2] != depth.shape:
-                raise DcslamError(f"{rgb_path} is {rgb.shape[1]}x{rgb.shape[0]} but {depth_path} is "
-                                  f"{depth.shape[1]}x{depth.shape[0]}")
-            yield rgb, depth
-
-
-def is_sequence(folder: Path | str) -> bool:
-    """A folder with ``associations.txt``, or with both ``rgb.txt`` and ``depth.txt``."""
-    folder = Path(folder)
-    return (folder / "associations.txt").is_file() or ((folder / "rgb.txt").is_file()
-                                                       and (folder / "depth.txt").is_file())
-
-
-def find_sequences(src: Path | str) -> list[Path]:
-    """``src`` itself if it is a sequence folder, else its sequence sub-folders sorted by name."""
-    src = Path(src)
-    if not src.is_dir():
-        raise DcslamError(f"{src} is not a folder; expected a TUM RGB-D / ICL-NUIM sequence folder or a folder of "
-                          f"them (run `dcslam synth --indoor` to generate one)")
-    if is_sequence(src):
-        return [src]
-    found = sorted(p for p in src.iterdir() if p.is_dir() and not p.name.startswith(".") and is_sequence(p))
-    if not found:
-        raise DcslamError(f"no TUM RGB-D or ICL-NUIM sequence in {src} (a sequence folder holds associations.txt, "
-                          f"or rgb.txt and depth.txt); run `dcslam synth --indoor` to generate one")
-    return found
-
-
-_ICL_NAME = re.compile(r"^(?P<room>living_room_|office_room_)?traj(?P<number>\d+)n?_frei_png$")
-_ICL_STEMS = {"living_room_": ("livingRoom",), "office_room_": ("traj",), None: ("traj", "livingRoom")}
-
-
-def find_groundtruth(folder: Path | str) -> Path:
-    """A sequence's trajectory: ``groundtruth.txt`` in the folder, else its one ``*.gt.freiburg``, else the
-    ICL-NUIM name in the parent folder (``living_room_traj2[n]_frei_png`` → ``livingRoom2.gt.freiburg``; the office
-    sequences ``traj2[n]_frei_png`` → ``traj2.gt.freiburg``), where the separate download puts it."""
-    folder = Path(folder)
-    if (folder / "groundtruth.txt").is_file():
-        return folder / "groundtruth.txt"
-    match = _ICL_NAME.match(folder.name)
-    expected = [f"{stem}{match['number']}.gt.freiburg" for stem in _ICL_STEMS[match["room"]]] if match else []
-    inside = sorted(folder.glob("*.gt.freiburg"))
-    if len(inside) > 1:
-        named = [p for p in inside if p.name in expected]
-        if len(named) != 1:
-            raise DcslamError(f"{folder}: {len(inside)} *.gt.freiburg files ({', '.join(p.name for p in inside)}); "
-                              f"keep one, or name the trajectory groundtruth.txt")
-        return named[0]
-    if inside:
-        return inside[0]
-    for name in expected:
-        if (folder.parent / name).is_file():
-            return folder.parent / name
-    looked = [str(folder / "groundtruth.txt"), str(folder / "*.gt.freiburg")] + [str(folder.parent / n)
-                                                                                for n in expected]
-    raise DcslamError(f"{folder}: no ground-truth trajectory (looked for {', '.join(looked)})")
-
-
-def index_sequence(folder: Path | str, *, intrinsics: np.ndarray | None = None, groundtruth: Path | str | None = None,
-                   max_difference: float = MAX_DIFFERENCE_S, max_pose_gap: float = MAX_POSE_GAP_S,
-                   depth_scale: float = DEPTH_SCALE) -> Sequence:
-    """Index a TUM RGB-D or ICL-NUIM sequence folder and check it: association, files present, ground truth.
-
-    ``associations.txt`` is used when present (ICL-NUIM), else ``rgb.txt`` + ``depth.txt`` are associated by
-    timestamp. Intrinsics: ``intrinsics`` (3, 3), else ``intrinsics.txt`` in the folder, else the format's default
-    (:data:`ICL_K` with an association file, :data:`TUM_K` otherwise). Frames without a ground-truth pose are
-    dropped (noted). Raises :class:`DcslamError` on malformed lines, unsorted timestamps, a missing image or
-    trajectory, or no frame left.
-    """
-    from dcslam.io.tum import read_tum
-
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise DcslamError(f"sequence folder {folder} not found")
-    notes: list[str] = []
-    if (folder / "associations.txt").is_file():
-        fmt = ICL
-        depth_t, depth_n, _, rgb_n = read_associations(folder / "associations.txt")
-    elif (folder / "rgb.txt").is_file() and (folder / "depth.txt").is_file():
-        fmt = TUM
-        rgb_t, rgb_all = read_list(folder / "rgb.txt")
-        depth_all_t, depth_all = read_list(folder / "depth.txt")
-        i_rgb, i_depth = associate(rgb_t, depth_all_t, max_difference)
-        if len(i_rgb) < len(depth_all_t):
-            notes.append(f"{len(depth_all_t) - len(i_rgb)} of {len(depth_all_t)} depth images have no colour image "
-                         f"within {max_difference} s, skipped")
-        depth_t = depth_all_t[i_depth]
-        depth_n = [depth_all[j] for j in i_depth]
-        rgb_n = [rgb_all[i] for i in i_rgb]
-    else:
-        raise DcslamError(f"{folder}: no associations.txt, nor rgb.txt and depth.txt; not a TUM RGB-D or ICL-NUIM "
-                          f"sequence")
-    if len(depth_t) == 0:
-        raise DcslamError(f"{folder}: no colour and depth images within {max_difference} s of each other")
-
-    rgb_paths = tuple(folder / n for n in rgb_n)
-    depth_paths = tuple(folder / n for n in depth_n)
-    for paths, listed in ((depth_paths, "depth.txt"), (rgb_paths, "rgb.txt")):
-        for path in paths:
-            if not path.is_file():
-                raise DcslamError(f"{path} not found (listed in "
-                                  f"{folder / ('associations.txt' if fmt == ICL else listed)})")
-
-    if groundtruth is None:
-        groundtruth = find_groundtruth(folder)
-    gt_times, T_gt = read_tum(groundtruth)
-    T, found = interpolate_poses(depth_t, gt_times, T_gt, max_difference, max_pose_gap)
-    if not found.all():
-        missing = np.flatnonzero(~found)
-        shown = ", ".join(_format_time(depth_t[i]) for i in missing[:5]) + (" ..." if len(missing) > 5 else "")
-        notes.append(f"{len(missing)} frame(s) without a ground-truth pose in {Path(groundtruth).name}, dropped "
-                     f"(timestamps {shown})")
-    if not found.any():
-        raise DcslamError(f"{folder}: no frame has a ground-truth pose in {groundtruth} (timestamps "
-                          f"{_format_time(depth_t[0])}..{_format_time(depth_t[-1])} vs "
-                          f"{_format_time(gt_times[0])}..{_format_time(gt_times[-1])})")
-
-    if intrinsics is not None:
-        K = np.asarray(intrinsics, dtype=np.float64)
-        if K.shape != (3, 3):
-            raise DcslamError(f"intrinsics have shape {K.shape}, expected (3, 3)")
-    elif (folder / INTRINSICS_FILE).is_file():
-        K = read_intrinsics(folder / INTRINSICS_FILE)
-    else:
-        K = ICL_K.copy() if fmt == ICL else TUM_K.copy()
-    keep = np.flatnonzero(found)
-    sequence = Sequence(root=folder, name=folder.name, format=fmt, K=K, groundtruth=Path(groundtruth),
-                        rgb_paths=rgb_paths, depth_paths=depth_paths, timestamps=depth_t, T_world_cam=T,
-                        frame_ids=np.arange(len(depth_t), dtype=np.int64), depth_scale=depth_scale,
-                        notes=tuple(notes))
-    return sequence.select(keep)
-
-
-def check_image_size(sequence: Sequence, width: int, height: int, intrinsics_given: bool) -> None:
-    """Fail when a format's default intrinsics (for 640 x 480) meet images of another size."""
-    if intrinsics_given or (sequence.root / INTRINSICS_FILE).is_file():
-        return
-    if (width, height) != (WIDTH, HEIGHT):
-        raise DcslamError(f"{sequence.root}: images are {width}x{height} but the default {sequence.format} "
-                          f"intrinsics are for {WIDTH}x{HEIGHT}; pass intrinsics (--intrinsics fx,fy,cx,cy)")
 
 
 # ------------------------------------------------------------------------------------------------ writing

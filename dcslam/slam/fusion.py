@@ -13,7 +13,6 @@ surface the current frame sees (free space).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import torch
 

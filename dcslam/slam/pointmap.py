@@ -11,7 +11,7 @@ import torch
 
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_K, project
-from dcslam.geometry.se3 import inverse, rotate, transform_points
+from dcslam.geometry.se3 import inverse, transform_points
 
 _KEY_BITS = 21
 _KEY_OFFSET = 1 << (_KEY_BITS - 1)

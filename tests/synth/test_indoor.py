@@ -8,6 +8,7 @@ import pytest
 from dcslam.errors import DcslamError
 from dcslam.io import tum_rgbd as tr
 from dcslam.io.tum import read_tum
+from dcslam.io.tum_sequence import index_sequence
 from dcslam.synth import indoor
 
 
@@ -36,7 +37,7 @@ def test_files_in_the_icl_nuim_layout(written):
     assert rgb.shape == (48, 64, 3) and depth.shape == (48, 64) and 0.3 < depth.min() and depth.max() < 10
     assert result.sequences[0].trajectory == result.paths[0] / "livingRoom0.gt.freiburg"
     assert json.loads((root / "synth_indoor.json").read_text())["settings"]["seed"] == 4
-    assert len(tr.index_sequence(seq)) == 3
+    assert len(index_sequence(seq)) == 3
 
 
 def test_deterministic_and_refuses_to_overwrite(written, tmp_path):
