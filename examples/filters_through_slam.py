@@ -51,7 +51,8 @@ def main() -> None:
     ws = Workspace.resolve(a.workspace)
     chains = {spec: chain_of(spec) for spec in a.filters or FILTERS}
     drives = [require(ws.drives / f"{d}.h5", "dcslam prepare-kitti") for d in read_splits(ws.splits)["test"]]
-    # output names as `dcslam filter` gives them, e.g. filtered/ip-basic-fast+range-min1-max60/
+    # one output name per spec, e.g. filtered/ip-basic-fast+range-min1-max60/ (`dcslam filter` names by filter kind,
+    # <model>+range, which would put range:min=1,max=60 and thesis-range in the same folder)
     names = {spec: f"{a.model}+" + spec.replace(":", "-").replace(",", "-").replace("=", "") for spec in chains}
     layers = {"(none)": {d.stem: ws.predictions / a.model / d.name for d in drives}}  # filter → {drive: layer file}
     layers.update({spec: {d.stem: ws.filtered / name / d.name for d in drives} for spec, name in names.items()})

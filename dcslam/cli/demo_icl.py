@@ -18,7 +18,7 @@ HELP = (
     "<workspace>/demo-icl/ (kept for the next run; the last room is held out).\n\n"
     "Writes <workspace>/results/demo-icl/: results.md, results.csv, results.json (settings, scores, frames, "
     "losses), denoising.png (noisy, denoised and clean depth of held-out frames, like the thesis's figure C.6) "
-    "and model.pt. About 2 minutes on two quiet CPU cores."
+    "and model.pt. About 70 s with the defaults on two quiet CPU cores."
 )
 
 

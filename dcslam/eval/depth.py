@@ -33,7 +33,7 @@ import numpy as np
 from dcslam.errors import DcslamError
 
 METRICS = ("mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km")
-#: Predicted depths below this (metres) are holes when scored; the same bound as SLAM's ``FrameSettings.min_depth``.
+#: Depths below this (metres) are holes: when scored, in prediction layers, and SLAM's ``FrameSettings.min_depth``.
 MIN_DEPTH_M = 0.1
 
 

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 import torch
 
 from dcslam.errors import DcslamError
+from dcslam.eval.depth import MIN_DEPTH_M
 from dcslam.geometry.camera import backproject, check_depth, check_K
 from dcslam.geometry.normals import vertex_normals
 
@@ -22,7 +23,7 @@ class FrameSettings:
 
     normal_search: int = 0
     max_relative_gap: float = 0.1
-    min_depth: float = 0.1
+    min_depth: float = MIN_DEPTH_M
     max_depth: float = 80.0
 
 
