@@ -31,28 +31,6 @@ class AssociationChoice(str, Enum):
     nn = "nn"
 
 
-def build_slam(odometry: str, mapper: str, solver: str, association: str, max_distance: float,
-               max_normal_angle: float, iterations: int, voxel_size: float):
-    """The one place where command-line strings become SLAM objects."""
-    from dcslam.slam.association import NearestNeighbourAssociation, ProjectiveAssociation
-    from dcslam.slam.fusion import PointFusion
-    from dcslam.slam.icpslam import ICPSLAM
-    from dcslam.slam.odometry import GroundTruthOdometry, ICPOdometry
-    from dcslam.slam.pipeline import SLAM
-    from dcslam.slam.solvers import DifferentiableLM, GaussNewton, LevenbergMarquardt
-
-    assoc = {"projective": ProjectiveAssociation, "nn": NearestNeighbourAssociation}[association]()
-    if odometry == "gt":
-        odo = GroundTruthOdometry()
-    else:
-        solver_obj = DifferentiableLM() if odometry == "gradicp" else {"gn": GaussNewton, "lm": LevenbergMarquardt}[
-            solver]()
-        odo = ICPOdometry(solver=solver_obj, association=assoc, max_distance=max_distance,
-                          max_normal_angle_deg=max_normal_angle, iterations=iterations)
-    mapper_obj = PointFusion(voxel_size=voxel_size) if mapper == "pointfusion" else ICPSLAM(voxel_size=voxel_size)
-    return SLAM(odo, mapper_obj)
-
-
 def _resolve_depth(depth: str, ws, drive_name: str, run: str | None) -> tuple[str | Path, str]:
     """(depth source for load_depth, output layer name)."""
     from dcslam.errors import DcslamError
@@ -107,6 +85,7 @@ def slam_command(
     force: ForceOption = False,
 ) -> None:
     from dcslam.io.drive import read_splits
+    from dcslam.slam.config import SlamSettings, build_slam
     from dcslam.slam.run import check_outputs, run_drive, write_outputs
     from dcslam.workspace import Workspace, require
 
@@ -120,6 +99,9 @@ def slam_command(
     settings = dict(depth=depth, odometry=odometry.value, mapper=mapper.value, solver=solver.value,
                     association=association.value, frames=frames, max_distance=max_distance,
                     max_normal_angle=max_normal_angle, iterations=iterations, voxel_size=voxel_size, device=device)
+    slam_settings = SlamSettings(odometry=odometry.value, mapper=mapper.value, solver=solver.value,
+                                 association=association.value, max_distance=max_distance,
+                                 max_normal_angle=max_normal_angle, iterations=iterations, voxel_size=voxel_size)
     jobs = []
     for path in paths:
         source, layer = _resolve_depth(depth, ws, path.stem, run)
@@ -127,8 +109,7 @@ def slam_command(
         check_outputs(out_dir, path.stem, force)
         jobs.append((path, source, out_dir))
     for path, source, out_dir in jobs:
-        slam = build_slam(odometry.value, mapper.value, solver.value, association.value, max_distance,
-                          max_normal_angle, iterations, voxel_size)
+        slam = build_slam(slam_settings)
         result = run_drive(path, source, slam, frames or None, device, settings={**settings, "source": str(source)})
         result.name = path.stem
         written = write_outputs(result, out_dir, force)

@@ -1,0 +1,72 @@
+"""The SLAM's settings, declared once, and the one place where they become SLAM objects.
+
+:class:`SlamSettings` holds every algorithm setting of a SLAM run (odometry, mapper, solver, association, gates,
+iterations, voxel size). Each field carries its help text in ``metadata["help"]`` so that the command line and the
+stage configuration take defaults and help from here instead of repeating them. :func:`build_slam` maps the names
+to objects; nothing else in dcslam switches on these strings.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+ODOMETRIES = ("gt", "icp", "gradicp")
+MAPPERS = ("pointfusion", "icpslam")
+SOLVERS = ("gn", "lm")
+ASSOCIATIONS = ("projective", "nn")
+
+
+@dataclass(frozen=True)
+class SlamSettings:
+    """Algorithm settings of one SLAM run (no paths, no devices)."""
+
+    odometry: str = field(default="icp", metadata={
+        "help": "gt: drive poses; icp: point-to-plane ICP; gradicp: ICP with the differentiable LM.",
+        "choices": ODOMETRIES})
+    mapper: str = field(default="pointfusion", metadata={
+        "help": "pointfusion or icpslam.", "choices": MAPPERS})
+    solver: str = field(default="gn", metadata={
+        "help": "ICP solver: gn (Gauss-Newton) or lm.", "choices": SOLVERS})
+    association: str = field(default="projective", metadata={
+        "help": "ICP association: projective or nn (KD-tree).", "choices": ASSOCIATIONS})
+    max_distance: float = field(default=0.5, metadata={"help": "ICP outlier gate, metres.", "min": 0.0})
+    max_normal_angle: float = field(default=30.0, metadata={"help": "ICP normal-angle gate, degrees.", "min": 0.0})
+    iterations: int = field(default=20, metadata={"help": "ICP iterations per gate stage.", "min": 1})
+    voxel_size: float = field(default=0.05, metadata={"help": "Map voxel size, metres.", "min": 0.0})
+
+    def __post_init__(self) -> None:
+        from dcslam.errors import DcslamError
+
+        for name, choices in (("odometry", ODOMETRIES), ("mapper", MAPPERS), ("solver", SOLVERS),
+                              ("association", ASSOCIATIONS)):
+            if getattr(self, name) not in choices:
+                raise DcslamError(f"unknown {name} {getattr(self, name)!r} (choose from {', '.join(choices)})")
+        for name in ("max_distance", "max_normal_angle", "voxel_size"):
+            if not getattr(self, name) >= 0:
+                raise DcslamError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.iterations < 1:
+            raise DcslamError(f"iterations must be >= 1, got {self.iterations}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def build_slam(settings: SlamSettings = SlamSettings()):
+    """The one place where setting names become SLAM objects -> :class:`~dcslam.slam.pipeline.SLAM`."""
+    from dcslam.slam.association import NearestNeighbourAssociation, ProjectiveAssociation
+    from dcslam.slam.fusion import PointFusion
+    from dcslam.slam.icpslam import ICPSLAM
+    from dcslam.slam.odometry import GroundTruthOdometry, ICPOdometry
+    from dcslam.slam.pipeline import SLAM
+    from dcslam.slam.solvers import DifferentiableLM, GaussNewton, LevenbergMarquardt
+
+    s = settings
+    assoc = {"projective": ProjectiveAssociation, "nn": NearestNeighbourAssociation}[s.association]()
+    if s.odometry == "gt":
+        odo = GroundTruthOdometry()
+    else:
+        solver = DifferentiableLM() if s.odometry == "gradicp" else {"gn": GaussNewton,
+                                                                      "lm": LevenbergMarquardt}[s.solver]()
+        odo = ICPOdometry(solver=solver, association=assoc, max_distance=s.max_distance,
+                          max_normal_angle_deg=s.max_normal_angle, iterations=s.iterations)
+    mapper = PointFusion(voxel_size=s.voxel_size) if s.mapper == "pointfusion" else ICPSLAM(voxel_size=s.voxel_size)
+    return SLAM(odo, mapper)
