@@ -12,8 +12,19 @@ paired with pose i of the other (see :func:`pair_by_timestamps`).
   reference with the SE(3) Umeyama fit of positions (``evo_ape -a``), or without alignment.
 * RPE (evo's RPE, delta 1 frame, consecutive pairs): ``E_i = (Q_i⁻¹ Q_{i+1})⁻¹ (P_i⁻¹ P_{i+1})`` with Q = gt and
   P = est; translation error ``‖t_E‖`` (m), rotation error = angle of ``R_E`` in degrees.
+* KITTI odometry drift (the odometry devkit's ``evaluate_odometry.cpp``): from every 10th frame, for each length
+  L in 100, 200, ..., 800 m, the segment ends at the first frame whose path length along the *ground truth*
+  exceeds the start's by more than L; its error is ``E = (P_s⁻¹ P_e)⁻¹ (Q_s⁻¹ Q_e)`` (Q = gt, P = est);
+  ``‖t_E‖ / L`` and ``acos(clip((trace R_E − 1) / 2, −1, 1)) / L`` are averaged over all segments of all lengths:
+  t_rel in % and r_rel in deg/100 m (the devkit's stats file has m/m and rad/m; its leaderboard prints % and
+  deg/m). The devkit's "every 10 frames" is one second at KITTI's 10 Hz. It computes in 32-bit floats; here
+  float64 with general matrix inverses, as in KISS-ICP's port of it, against which this is tested
+  (tests/data/kitti_drift_reference.json).
 
 Statistics are evo's: rmse, mean, median, std (population), min, max.
+
+Pairing: :func:`associate_timestamps` pairs estimate and reference as evo's ``associate_trajectories`` does (nearest
+timestamp within ``max_time_diff``, 10 ms by default); pose i of ``T_gt`` then goes with pose i of ``T_est``.
 """
 from __future__ import annotations
 
@@ -24,6 +35,11 @@ import numpy as np
 from dcslam.errors import DcslamError
 
 STATISTICS = ("rmse", "mean", "median", "std", "min", "max")
+#: Segment lengths (m) and start step (frames) of the KITTI odometry devkit.
+DRIFT_LENGTHS_M = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
+DRIFT_STEP_FRAMES = 10
+#: evo's default ``max_diff`` of ``associate_trajectories`` (seconds).
+EVO_MAX_TIME_DIFF_S = 0.01
 
 
 def _check_poses(*poses: np.ndarray) -> list[np.ndarray]:
@@ -151,6 +167,103 @@ def rpe_errors(T_gt: np.ndarray, T_est: np.ndarray, delta: int = 1) -> tuple[np.
     return np.linalg.norm(E[:, :3, 3], axis=1), np.degrees(rotation_angle(E[:, :3, :3]))
 
 
+def path_distances(T_world_cam: np.ndarray) -> np.ndarray:
+    """Cumulative path length (m) at each pose, 0 at the first (the devkit's ``trajectoryDistances``).
+    Shapes: (N, 4, 4) → (N,)."""
+    (T,) = _check_poses(T_world_cam)
+    steps = np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1)
+    return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+@dataclass(frozen=True)
+class DriftSegment:
+    """One devkit segment: frames ``first``..``last``, nominal ``length_m``, errors per metre (m/m and rad/m)."""
+
+    first: int
+    last: int
+    length_m: float
+    t_err_per_m: float
+    r_err_rad_per_m: float
+
+
+def drift_segments(T_gt: np.ndarray, T_est: np.ndarray, lengths_m=DRIFT_LENGTHS_M,
+                   step: int = DRIFT_STEP_FRAMES) -> list[DriftSegment]:
+    """Every segment the KITTI odometry devkit scores (its ``calcSequenceErrors``), in its order: starts every
+    ``step`` frames, then lengths ascending. Empty when the ground truth is shorter than the shortest length.
+    Shapes: (N, 4, 4), (N, 4, 4), paired pose by pose."""
+    T_gt, T_est = _check_poses(T_gt, T_est)
+    dist = path_distances(T_gt)
+    firsts = np.arange(0, len(T_gt), step)
+    lengths = np.asarray(lengths_m, dtype=np.float64)
+    # the first frame whose distance exceeds dist[first] + length (dist is non-decreasing, so the devkit's linear
+    # scan from ``first`` finds the same frame); len(dist) = none
+    lasts = np.searchsorted(dist, dist[firsts][:, None] + lengths[None, :], side="right")
+    first_idx, length_idx = np.nonzero(lasts < len(dist))
+    if len(first_idx) == 0:
+        return []
+    first, last = firsts[first_idx], lasts[first_idx, length_idx]
+    # general matrix inverses, as the devkit's Matrix::inv: the benchmark's files print 6 digits, so their rotations
+    # are orthonormal to ~1e-7 only, and a transpose-inverse would move r_rel by ~1e-6 of itself
+    inv = np.linalg.inv
+    E = inv(inv(T_est[first]) @ T_est[last]) @ (inv(T_gt[first]) @ T_gt[last])
+    cos_angle = np.clip(0.5 * (np.trace(E[:, :3, :3], axis1=1, axis2=2) - 1.0), -1.0, 1.0)
+    length = lengths[length_idx]
+    t_err = np.linalg.norm(E[:, :3, 3], axis=1) / length
+    r_err = np.arccos(cos_angle) / length
+    return [DriftSegment(int(f), int(la), float(L), float(t), float(r))
+            for f, la, L, t, r in zip(first, last, length, t_err, r_err)]
+
+
+@dataclass(frozen=True)
+class DriftFigures:
+    """Mean drift over ``segments`` segments: t_rel in %, r_rel in deg/100 m."""
+
+    segments: int
+    t_rel_percent: float
+    r_rel_deg_per_100m: float
+
+    @classmethod
+    def of(cls, segments: list[DriftSegment]) -> "DriftFigures":
+        return cls(segments=len(segments),
+                   t_rel_percent=100.0 * float(np.mean([s.t_err_per_m for s in segments])),
+                   r_rel_deg_per_100m=100.0 * float(np.degrees(np.mean([s.r_err_rad_per_m for s in segments]))))
+
+
+@dataclass(frozen=True)
+class KittiDrift:
+    """The KITTI odometry devkit's drift of one trajectory.
+
+    ``overall`` averages every segment of every length (the devkit's figure); ``per_length`` maps each length with
+    at least one segment to its own mean (the devkit's error-vs-length plot shows a length only when it has 3 or more
+    segments). When the ground-truth path is shorter than 100 m, ``overall`` is ``None`` and ``note`` says so.
+    """
+
+    path_length_m: float
+    overall: DriftFigures | None
+    per_length: dict[float, DriftFigures]
+    note: str = ""
+
+
+def kitti_drift(T_gt: np.ndarray, T_est: np.ndarray, lengths_m=DRIFT_LENGTHS_M,
+                step: int = DRIFT_STEP_FRAMES) -> KittiDrift:
+    """KITTI odometry drift (t_rel %, r_rel deg/100 m) of an estimate against its reference, exactly as the devkit's
+    ``evaluate_odometry.cpp`` computes it (see the module docstring). Shapes: (N, 4, 4), (N, 4, 4), paired pose by
+    pose, poses ``step`` frames apart being the devkit's one second."""
+    T_gt, T_est = _check_poses(T_gt, T_est)
+    path_length = float(path_distances(T_gt)[-1])
+    segments = drift_segments(T_gt, T_est, lengths_m, step)
+    if not segments:
+        return KittiDrift(path_length_m=path_length, overall=None, per_length={},
+                          note=f"too short for KITTI drift: the reference path is {path_length:.1f} m, the shortest "
+                               f"segment {min(lengths_m):g} m")
+    per_length = {}
+    for length in lengths_m:
+        selected = [s for s in segments if s.length_m == length]
+        if selected:
+            per_length[float(length)] = DriftFigures.of(selected)
+    return KittiDrift(path_length_m=path_length, overall=DriftFigures.of(segments), per_length=per_length)
+
+
 @dataclass(frozen=True)
 class TrajectoryScores:
     """All trajectory scores of one estimate against its reference."""
@@ -162,15 +275,21 @@ class TrajectoryScores:
     ate: Statistics
     rpe_trans_m: Statistics | None
     rpe_rot_deg: Statistics | None
+    drift: KittiDrift | None = None
 
     def flat(self) -> dict:
-        """One flat dict, e.g. ``ate_aligned_rmse``, for CSV rows."""
+        """One flat dict, e.g. ``ate_aligned_rmse``, for CSV rows; KITTI drift as ``kitti_t_rel_percent``,
+        ``kitti_r_rel_deg_per_100m`` and ``kitti_segments`` (empty and 0 when the drive is too short)."""
         row = {"poses": self.poses, "localisation": self.localisation,
                "localisation_thesis_clamp": self.localisation_thesis_clamp}
         for name in ("ate_aligned", "ate", "rpe_trans_m", "rpe_rot_deg"):
             stats = getattr(self, name)
             for s in STATISTICS:
                 row[f"{name}_{s}"] = None if stats is None else getattr(stats, s)
+        overall = None if self.drift is None else self.drift.overall
+        row["kitti_t_rel_percent"] = None if overall is None else overall.t_rel_percent
+        row["kitti_r_rel_deg_per_100m"] = None if overall is None else overall.r_rel_deg_per_100m
+        row["kitti_segments"] = 0 if overall is None else overall.segments
         return row
 
 
@@ -178,7 +297,8 @@ def score_trajectory(T_gt: np.ndarray, T_est: np.ndarray) -> TrajectoryScores:
     """Every score of an estimate against its reference (paired pose by pose). Shapes: (N, 4, 4) each.
 
     RPE is ``None`` for a single pose; aligned ATE is ``None`` when the positions are degenerate (all on one line
-    or point), where evo's alignment fails too.
+    or point), where evo's alignment fails too; ``drift.overall`` is ``None`` when the reference path is shorter
+    than 100 m.
     """
     T_gt, T_est = _check_poses(T_gt, T_est)
     rpe = rpe_errors(T_gt, T_est) if len(T_gt) > 1 else None
@@ -192,7 +312,8 @@ def score_trajectory(T_gt: np.ndarray, T_est: np.ndarray) -> TrajectoryScores:
         ate_aligned=ate_aligned,
         ate=Statistics.of(ate_errors(T_gt, T_est, align=False)),
         rpe_trans_m=None if rpe is None else Statistics.of(rpe[0]),
-        rpe_rot_deg=None if rpe is None else Statistics.of(rpe[1]))
+        rpe_rot_deg=None if rpe is None else Statistics.of(rpe[1]),
+        drift=kitti_drift(T_gt, T_est))
 
 
 def pair_by_timestamps(t_est: np.ndarray, t_gt: np.ndarray, allow_prefix: bool = False,
@@ -219,3 +340,70 @@ def pair_by_timestamps(t_est: np.ndarray, t_gt: np.ndarray, allow_prefix: bool =
         raise DcslamError(f"timestamps do not match: estimated pose {bad} at {t_est[bad]:.6f} s, reference at "
                           f"{t_gt[bad]:.6f} s")
     return n
+
+
+@dataclass(frozen=True)
+class Association:
+    """Poses of an estimate and a reference paired by timestamp: ``est_indices`` (M,) and ``gt_indices`` (M,)
+    index the two trajectories; ``est_poses`` / ``gt_poses`` are their full lengths; ``time_diffs_s`` (M,) the
+    absolute timestamp differences of the pairs."""
+
+    est_indices: np.ndarray
+    gt_indices: np.ndarray
+    est_poses: int
+    gt_poses: int
+    time_diffs_s: np.ndarray
+    max_time_diff_s: float
+
+    @property
+    def pairs(self) -> int:
+        return len(self.est_indices)
+
+    def summary(self) -> str:
+        """e.g. ``28 of 30 estimated poses paired with 40 reference poses (max. time difference 10 ms)``."""
+        return (f"{self.pairs} of {self.est_poses} estimated poses paired with {self.gt_poses} reference poses "
+                f"(max. time difference {1000 * self.max_time_diff_s:g} ms)")
+
+
+def _nearest(t_query: np.ndarray, t_sorted: np.ndarray) -> np.ndarray:
+    """Index in ``t_sorted`` of the nearest timestamp to each of ``t_query``; a tie goes to the earlier one (as
+    ``np.argmin`` of the differences)."""
+    right = np.clip(np.searchsorted(t_sorted, t_query, side="left"), 0, len(t_sorted) - 1)
+    left = np.clip(right - 1, 0, len(t_sorted) - 1)
+    take_left = np.abs(t_sorted[left] - t_query) <= np.abs(t_sorted[right] - t_query)
+    return np.where(take_left, left, right)
+
+
+def associate_timestamps(t_est: np.ndarray, t_gt: np.ndarray,
+                         max_time_diff: float = EVO_MAX_TIME_DIFF_S) -> Association:
+    """Pair estimated and reference poses by nearest timestamp, as evo's ``associate_trajectories``.
+
+    Each pose of the trajectory with fewer poses (the estimate when both are as long) takes the nearest timestamp of
+    the other; the pair is kept when they differ by at most ``max_time_diff`` seconds. Fails
+    (:class:`DcslamError`) on empty, non-finite or not strictly increasing timestamps, a negative tolerance, or when
+    no pose pairs. Shapes: (N,), (M,).
+    """
+    t_est, t_gt = np.asarray(t_est, dtype=np.float64), np.asarray(t_gt, dtype=np.float64)
+    for name, t in (("estimated", t_est), ("reference", t_gt)):
+        if t.ndim != 1 or len(t) == 0:
+            raise DcslamError(f"{name} timestamps have shape {t.shape}, expected (N,) with N > 0")
+        if not np.all(np.isfinite(t)):
+            raise DcslamError(f"{name} timestamps are not all finite")
+        if np.any(np.diff(t) <= 0):
+            raise DcslamError(f"{name} timestamps are not strictly increasing")
+    if not max_time_diff >= 0:
+        raise DcslamError(f"max_time_diff is {max_time_diff}, expected >= 0 seconds")
+    # evo walks the shorter trajectory (the estimate, its second one, when both are as long)
+    if len(t_est) > len(t_gt):
+        gt_idx, est_idx = np.arange(len(t_gt)), _nearest(t_gt, t_est)
+    else:
+        est_idx, gt_idx = np.arange(len(t_est)), _nearest(t_est, t_gt)
+    diffs = np.abs(t_est[est_idx] - t_gt[gt_idx])
+    keep = diffs <= max_time_diff
+    if not keep.any():
+        raise DcslamError(f"no estimated pose has a reference timestamp within {1000 * max_time_diff:g} ms "
+                          f"(estimate {t_est[0]:.3f}..{t_est[-1]:.3f} s, {len(t_est)} poses; reference "
+                          f"{t_gt[0]:.3f}..{t_gt[-1]:.3f} s, {len(t_gt)} poses); check the time bases or raise "
+                          "the maximum time difference")
+    return Association(est_indices=est_idx[keep], gt_indices=gt_idx[keep], est_poses=len(t_est),
+                       gt_poses=len(t_gt), time_diffs_s=diffs[keep], max_time_diff_s=float(max_time_diff))

@@ -1,17 +1,29 @@
 """IP-Basic (Ku, Harakeh, Waslander, "In Defense of Classical Image Processing: Fast Depth Completion on the CPU",
-CRV 2018), written from the paper's description.
+CRV 2018): the algorithm of the authors' ``ip_basic/depth_map_utils.py`` (github.com/kujason/ip_basic),
+``fill_in_fast`` and ``fill_in_multiscale``, step for step, written anew.
 
-Classical image processing on one depth map, no training. Depth is first *inverted* (``d' = max_depth − d`` on
-valid pixels, 0 elsewhere) so that morphological dilation, a maximum filter, lets closer surfaces win over farther
-ones at object edges. Then:
+Classical image processing on one depth map, no training. Depth is first *inverted* (``d' = max_depth − d`` where
+``d > 0.1`` m) so that morphological dilation, a maximum filter, lets closer surfaces win over farther ones at
+object edges. A pixel counts as empty while its inverted value is at most 0.1 (the authors' threshold). Then:
 
-``fast``: diamond-kernel dilation → full-kernel closing of small holes → fill of empty pixels by a 7×7 dilation →
-extension of each column's top value to the top of the image → fill of large holes by a 31×31 dilation → 5×5 median
-blur (outliers) → Gaussian or bilateral blur (smoothing) → inversion back to metres.
+``fast``: 5×5 diamond dilation → 5×5 closing → empty pixels take a 7×7 dilation → *only with* ``extrapolate``: each
+column's top value extended to the top of the image, then empty pixels take a 31×31 dilation → 5×5 median blur of
+the whole image → bilateral blur (d 5, σ_colour 1.5, σ_space 2) of the whole image, or Gaussian 5×5 blur of the
+non-empty pixels → inversion back to metres.
 
-``multiscale``: the valid depths are split into near / medium / far bins, each dilated separately with a kernel
-sized for its range (near surfaces span more pixels), merged with near taking priority, then closing, median blur,
-top extension and hole filling with growing kernels (7, 15, 31), blur and inversion.
+``multiscale``: the valid depths are split into near (≤ 15 m), medium (≤ 30 m) and far bins, each dilated with a cross
+kernel sized for its range (7×7 near, 5×5 medium, 3×3 far: near surfaces span more pixels) and merged far to near
+(near wins) over the inverted input → 5×5 closing → 5×5 median blur of the non-empty pixels → empty pixels below
+each column's top value take a 9×9 dilation → with ``extrapolate`` the top values are extended to the top of the
+image, without it the pixels above them stay empty for good → six rounds of 5×5 dilation into the remaining empty
+pixels → 5×5 median blur, then Gaussian 5×5 or bilateral (d 5, σ_colour 0.5, σ_space 2) blur, of the non-empty
+pixels → inversion.
+
+Departures from the authors' code, none of which changes a KITTI result: inputs of at most 0.1 m are read as "no
+depth" (the authors keep them as inverted values), depths beyond ``max_depth`` are clipped to it (the authors
+invert them to negative values), and an output pixel whose inverted value is at most 0.1 (depth within 0.1 m of
+``max_depth``, or an empty pixel that a blur touched with a vanishing weight) is 0, where the authors return the
+inverted value itself as a depth.
 """
 from __future__ import annotations
 
@@ -22,6 +34,9 @@ import numpy as np
 from dcslam.errors import DcslamError
 
 VARIANTS = ("fast", "multiscale")
+BLURS = ("gaussian", "bilateral", "none")
+#: Inverted values at most this are empty (the authors' ``> 0.1`` tests in the inverted image).
+EMPTY_AT_MOST = 0.1
 
 
 def full_kernel(size: int) -> np.ndarray:
@@ -44,116 +59,120 @@ def diamond_kernel(size: int) -> np.ndarray:
     return (np.abs(yy) + np.abs(xx) <= r).astype(np.uint8)
 
 
-def _fill_empty(inv: np.ndarray, kernel: np.ndarray) -> np.ndarray:
-    """Empty pixels (0) take the maximum (closest) inverted depth within ``kernel``; valid pixels are kept."""
-    import cv2
-
-    dilated = cv2.dilate(inv, kernel)
-    np.copyto(dilated, inv, where=inv > 0)
-    return dilated
-
-
-def _extend_to_top(inv: np.ndarray) -> np.ndarray:
-    """Pixels above each column's topmost valid pixel take that pixel's value (columns with none stay empty)."""
-    top = np.argmax(inv > 0, axis=0)  # 0 for a column with no valid pixel: nothing above it changes
-    out = inv.copy()
-    reach = int(top.max()) if top.size else 0
-    if reach:
-        top_value = inv[top, np.arange(inv.shape[1])]
-        np.copyto(out[:reach], top_value[None, :], where=np.arange(reach)[:, None] < top[None, :])
-    return out
-
-
-def _blur_valid(inv: np.ndarray, blur: str) -> np.ndarray:
-    import cv2
-
-    if blur not in ("gaussian", "bilateral", "none"):
-        raise DcslamError(f"unknown blur {blur!r}; expected gaussian, bilateral or none")
-    # Smoothed values on valid pixels only, the others kept: OpenCV's masked copy into the filter's output (the same
-    # values as np.where, without its full-frame temporaries; a uint8 mask is what cv2 copies fastest with).
-    inv = np.ascontiguousarray(inv, dtype=np.float32)
-    invalid = cv2.bitwise_not(cv2.compare(inv, 0, cv2.CMP_GT))
-    smoothed = cv2.copyTo(inv, invalid, cv2.medianBlur(inv, 5))
-    if blur == "none":
-        return smoothed
-    inv = smoothed
-    smoothed = cv2.GaussianBlur(inv, (5, 5), 0) if blur == "gaussian" else cv2.bilateralFilter(inv, 5, 1.5, 2.0)
-    return cv2.copyTo(inv, invalid, smoothed)
-
-
-def _check(depth_m: np.ndarray) -> np.ndarray:
+def _check(depth_m: np.ndarray, blur: str) -> np.ndarray:
     depth_m = np.asarray(depth_m)
     if depth_m.ndim != 2:
         raise DcslamError(f"IP-Basic takes one (H, W) depth map, got shape {depth_m.shape}")
+    if blur not in BLURS:
+        raise DcslamError(f"unknown blur {blur!r}; expected one of {', '.join(BLURS)}")
     return depth_m.astype(np.float32, copy=False)
 
 
 def _invert(depth_m: np.ndarray, max_depth: float) -> np.ndarray:
-    # float32 throughout, in place: (max_depth - min(d, max_depth)) + 1e-3 on valid pixels, 0 elsewhere.
-    inv = np.minimum(depth_m, np.float32(max_depth))
-    np.subtract(np.float32(max_depth), inv, out=inv)
-    inv += np.float32(1e-3)
-    inv[~(depth_m > 0)] = 0
+    """``max_depth − d`` where ``d > 0.1`` m, 0 elsewhere; a new float32 array."""
+    inv = np.subtract(np.float32(max_depth), np.minimum(depth_m, np.float32(max_depth)), dtype=np.float32)
+    inv[~(depth_m > EMPTY_AT_MOST)] = 0
     return inv
 
 
 def _revert(inv: np.ndarray, max_depth: float) -> np.ndarray:
-    depth = np.subtract(np.float32(max_depth + 1e-3), inv, dtype=np.float32)
-    depth[~(inv > 0)] = 0
-    np.maximum(depth, 0, out=depth)
+    """Inverted values back to metres; empty pixels (≤ 0.1) become 0."""
+    depth = np.subtract(np.float32(max_depth), inv, dtype=np.float32)
+    depth[~(inv > EMPTY_AT_MOST)] = 0
     return depth
+
+
+def _fill(inv: np.ndarray, kernel: np.ndarray, where: np.ndarray | None = None) -> np.ndarray:
+    """Empty pixels (and, with ``where``, only those where it is True) take the dilation of ``inv`` by ``kernel``;
+    in place, returned."""
+    import cv2
+
+    empty = ~(inv > EMPTY_AT_MOST)
+    if where is not None:
+        empty &= where
+    dilated = cv2.dilate(inv, kernel)
+    np.copyto(inv, dilated, where=empty)
+    return inv
+
+
+def _top_rows(inv: np.ndarray) -> np.ndarray:
+    """(W,) row of each column's topmost non-empty pixel (0 for a column without one, as ``np.argmax``)."""
+    return np.argmax(inv > EMPTY_AT_MOST, axis=0)
+
+
+def _below_top(inv: np.ndarray) -> np.ndarray:
+    """(H, W) mask: False above each column's topmost non-empty pixel, True from it down."""
+    return np.arange(inv.shape[0])[:, None] >= _top_rows(inv)[None, :]
+
+
+def _extend_to_top(inv: np.ndarray) -> np.ndarray:
+    """Pixels above each column's topmost non-empty pixel take its value; in place, returned."""
+    top = _top_rows(inv)
+    above = np.arange(inv.shape[0])[:, None] < top[None, :]
+    np.copyto(inv, np.broadcast_to(inv[top, np.arange(inv.shape[1])][None, :], inv.shape), where=above)
+    return inv
 
 
 def complete_fast(depth_m: np.ndarray, max_depth: float = 100.0, extrapolate: bool = True,
                   blur: str = "bilateral") -> np.ndarray:
-    """IP-Basic's fast variant.
+    """IP-Basic's fast variant (the authors' ``fill_in_fast``).
 
     Shape:
-        depth_m: (H, W) metres, 0 = none → (H, W) float32 metres (0 only where nothing could be filled)
+        depth_m: (H, W) metres, 0 = none → (H, W) float32 metres (0 where nothing was filled: with
+        ``extrapolate=False``, typically above the highest LiDAR return)
     """
     import cv2
 
-    inv = _invert(_check(depth_m), max_depth)
+    inv = _invert(_check(depth_m, blur), max_depth)
     inv = cv2.dilate(inv, diamond_kernel(5))
     inv = cv2.morphologyEx(inv, cv2.MORPH_CLOSE, full_kernel(5))
-    inv = _fill_empty(inv, full_kernel(7))
+    inv = _fill(inv, full_kernel(7))
     if extrapolate:
-        inv = _extend_to_top(inv)
-    inv = _fill_empty(inv, full_kernel(31))
-    inv = _blur_valid(inv, blur)
+        inv = _fill(_extend_to_top(inv), full_kernel(31))
+    inv = cv2.medianBlur(inv, 5)
+    if blur == "bilateral":
+        inv = cv2.bilateralFilter(inv, 5, 1.5, 2.0)
+    elif blur == "gaussian":
+        np.copyto(inv, cv2.GaussianBlur(inv, (5, 5), 0), where=inv > EMPTY_AT_MOST)
     return _revert(inv, max_depth)
 
 
 def complete_multiscale(depth_m: np.ndarray, max_depth: float = 100.0, extrapolate: bool = True,
                         blur: str = "gaussian", bins_m: tuple[float, float] = (15.0, 30.0)) -> np.ndarray:
-    """IP-Basic's multi-scale variant.
+    """IP-Basic's multi-scale variant (the authors' ``fill_in_multiscale``).
 
     Shape:
-        depth_m: (H, W) metres, 0 = none → (H, W) float32 metres
+        depth_m: (H, W) metres, 0 = none → (H, W) float32 metres (0 where nothing was filled: with
+        ``extrapolate=False``, above the highest depth of each column)
     """
     import cv2
 
-    depth_m = _check(depth_m)
+    depth_m = _check(depth_m, blur)
     inv = _invert(depth_m, max_depth)
-    near = (depth_m > 0) & (depth_m <= bins_m[0])
+    near = (depth_m > EMPTY_AT_MOST) & (depth_m <= bins_m[0])
     medium = (depth_m > bins_m[0]) & (depth_m <= bins_m[1])
     far = depth_m > bins_m[1]
-    dilated = {}
-    for name, selected, kernel in (("far", far, diamond_kernel(5)), ("medium", medium, diamond_kernel(7)),
-                                   ("near", near, diamond_kernel(9))):
-        dilated[name] = cv2.dilate(np.where(selected, inv, np.float32(0)), kernel)
-    merged = dilated["far"]
-    np.copyto(merged, dilated["medium"], where=dilated["medium"] > 0)
-    np.copyto(merged, dilated["near"], where=dilated["near"] > 0)
-    inv = cv2.morphologyEx(merged, cv2.MORPH_CLOSE, full_kernel(5))
-    smoothed = cv2.medianBlur(inv, 5)
-    np.copyto(smoothed, inv, where=~(inv > 0))
-    inv = smoothed
+    merged = inv.copy()
+    for selected, kernel in ((far, cross_kernel(3)), (medium, cross_kernel(5)), (near, cross_kernel(7))):
+        dilated = cv2.dilate(np.where(selected, inv, np.float32(0)), kernel)
+        np.copyto(merged, dilated, where=dilated > EMPTY_AT_MOST)
+    closed = cv2.morphologyEx(merged, cv2.MORPH_CLOSE, full_kernel(5))
+    inv = closed.copy()
+    np.copyto(inv, cv2.medianBlur(closed, 5), where=closed > EMPTY_AT_MOST)
+    inv = _fill(inv, full_kernel(9), where=_below_top(inv))
     if extrapolate:
         inv = _extend_to_top(inv)
-    for size in (7, 15, 31):
-        inv = _fill_empty(inv, full_kernel(size))
-    inv = _blur_valid(inv, blur)
+        keep = np.ones(inv.shape, bool)
+    else:
+        keep = _below_top(inv)
+    for _ in range(6):
+        inv = _fill(inv, full_kernel(5), where=keep)
+    valid = (inv > EMPTY_AT_MOST) & keep
+    np.copyto(inv, cv2.medianBlur(inv, 5), where=valid)
+    if blur == "gaussian":
+        np.copyto(inv, cv2.GaussianBlur(inv, (5, 5), 0), where=(inv > EMPTY_AT_MOST) & keep)
+    elif blur == "bilateral":
+        np.copyto(inv, cv2.bilateralFilter(inv, 5, 0.5, 2.0), where=valid)
     return _revert(inv, max_depth)
 
 

@@ -1,8 +1,9 @@
 import numpy as np
 import pytest
 
-from dcslam.depth.models.ip_basic import IPBasic, complete_fast, cross_kernel, diamond_kernel
+from dcslam.depth.models.ip_basic import IPBasic, complete_fast, complete_multiscale, cross_kernel, diamond_kernel
 from dcslam.errors import DcslamError
+from dcslam.eval.depth import depth_errors
 from dcslam.io.kitti import read_depth_png
 
 SAMPLE = "kitti-sample/depth_completion/train/2011_09_26_drive_0001_sync/proj_depth"
@@ -61,11 +62,62 @@ def test_bad_input():
         complete_fast(np.ones((8, 8), np.float32), blur="box")
 
 
-def test_real_kitti_frame_accuracy(data_dir):
+def _kitti_frame(data_dir):
     sparse = read_depth_png(data_dir / SAMPLE / "velodyne_raw/image_02/0000000005.png")
     gt = read_depth_png(data_dir / SAMPLE / "groundtruth/image_02/0000000005.png")
-    valid = gt > 0
-    for variant in ("fast", "multiscale"):
-        err = IPBasic(variant)(sparse)[valid] - gt[valid]
-        # the paper reports 302.6 mm MAE / 1288.5 mm RMSE on the KITTI test set
-        assert np.abs(err).mean() < 0.45 and np.sqrt((err ** 2).mean()) < 1.6
+    return sparse, gt
+
+
+# The authors' code (kujason/ip_basic, depth_map_utils.py) on the real KITTI frame (drive 0001, frame 5, image_02),
+# scored over its ground-truth pixels, mm: the figures of issue 15. dcslam's output was also checked identical, pixel
+# for pixel, to the authors' functions run locally on this frame, for both variants, both blurs, with and without
+# extrapolation; the extrapolate=False figures below are those runs' (scored with dcslam's devkit interpolation).
+AUTHORS_FIGURES = [
+    ("fast", True, "gaussian", 268.1, 1079.8),
+    ("fast", True, "bilateral", 281.9, 1166.1),
+    ("multiscale", True, "gaussian", 300.4, 1370.5),
+    ("fast", False, "bilateral", 276.0, 1072.7),
+    ("multiscale", False, "bilateral", 367.1, 1583.5),
+]
+
+
+@pytest.mark.parametrize("variant, extrapolate, blur, mae_mm, rmse_mm", AUTHORS_FIGURES)
+def test_real_kitti_frame_matches_the_authors(data_dir, variant, extrapolate, blur, mae_mm, rmse_mm):
+    sparse, gt = _kitti_frame(data_dir)
+    out = IPBasic(variant, extrapolate=extrapolate, blur=blur)(sparse)
+    errors = depth_errors(out, gt)
+    assert errors.coverage == 1.0
+    assert errors.mae_mm == pytest.approx(mae_mm, abs=0.1)
+    assert errors.rmse_mm == pytest.approx(rmse_mm, abs=0.1)
+
+
+@pytest.mark.parametrize("variant, holes", [("fast", 92), ("multiscale", 1123)])
+def test_no_extrapolation_leaves_the_top_empty(data_dir, variant, holes):
+    """Without extrapolation the authors' code fills nothing above each column's highest depth (no 31x31 fill):
+    on the KITTI frame that leaves 92 (fast) / 1123 (multiscale) ground-truth pixels without depth."""
+    sparse, gt = _kitti_frame(data_dir)
+    out = IPBasic(variant, extrapolate=False)(sparse)
+    assert int(((gt > 0) & (out == 0)).sum()) == holes
+    assert (out[0] == 0).all()                        # the top row is above every LiDAR return
+    filled = IPBasic(variant, extrapolate=True)(sparse)
+    assert (filled > 0).all()
+
+
+def test_multiscale_dilates_each_range_with_its_cross():
+    """A far wall (50 m, cols 0-19) and a near wall (5 m, cols 24-39) with a 4-column gap: the far bin's 3x3 cross
+    reaches one column (20), the near bin's 7x7 cross three (21-23), and the near one wins where both reach. (The
+    earlier diamonds 5/7/9 let the near wall reach column 20 as well.)"""
+    sparse = np.zeros((30, 40), np.float32)
+    sparse[:, :20] = 50.0
+    sparse[:, 24:] = 5.0
+    out = complete_multiscale(sparse, extrapolate=False, blur="none")
+    assert out[15, 20] == pytest.approx(50.0, abs=1e-4)
+    np.testing.assert_allclose(out[15, 21:24], 5.0, atol=1e-4)
+
+
+def test_inputs_below_a_decimetre_are_no_depth():
+    sparse = np.zeros((30, 30), np.float32)
+    sparse[10:20, 10:20] = 12.0
+    with_tiny = sparse.copy()
+    with_tiny[5, 5] = 0.05
+    np.testing.assert_array_equal(complete_fast(with_tiny), complete_fast(sparse))
