@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.workspace import atomic_output
+from dcslam.io.atomic import atomic_output
 
 DRIVE_SCHEMA = "dcslam.drive/1"
 LAYER_SCHEMA = "dcslam.layer/1"

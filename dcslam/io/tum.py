@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.workspace import atomic_output
+from dcslam.io.atomic import atomic_output
 
 FORMAT = "'timestamp tx ty tz qx qy qz qw' per line"
 

@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.workspace import atomic_output
+from dcslam.io.atomic import atomic_output
 
 DEPTH_SCALE = 5000.0  # 16-bit depth PNG: metres = value / 5000, 0 = no value
 MAX_DIFFERENCE_S = 0.02
