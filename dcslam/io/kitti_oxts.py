@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
+from dcslam.geometry.rotations import rotation_from_rpy
 from dcslam.io.kitti_calib import Calibration
 
 EARTH_RADIUS_M = 6378137.0
@@ -103,17 +104,6 @@ def write_oxts(path: Path | str, packet: OxtsPacket) -> None:
     Path(path).write_text(packet.to_line() + "\n")
 
 
-def rotation_xyz(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
-    """Angles (N,) in radians → (N, 3, 3) rotations ``Rz(yaw) · Ry(pitch) · Rx(roll)``."""
-    roll, pitch, yaw = (np.asarray(a, dtype=np.float64) for a in (roll, pitch, yaw))
-    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
-    return np.stack([
-        np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
-        np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
-        np.stack([-sp, cp * sr, cp * cr], -1),
-    ], -2)
-
-
 def mercator_xyz(lat: np.ndarray, lon: np.ndarray, alt: np.ndarray, scale: float) -> np.ndarray:
     """Latitudes, longitudes (N,) in degrees and altitudes (N,) in metres → (N, 3) Mercator x east, y north, z up."""
     lat, lon, alt = (np.asarray(a, dtype=np.float64) for a in (lat, lon, alt))
@@ -132,7 +122,7 @@ def oxts_to_T_world_imu(packets: list[OxtsPacket]) -> np.ndarray:
     alt = np.array([p.alt for p in packets])
     xyz = mercator_xyz(lat, lon, alt, scale=float(np.cos(np.deg2rad(lat[0]))))
     T = np.tile(np.eye(4), (len(packets), 1, 1))
-    T[:, :3, :3] = rotation_xyz([p.roll for p in packets], [p.pitch for p in packets], [p.yaw for p in packets])
+    T[:, :3, :3] = rotation_from_rpy([p.roll for p in packets], [p.pitch for p in packets], [p.yaw for p in packets])
     T[:, :3, 3] = xyz - xyz[0]
     return T
 

@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
+from dcslam.geometry.rotations import look_rotation
 from dcslam.io.tum_rgbd import HEIGHT, ICL_K, WIDTH, IclWriter
 from dcslam.synth.raycast import GROUND, CameraGrid, cast, local_normals
 from dcslam.synth.scene import BOX, CYLINDER, ELLIPSOID, Shape
@@ -312,20 +313,6 @@ def build_room(rng: np.random.Generator) -> Room:
 
 
 # ------------------------------------------------------------------------------------------------ the camera path
-def look_rotation(forward: np.ndarray, roll: np.ndarray) -> np.ndarray:
-    """R_world_cam (N, 3, 3) of an ICL-NUIM camera (x right, **y up**, z forward) looking along ``forward`` (N, 3)
-    with the world's z axis up, rolled by ``roll`` (N,) radians about the optical axis. Columns x = y × z, so the
-    rotation is proper (det +1)."""
-    z = forward / np.linalg.norm(forward, axis=1, keepdims=True)
-    up = np.array([0.0, 0.0, 1.0])
-    y0 = up - (z @ up)[:, None] * z
-    y0 /= np.linalg.norm(y0, axis=1, keepdims=True)
-    c, s = np.cos(roll)[:, None], np.sin(roll)[:, None]
-    y = c * y0 + s * np.cross(z, y0)
-    x = np.cross(y, z)
-    return np.stack([x, y, z], axis=2)
-
-
 def handheld_trajectory(room: Room, frames: int, rng: np.random.Generator) -> np.ndarray:
     """A smooth hand-held path over the middle of the room: T_world_cam (N, 4, 4) float64.
 

@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dcslam.synth.trajectory import Drive, rotation_xyz
+from dcslam.geometry.rotations import rotation_from_rpy
+from dcslam.synth.trajectory import Drive
 
 BOX, CYLINDER, ELLIPSOID = 0, 1, 2
 
@@ -83,7 +84,7 @@ class Scene:
                 continue
             yaw = heading + (0.0 if car.direction > 0 else np.pi)
             z = terrain.height(xy[0], xy[1])
-            R = rotation_xyz([0.0], [0.0], [yaw])[0]
+            R = rotation_from_rpy([0.0], [0.0], [yaw])[0]
             origin = np.array([xy[0], xy[1], z])
             shapes += [Shape(p.kind, R @ p.R_world_obj, origin + R @ p.center, p.half, p.material, p.color)
                        for p in car.parts]
@@ -118,7 +119,7 @@ class _Builder:
         metres above the ground (``sunk`` metres more below) to ``bottom + height``."""
         xy, yaw, z = self.frame(s, lateral)
         z = z if z0 is None else z0
-        R = rotation_xyz([0.0], [pitch], [yaw])[0]
+        R = rotation_from_rpy([0.0], [pitch], [yaw])[0]
         zc = z + bottom + (height - sunk) / 2
         self.shapes.append(Shape(BOX, R, np.array([xy[0], xy[1], zc]),
                                  np.array([along / 2, across / 2, (height + sunk) / 2]), material, np.asarray(color)))
@@ -130,7 +131,7 @@ class _Builder:
 
     def ellipsoid(self, s, lateral, radii, center_height, material, color):
         xy, yaw, z = self.frame(s, lateral)
-        R = rotation_xyz([0.0], [0.0], [yaw])[0]
+        R = rotation_from_rpy([0.0], [0.0], [yaw])[0]
         self.shapes.append(Shape(ELLIPSOID, R, np.array([xy[0], xy[1], z + center_height]), np.asarray(radii, float),
                                  material, np.asarray(color)))
 
@@ -153,7 +154,7 @@ class _Builder:
 
     def parked_car(self, s, lateral):
         xy, yaw, z = self.frame(s, lateral, yaw_offset=self.rng.normal(0, 0.03))
-        R = rotation_xyz([0.0], [0.0], [yaw])[0]
+        R = rotation_from_rpy([0.0], [0.0], [yaw])[0]
         origin = np.array([xy[0], xy[1], z])
         for p in _car_parts(self.rng):
             self.shapes.append(Shape(p.kind, R @ p.R_world_obj, origin + R @ p.center, p.half, p.material, p.color))

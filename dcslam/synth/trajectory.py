@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dcslam.io.kitti_oxts import rotation_xyz
+from dcslam.geometry.rotations import rotation_from_rpy, rpy_from_rotation
 
 EARTH_RADIUS_M = 6378137.0
 GRAVITY = 9.81
@@ -145,17 +145,9 @@ class Drive:
         pitch = -np.arctan(gx * forward[:, 0] + gy * forward[:, 1]) + wob[1]
         yaw = heading + wob[2]
         T = np.tile(np.eye(4), (len(t), 1, 1))
-        T[:, :3, :3] = rotation_xyz(roll, pitch, yaw)  # the Velodyne axes follow the car body (x fwd, y left, z up)
+        T[:, :3, :3] = rotation_from_rpy(roll, pitch, yaw)  # the Velodyne axes follow the car body (x fwd, y left, z up)
         T[:, :3, 3] = np.concatenate([xy, (self.terrain.height(xy[:, 0], xy[:, 1]) + LIDAR_HEIGHT_M)[:, None]], 1)
         return T
-
-
-def rpy_from_rotation(R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(N, 3, 3) rotations ``Rz(yaw) Ry(pitch) Rx(roll)`` → roll, pitch, yaw (N,) each."""
-    pitch = -np.arcsin(np.clip(R[:, 2, 0], -1, 1))
-    roll = np.arctan2(R[:, 2, 1], R[:, 2, 2])
-    yaw = np.arctan2(R[:, 1, 0], R[:, 0, 0])
-    return roll, pitch, yaw
 
 
 def oxts_packets(T_world_imu_of, times: np.ndarray, lat0_deg: float, lon0_deg: float, alt0_m: float,

@@ -7,7 +7,7 @@ import pytest
 
 from dcslam.errors import DcslamError
 from dcslam.io import kitti
-from dcslam.io.kitti_oxts import mercator_xyz, parse_oxts_line, rotation_xyz
+from dcslam.io.kitti_oxts import mercator_xyz, parse_oxts_line
 
 SAMPLE = Path(__file__).parents[1] / "data" / "kitti-sample"
 DATE_DIR = SAMPLE / "raw" / "2011_09_26"
@@ -206,17 +206,6 @@ class TestOxts:
         logged = 0.5 * (speed[1:] + speed[:-1]) * np.diff(stamps)
         assert np.median(np.abs(steps / logged - 1)) < 0.02
         assert np.abs(steps / logged - 1).max() < 0.05
-
-    def test_rotation_order_is_z_y_x(self):
-        R = rotation_xyz([0.3], [0.2], [0.1])[0]
-        def rot(axis, a):
-            c, s = np.cos(a), np.sin(a)
-            i, j = [k for k in range(3) if k != axis]
-            m = np.eye(3)
-            m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
-            return m if axis != 1 else m.T
-        assert R == pytest.approx(rot(2, 0.1) @ rot(1, 0.2) @ rot(0, 0.3))
-        assert rotation_xyz([0.0], [0.0], [np.pi / 2])[0] @ [1, 0, 0] == pytest.approx([0, 1, 0])
 
     def test_mercator_known_answer(self):
         scale = np.cos(np.deg2rad(49.0))

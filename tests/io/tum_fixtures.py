@@ -2,7 +2,8 @@
 import numpy as np
 
 from dcslam.io import tum_rgbd as tr
-from dcslam.io.tum import quaternion_to_rotation, read_tum, write_tum
+from dcslam.geometry.rotations import quaternion_to_rotation
+from dcslam.io.tum import read_tum, write_tum
 
 H, W = 6, 8
 
