@@ -12,37 +12,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dcslam.geometry.rotations import rotation_from_rpy
-from dcslam.synth.trajectory import Drive
-
-BOX, CYLINDER, ELLIPSOID = 0, 1, 2
+from dcslam.synth.shapes import BOX, CYLINDER, ELLIPSOID, Shape  # noqa: F401 (street builders use all three)
+from dcslam.synth.street.trajectory import Drive
 
 # materials: index → (name, LiDAR reflectance); colours are per object
 ASPHALT, GRASS, SIDEWALK, FACADE, GLASS, CAR, TIRE, BARK, FOLIAGE, METAL, HEDGE, ROOF = range(12)
 REFLECTANCE = np.array([0.15, 0.3, 0.35, 0.4, 0.05, 0.5, 0.05, 0.25, 0.3, 0.6, 0.3, 0.3], dtype=np.float32)
 
 LANE_WIDTH_M = 3.5
-
-
-@dataclass(frozen=True)
-class Shape:
-    """One solid: ``kind`` (BOX, CYLINDER along local z, ELLIPSOID), pose ``R_world_obj`` (3, 3) and ``center``
-    (3,), ``half`` (3,) half extents (cylinder: radius, radius, half height; ellipsoid: radii), material and colour."""
-
-    kind: int
-    R_world_obj: np.ndarray
-    center: np.ndarray
-    half: np.ndarray
-    material: int
-    color: np.ndarray
-
-    @property
-    def radius(self) -> float:
-        return float(np.linalg.norm(self.half))
-
-    def corners(self) -> np.ndarray:
-        """The 8 corners (8, 3) in the world of the shape's oriented bounding box."""
-        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64)
-        return self.center + (signs * self.half) @ self.R_world_obj.T
 
 
 @dataclass(frozen=True)
