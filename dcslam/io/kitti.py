@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
+from dcslam.io import depth_png
 from dcslam.io.drive import Frame
 from dcslam.io.kitti_calib import CALIB_FILES, Calibration, project_velodyne, read_calibration  # noqa: F401
 from dcslam.io.kitti_oxts import (OxtsPacket, camera_poses, oxts_to_T_world_imu, read_oxts,  # noqa: F401
@@ -42,32 +43,13 @@ def frame_name(frame_id: int, suffix: str) -> str:
 
 
 def read_depth_png(path: Path | str) -> np.ndarray:
-    """A KITTI uint16 depth PNG → (H, W) float32 metres (0 = no value). Fails on 8-bit or unreadable files."""
-    import cv2
-
-    path = Path(path)
-    if not path.exists():
-        raise DcslamError(f"depth PNG {path} not found")
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise DcslamError(f"{path}: not a readable PNG (truncated or corrupt?)")
-    if image.dtype != np.uint16 or image.ndim != 2:
-        raise DcslamError(f"{path}: expected a 16-bit single-channel depth PNG, got {image.dtype} with shape "
-                          f"{image.shape}")
-    return image.astype(np.float32) / DEPTH_SCALE
+    """A KITTI uint16 depth PNG → (H, W) float32 metres (value / 256, 0 = no value); see :mod:`dcslam.io.depth_png`."""
+    return depth_png.read_depth_png(path, DEPTH_SCALE)
 
 
-def write_depth_png(path: Path | str, depth_m: np.ndarray) -> None:
-    """(H, W) metres → KITTI uint16 depth PNG (value = round(256 · metres), clipped to 0..65535)."""
-    import cv2
-
-    depth_m = np.asarray(depth_m)
-    if depth_m.ndim != 2:
-        raise DcslamError(f"depth has shape {depth_m.shape}, expected (H, W)")
-    value = np.clip(np.rint(np.nan_to_num(depth_m, nan=0.0) * DEPTH_SCALE), 0, 65535).astype(np.uint16)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), value):
-        raise DcslamError(f"could not write {path}")
+def write_depth_png(path: Path | str, depth_m: np.ndarray) -> Path:
+    """(H, W) metres → KITTI uint16 depth PNG (value = round(256 · metres)); see :mod:`dcslam.io.depth_png`."""
+    return depth_png.write_depth_png(path, depth_m, DEPTH_SCALE)
 
 
 def read_image(path: Path | str) -> np.ndarray:
