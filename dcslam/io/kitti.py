@@ -11,7 +11,7 @@ Layout under a KITTI root (real, or written by ``dcslam synth``)::
 
 This module holds the per-file formats (depth PNG, image, Velodyne scan, timestamps) and the drive-level reading:
 :func:`find_drives` lists drives, :func:`index_drive` checks that their files line up and works out timestamps and
-camera-2 poses, :func:`read_drive` yields :class:`dcslam.io.drive.Frame` records. Calibration is in
+camera-2 poses, :func:`read_drive` yields :class:`dcslam.io.drive.DriveFrame` records. Calibration is in
 :mod:`dcslam.io.kitti_calib`, OXTS packets and poses in :mod:`dcslam.io.kitti_oxts` (both re-exported here).
 
 The depth benchmark has depth only for frames 5 .. n-6 of each raw drive; frames are aligned by their number.
@@ -29,10 +29,9 @@ import numpy as np
 
 from dcslam.errors import DcslamError
 from dcslam.io import depth_png
-from dcslam.io.drive import Frame
+from dcslam.io.drive import DriveFrame
 from dcslam.io.kitti_calib import CALIB_FILES, Calibration, project_velodyne, read_calibration  # noqa: F401
-from dcslam.io.kitti_oxts import (OxtsPacket, camera_poses, oxts_to_T_world_imu, read_oxts,  # noqa: F401
-                                  rebase, write_oxts)
+from dcslam.io.kitti_oxts import OxtsPacket, camera_poses, oxts_to_T_world_imu, read_oxts, rebase, write_oxts  # noqa: F401
 
 DEPTH_SCALE = 256.0  # uint16 depth PNG: metres = value / 256, 0 = no value
 
@@ -314,7 +313,7 @@ def index_drive(drive: RawDrive) -> DriveIndex:
     return DriveIndex(drive, calib, ids, stamps[ids], rebase(T_world_cam_raw[ids]))
 
 
-def read_drive(index: DriveIndex) -> Iterator[Frame]:
+def read_drive(index: DriveIndex) -> Iterator[DriveFrame]:
     """The frames of a checked drive, read lazily: image, sparse and dense depth, pose, timestamp, frame number.
 
     Raises :class:`DcslamError` naming the file on an unreadable image, an 8-bit or truncated depth PNG, or sizes
@@ -329,5 +328,5 @@ def read_drive(index: DriveIndex) -> Iterator[Frame]:
             if depth.shape != rgb.shape[:2]:
                 raise DcslamError(f"{drive.depth_path(kind, frame_id)}: depth is {depth.shape[1]}x{depth.shape[0]} "
                                   f"but image {drive.image_path(frame_id).name} is {rgb.shape[1]}x{rgb.shape[0]}")
-        yield Frame(rgb=rgb, sparse=sparse, dense=dense, T_world_cam=index.T_world_cam[i],
+        yield DriveFrame(rgb=rgb, sparse=sparse, dense=dense, T_world_cam=index.T_world_cam[i],
                     timestamp=float(index.timestamps[i]), frame_id=int(frame_id))
