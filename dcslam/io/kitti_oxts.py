@@ -62,7 +62,8 @@ class OxtsPacket:
     @classmethod
     def from_values(cls, values) -> "OxtsPacket":
         """30 numbers in the order of :data:`OXTS_FIELDS` → a packet (the last five rounded to integers)."""
-        return cls(**{name: (int(round(x)) if name in _INT_FIELDS else float(x)) for name, x in zip(OXTS_FIELDS, values)})
+        return cls(**{name: (int(round(x)) if name in _INT_FIELDS else float(x))
+                      for name, x in zip(OXTS_FIELDS, values)})
 
     def to_line(self) -> str:
         """The packet as one KITTI text line (floats with 15 significant digits, the last five as integers)."""

@@ -21,8 +21,8 @@ import numpy as np
 
 from dcslam.errors import DcslamError
 from dcslam.geometry.rotations import quaternion_to_rotation, rotation_to_quaternion, slerp
-from dcslam.io.tum_rgbd import (DEPTH_SCALE, HEIGHT, ICL, ICL_K, INTRINSICS_FILE, MAX_DIFFERENCE_S, MAX_POSE_GAP_S,
-                                TUM, TUM_K, WIDTH, format_time, associate, read_associations, read_depth_png,
+from dcslam.io.tum_rgbd import (DEPTH_SCALE, HEIGHT, ICL, ICL_K, INTRINSICS_FILE, MAX_DIFFERENCE_S, MAX_POSE_GAP_S, TUM,
+                                TUM_K, WIDTH, associate, format_time, read_associations, read_depth_png,
                                 read_intrinsics, read_list, read_rgb_png)
 
 

@@ -26,7 +26,8 @@ def test_depth_that_does_not_fit_is_no_value(tmp_path):
 
 def test_malformed(tmp_path):
     cv2.imwrite(str(tmp_path / "rgb16.png"), np.zeros((3, 4, 3), np.uint16))
-    with pytest.raises(DcslamError, match=r"rgb16.png: expected a 16-bit single-channel depth PNG \(metres = value / 256"):
+    expected = r"rgb16.png: expected a 16-bit single-channel depth PNG \(metres = value / 256\)"
+    with pytest.raises(DcslamError, match=expected):
         read_depth_png(tmp_path / "rgb16.png", 256.0)
     (tmp_path / "cut.png").write_bytes(b"\x89PNG\r\n")
     with pytest.raises(DcslamError, match="cut.png: not a readable PNG"):

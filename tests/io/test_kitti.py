@@ -143,7 +143,7 @@ class TestCalibration:
 
     def test_missing_entry(self, tmp_path):
         path = self._copy(tmp_path) / "calib_velo_to_cam.txt"
-        path.write_text("".join(l for l in path.read_text().splitlines(True) if not l.startswith("T:")))
+        path.write_text("".join(line for line in path.read_text().splitlines(True) if not line.startswith("T:")))
         with pytest.raises(DcslamError, match="missing entry 'T'"):
             kitti.read_calibration(tmp_path)
 

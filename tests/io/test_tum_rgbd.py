@@ -1,5 +1,5 @@
-"""TUM RGB-D and ICL-NUIM file formats: lists, associations, depth and colour PNGs, intrinsics (IclWriter round trips through
-tests/io/test_tum_sequence.py)."""
+"""TUM RGB-D and ICL-NUIM file formats: lists, associations, depth and colour PNGs, intrinsics (IclWriter round
+trips through tests/io/test_tum_sequence.py)."""
 import cv2
 import numpy as np
 import pytest

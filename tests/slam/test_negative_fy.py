@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from dcslam.geometry.se3 import pose_error
-from dcslam.slam.fusion import PointFusion, surfel_radius
 from dcslam.slam.frame import prepare_frame
+from dcslam.slam.fusion import PointFusion, surfel_radius
 from dcslam.slam.odometry import ICPOdometry
 from dcslam.slam.pipeline import SLAM
 from dcslam.synth import indoor

@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
+from dcslam.geometry.rotations import rotation_from_rpy
 from dcslam.synth.raycast import NO_HIT, CameraGrid, cast, intersect, intersect_terrain, local_normals
 from dcslam.synth.street.scene import BOX, CYLINDER, ELLIPSOID, Shape
 from dcslam.synth.street.sensors import make_lidar_grid
-from dcslam.geometry.rotations import rotation_from_rpy
 from dcslam.synth.street.trajectory import Terrain
 
 FLAT = Terrain(amplitude=np.zeros(1), wave=np.ones((1, 2)), phase=np.zeros(1))

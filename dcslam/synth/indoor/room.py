@@ -104,7 +104,8 @@ class _Builder:
         rng = self.rng
         for _ in range(rng.integers(1, 4)):
             kind = rng.integers(4)
-            r = (rng.uniform(0.04, 0.08), rng.uniform(0.06, 0.12), rng.uniform(0.06, 0.15), rng.uniform(0.1, 0.16))[kind]
+            r = (rng.uniform(0.04, 0.08), rng.uniform(0.06, 0.12), rng.uniform(0.06, 0.15),
+                 rng.uniform(0.1, 0.16))[kind]
             if t1 - t0 < 2 * r + 0.04 or s1 - s0 < 2 * r + 0.04:
                 continue
             s, t = rng.uniform(s0 + r + 0.02, s1 - r - 0.02), rng.uniform(t0 + r + 0.02, t1 - r - 0.02)

@@ -34,7 +34,8 @@ from dcslam.synth.raycast import CameraGrid
 from dcslam.synth.street.scene import Scene, build_scene
 from dcslam.synth.street.sensors import (GroundTexture, consistent_groundtruth, make_lidar_grid, project_points,
                                          render_camera, scan_lidar, stereo_valid)
-from dcslam.synth.street.trajectory import Drive, Motion, Path as StreetPath, oxts_packets
+from dcslam.synth.street.trajectory import Drive, Motion, oxts_packets
+from dcslam.synth.street.trajectory import Path as StreetPath
 from dcslam.synth.terrain import Terrain
 
 DATE = "2011_09_26"

@@ -72,9 +72,9 @@ def _car_parts(rng: np.random.Generator) -> tuple:
     length, width = rng.uniform(3.9, 4.8), rng.uniform(1.7, 1.9)
     color = rng.choice(np.array([[0.7, 0.1, 0.1], [0.1, 0.2, 0.6], [0.8, 0.8, 0.8], [0.15, 0.15, 0.15],
                                  [0.5, 0.5, 0.55], [0.9, 0.9, 0.85], [0.2, 0.4, 0.2]]))
-    I = np.eye(3)
-    body = Shape(BOX, I, np.array([0.0, 0.0, 0.75]), np.array([length / 2, width / 2, 0.4]), CAR, color)
-    cabin = Shape(BOX, I, np.array([-0.2, 0.0, 1.35]), np.array([length * 0.3, width / 2 - 0.08, 0.25]), GLASS,
+    R_level = np.eye(3)
+    body = Shape(BOX, R_level, np.array([0.0, 0.0, 0.75]), np.array([length / 2, width / 2, 0.4]), CAR, color)
+    cabin = Shape(BOX, R_level, np.array([-0.2, 0.0, 1.35]), np.array([length * 0.3, width / 2 - 0.08, 0.25]), GLASS,
                   color * 0.5)
     R_wheel = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # local z (cylinder axis) → car y
     wheels = tuple(Shape(CYLINDER, R_wheel, np.array([sx * (length / 2 - 0.75), sy * (width / 2 - 0.1), 0.33]),

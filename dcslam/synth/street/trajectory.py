@@ -106,7 +106,7 @@ class Drive:
         pitch = -np.arctan(gx * forward[:, 0] + gy * forward[:, 1]) + wob[1]
         yaw = heading + wob[2]
         T = np.tile(np.eye(4), (len(t), 1, 1))
-        T[:, :3, :3] = rotation_from_rpy(roll, pitch, yaw)  # the Velodyne axes follow the car body (x fwd, y left, z up)
+        T[:, :3, :3] = rotation_from_rpy(roll, pitch, yaw)  # Velodyne axes follow the car body (x fwd, y left, z up)
         T[:, :3, 3] = np.concatenate([xy, (self.terrain.height(xy[:, 0], xy[:, 1]) + LIDAR_HEIGHT_M)[:, None]], 1)
         return T
 

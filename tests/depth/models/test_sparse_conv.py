@@ -66,8 +66,9 @@ def _call(layer, x, m, w, b):
 class TestSparseConvNet:
     def test_architecture_is_the_papers(self):
         net = SparseConvNet()
-        assert [l.kernel_size for l in net.layers] == [11, 7, 5, 3, 3, 1]
-        assert [(l.in_channels, l.out_channels) for l in net.layers] == [(1, 16)] + [(16, 16)] * 4 + [(16, 1)]
+        assert [layer.kernel_size for layer in net.layers] == [11, 7, 5, 3, 3, 1]
+        channels = [(layer.in_channels, layer.out_channels) for layer in net.layers]
+        assert channels == [(1, 16)] + [(16, 16)] * 4 + [(16, 1)]
 
     @pytest.mark.parametrize("batch", [1, 3])
     def test_cardinality(self, batch):

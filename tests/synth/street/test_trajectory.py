@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from dcslam.synth.street.generate import CALIB_DIR, make_drive, street_calibration
 from dcslam.geometry.rotations import rpy_from_rotation
 from dcslam.io.kitti_calib import copy_calibration, read_calibration
 from dcslam.io.kitti_oxts import OxtsPacket, camera_poses, oxts_to_T_world_imu, read_oxts, write_oxts
+from dcslam.synth.street.generate import CALIB_DIR, make_drive, street_calibration
 from dcslam.synth.street.trajectory import LIDAR_HEIGHT_M
 
 
