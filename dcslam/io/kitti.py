@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.io import depth_png
+from dcslam.io import png
 from dcslam.io.drive import DriveFrame
 from dcslam.io.kitti_calib import CALIB_FILES, Calibration, project_velodyne, read_calibration  # noqa: F401
 from dcslam.io.kitti_oxts import OxtsPacket, camera_poses, oxts_to_T_world_imu, read_oxts, rebase, write_oxts  # noqa: F401
@@ -42,38 +42,23 @@ def frame_name(frame_id: int, suffix: str) -> str:
 
 
 def read_depth_png(path: Path | str) -> np.ndarray:
-    """A KITTI uint16 depth PNG → (H, W) float32 metres (value / 256, 0 = no value); see :mod:`dcslam.io.depth_png`."""
-    return depth_png.read_depth_png(path, DEPTH_SCALE)
+    """A KITTI uint16 depth PNG → (H, W) float32 metres (value / 256, 0 = no value); see :mod:`dcslam.io.png`."""
+    return png.read_depth_png(path, DEPTH_SCALE)
 
 
 def write_depth_png(path: Path | str, depth_m: np.ndarray) -> Path:
-    """(H, W) metres → KITTI uint16 depth PNG (value = round(256 · metres)); see :mod:`dcslam.io.depth_png`."""
-    return depth_png.write_depth_png(path, depth_m, DEPTH_SCALE)
+    """(H, W) metres → KITTI uint16 depth PNG (value = round(256 · metres)); see :mod:`dcslam.io.png`."""
+    return png.write_depth_png(path, depth_m, DEPTH_SCALE)
 
 
 def read_image(path: Path | str) -> np.ndarray:
-    """A KITTI colour PNG → (H, W, 3) uint8 RGB."""
-    import cv2
-
-    path = Path(path)
-    if not path.exists():
-        raise DcslamError(f"image {path} not found")
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise DcslamError(f"{path}: not a readable image (truncated or corrupt?)")
-    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    """A KITTI colour PNG → (H, W, 3) uint8 RGB; see :mod:`dcslam.io.png`."""
+    return png.read_rgb_png(path)
 
 
-def write_image(path: Path | str, rgb: np.ndarray) -> None:
-    """(H, W, 3) uint8 RGB → PNG."""
-    import cv2
-
-    rgb = np.asarray(rgb)
-    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
-        raise DcslamError(f"image has shape {rgb.shape} and dtype {rgb.dtype}, expected (H, W, 3) uint8")
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
-        raise DcslamError(f"could not write {path}")
+def write_image(path: Path | str, rgb: np.ndarray) -> Path:
+    """(H, W, 3) uint8 RGB → PNG (OpenCV's default compression); see :mod:`dcslam.io.png`."""
+    return png.write_rgb_png(path, rgb)
 
 
 def read_velodyne(path: Path | str) -> np.ndarray:

@@ -1,10 +1,10 @@
-"""The one 16-bit depth PNG codec, at KITTI's and TUM's scales."""
+"""The PNG codecs: 16-bit depth at KITTI's and TUM's scales, 8-bit colour."""
 import cv2
 import numpy as np
 import pytest
 
 from dcslam.errors import DcslamError
-from dcslam.io.depth_png import read_depth_png, write_depth_png
+from dcslam.io.png import read_depth_png, read_rgb_png, write_depth_png, write_rgb_png
 
 
 @pytest.mark.parametrize("scale", [256.0, 5000.0])
@@ -36,3 +36,25 @@ def test_malformed(tmp_path):
         read_depth_png(tmp_path / "none.png", 256.0)
     with pytest.raises(DcslamError, match=r"expected \(H, W\)"):
         write_depth_png(tmp_path / "x.png", np.zeros((2, 2, 1)), 256.0)
+
+
+def test_rgb_round_trip_compression_changes_bytes_not_pixels(tmp_path):
+    rgb = np.random.default_rng(1).integers(0, 256, (6, 5, 3), dtype=np.uint8)
+    write_rgb_png(tmp_path / "a.png", rgb)
+    write_rgb_png(tmp_path / "b.png", rgb, compression=9)
+    for name in ("a.png", "b.png"):
+        assert np.array_equal(read_rgb_png(tmp_path / name), rgb)
+    assert np.array_equal(cv2.imread(str(tmp_path / "a.png"))[..., ::-1], rgb)  # BGR on disk
+    cv2.imwrite(str(tmp_path / "rgba.png"), np.dstack([rgb[..., ::-1], np.full((6, 5), 9, np.uint8)]))
+    assert np.array_equal(read_rgb_png(tmp_path / "rgba.png"), rgb)
+
+
+def test_rgb_malformed(tmp_path):
+    cv2.imwrite(str(tmp_path / "deep.png"), np.zeros((3, 4, 3), np.uint16))
+    with pytest.raises(DcslamError, match="deep.png: expected an 8-bit colour image"):
+        read_rgb_png(tmp_path / "deep.png")
+    (tmp_path / "cut.png").write_bytes(b"\x89PNG\r\n")
+    with pytest.raises(DcslamError, match="cut.png: not a readable image"):
+        read_rgb_png(tmp_path / "cut.png")
+    with pytest.raises(DcslamError, match=r"expected \(H, W, 3\) uint8"):
+        write_rgb_png(tmp_path / "x.png", np.zeros((2, 2), np.uint8))
