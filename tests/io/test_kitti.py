@@ -7,7 +7,8 @@ import pytest
 
 from dcslam.errors import DcslamError
 from dcslam.io import kitti
-from dcslam.io.kitti_oxts import mercator_xyz, parse_oxts_line
+from dcslam.io.kitti_oxts import (OxtsPacket, mercator_to_lat_lon_alt, mercator_xyz, parse_oxts_line,
+                                  write_oxts_dataformat)
 
 SAMPLE = Path(__file__).parents[1] / "data" / "kitti-sample"
 DATE_DIR = SAMPLE / "raw" / "2011_09_26"
@@ -214,6 +215,18 @@ class TestOxts:
         assert d[0] == pytest.approx(scale * 6378137.0 * np.deg2rad(0.001))
         assert d[1] == pytest.approx(6378137.0 * np.deg2rad(0.001), rel=1e-4)  # 1/cos(lat) · cos(lat0) ≈ 1
         assert d[2] == 1.0
+
+    def test_mercator_inverse(self):
+        scale = np.cos(np.deg2rad(49.0))
+        lat, lon, alt = [49.0, 49.01, 48.99], [8.0, 8.4, 7.9], [100.0, 101.0, 99.5]
+        back = mercator_to_lat_lon_alt(mercator_xyz(lat, lon, alt, scale), scale)
+        np.testing.assert_allclose(np.stack(back), [lat, lon, alt], rtol=0, atol=1e-11)
+
+    def test_packet_from_values_and_dataformat_file(self, tmp_path, packets):
+        assert OxtsPacket.from_values(packets[3].values()) == packets[3]
+        assert isinstance(OxtsPacket.from_values(np.array(packets[3].values(), float)).numsats, int)
+        write_oxts_dataformat(tmp_path / "dataformat.txt")
+        assert (tmp_path / "dataformat.txt").read_bytes() == (RAW / "oxts" / "dataformat.txt").read_bytes()
 
     def test_camera_poses(self, packets, calib):
         T_world_imu = kitti.oxts_to_T_world_imu(packets)
