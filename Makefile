@@ -27,6 +27,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 test: setup
+	$(PY) -m ruff check dcslam tests benchmarks examples
 	$(PY) -m pytest -q tests
 
 # The main job: generate KITTI-format drives (or read KITTI_ROOT=...), train the four recipes, predict, filter,

@@ -31,14 +31,14 @@ def main() -> None:
           f"{drives} drive(s) of {frames} frames", flush=True)
 
     from dcslam.synth import generate, make_drive
-    from dcslam.synth.calib import load_rig
     from dcslam.synth.raycast import CameraGrid
-    from dcslam.synth.sensors import GroundTexture, make_lidar_grid, render_camera, scan_lidar
+    from dcslam.synth.street.generate import street_calibration
+    from dcslam.synth.street.sensors import GroundTexture, make_lidar_grid, render_camera, scan_lidar
 
-    rig = load_rig()
+    rig = street_calibration()
     truth, rng = make_drive(0, 0, 11, rig)
     scene, t = truth.scene, float(truth.timestamps[5] - truth.timestamps[0])
-    camera, lidar, ground = CameraGrid(rig.K_cam2, rig.width, rig.height), make_lidar_grid(), GroundTexture(scene)
+    camera, lidar, ground = CameraGrid(rig.K_cam2, *rig.size_rect_02), make_lidar_grid(), GroundTexture(scene)
     T_world_cam = truth.T_world_imu[5] @ np.linalg.inv(rig.T_cam2_imu)
     T_world_velo = scene.drive.T_world_velo(np.array([t]))[0]
     start = time.perf_counter()

@@ -45,7 +45,8 @@ def bench_ip_basic(sparse, gt, repeat):
     from dcslam.depth.models.ip_basic import IPBasic
 
     print("\nIP-Basic on the KITTI frame (1242 x 375)")
-    print(f"{'variant':<24}{'Hz':>8}{'ms/frame':>10}{'MAE mm':>9}{'RMSE mm':>9}   paper: 90 Hz (1 core), 302.6 / 1288.5 mm")
+    print(f"{'variant':<24}{'Hz':>8}{'ms/frame':>10}{'MAE mm':>9}{'RMSE mm':>9}"
+          "   paper: 90 Hz (1 core), 302.6 / 1288.5 mm")
     valid = gt > 0
     for variant, blur in (("fast", "bilateral"), ("fast", "gaussian"), ("multiscale", "gaussian")):
         f = IPBasic(variant, blur=blur)

@@ -36,7 +36,7 @@ from torch import nn
 
 from dcslam.depth.chamfer import chamfer_distance
 from dcslam.depth.data import check_view, frame_windows
-from dcslam.depth.losses import depth_errors
+from dcslam.depth.losses import batch_depth_errors
 from dcslam.depth.maps import MapChamfer
 from dcslam.errors import DcslamError
 from dcslam.eval.tables import Column, Table
@@ -299,7 +299,7 @@ def evaluate(model: DepthDenoiser, frames: list[Frames], config: DenoiseConfig, 
             K, T = part.K.to(device), part.T_world_cam.to(device)
             clean_map = map_builder(clean, K, T).points
             for kind, depth in outputs.items():
-                e = depth_errors(depth, clean)
+                e = batch_depth_errors(depth, clean)
                 sums[kind]["sq"] += e["mse"] * e["pixels"]
                 sums[kind]["abs"] += e["mae_mm"] * e["pixels"]
                 sums[kind]["psnr"] += depth_psnr_db(depth, clean).tolist()

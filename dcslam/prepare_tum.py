@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.io.drive import DriveWriter, Frame, read_splits
+from dcslam.io.drive import DriveFrame, DriveWriter, read_splits
 from dcslam.io.tum_rgbd import read_depth_png
 from dcslam.io.tum_sequence import Sequence, check_image_size, find_sequences, index_sequence
 from dcslam.prepare import SPLIT_NAMES, PreparedDrive, PrepareResult, proportional_splits
@@ -70,7 +70,7 @@ def _splits(names: list[str], splits_file: Path | str | None, notes: list[str]) 
 def _frames(sequence: Sequence, sparse_stride: int):
     T0_inv = np.linalg.inv(sequence.T_world_cam[0])
     for k, (rgb, depth) in enumerate(sequence.frames()):
-        yield Frame(rgb=rgb, sparse=sparse_subsample(depth, sparse_stride), dense=depth,
+        yield DriveFrame(rgb=rgb, sparse=sparse_subsample(depth, sparse_stride), dense=depth,
                     T_world_cam=T0_inv @ sequence.T_world_cam[k], timestamp=float(sequence.timestamps[k]),
                     frame_id=int(sequence.frame_ids[k]))
 

@@ -16,16 +16,15 @@ renamed when complete, so an interrupted stage leaves no half-written file.
 """
 from __future__ import annotations
 
-import contextlib
-import json
 import os
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 from dcslam import __version__
 from dcslam.errors import DcslamError
+from dcslam.io.atomic import atomic_output, write_json_atomic, write_text_atomic  # noqa: F401 (moved to io/)
 
 ENV_VAR = "DCSLAM_WORKSPACE"
 
@@ -74,50 +73,6 @@ class Workspace:
     @property
     def results(self) -> Path:
         return self.root / "results"
-
-
-def _temporary_name(path: Path) -> Path:
-    return path.with_name(f".{path.name}.tmp-{os.getpid()}")
-
-
-@contextlib.contextmanager
-def atomic_output(path: Path | str, force: bool = False) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; rename it to ``path`` only if the block completes.
-
-    Raises :class:`DcslamError` if ``path`` exists and ``force`` is false. On any exception (Ctrl-C included) the
-    temporary file is removed and ``path`` is left as it was.
-    """
-    path = Path(path)
-    if path.exists() and not force:
-        raise DcslamError(f"{path} exists; pass --force to overwrite it")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _temporary_name(path)
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
-        raise
-
-
-def write_text_atomic(path: Path | str, text: str, force: bool = True) -> Path:
-    """Write ``text`` to ``path`` atomically (overwriting by default: used for small derived files)."""
-    with atomic_output(path, force=force) as tmp:
-        tmp.write_text(text)
-    return Path(path)
-
-
-def write_json_atomic(path: Path | str, obj, force: bool = True) -> Path:
-    return write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=False, default=_json_default) + "\n", force)
-
-
-def _json_default(obj):
-    if isinstance(obj, Path):
-        return str(obj)
-    if hasattr(obj, "tolist"):
-        return obj.tolist()
-    raise TypeError(f"cannot write {type(obj).__name__} as JSON")
 
 
 def stage_config(stage: str, settings: dict) -> dict:

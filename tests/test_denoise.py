@@ -11,7 +11,7 @@ from dcslam.denoise import (MIN_NOISY_DEPTH_M, DenoiseConfig, DepthDenoiser, add
                             depth_psnr_db, drives_of, run_denoising, split_frames)
 from dcslam.depth.models import build_model, load_model
 from dcslam.errors import DcslamError
-from dcslam.io.drive import DriveWriter, Frame
+from dcslam.io.drive import DriveFrame, DriveWriter
 
 H, W = 48, 64
 K_ICL = np.array([[48.12, 0, 31.5], [0, -48.0, 23.5], [0, 0, 1.0]])  # ICL-NUIM's camera at 1/10 (fy < 0)
@@ -50,7 +50,7 @@ def write_room(path, n: int, seed: int, name: str, split: str = "train"):
             T[:3, 3] = [0.3 * np.sin(yaw), 0.2, 0.3 * np.cos(2 * yaw)]
             dense = _room_depth(T, boxes)
             dense[:3, :5] = 0  # a few pixels without depth
-            writer.append(Frame(rgb=np.zeros((H, W, 3), np.uint8), sparse=np.zeros_like(dense), dense=dense,
+            writer.append(DriveFrame(rgb=np.zeros((H, W, 3), np.uint8), sparse=np.zeros_like(dense), dense=dense,
                                 T_world_cam=T, timestamp=float(i), frame_id=i))
     return path
 

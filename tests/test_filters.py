@@ -2,9 +2,9 @@ import numpy as np
 import pytest
 
 from dcslam.errors import DcslamError
-from dcslam.filters import (PRESETS, BilateralFilter, DiscontinuityFilter, FilterChain, HiddenPointFilter,
-                            RangeFilter, StatisticalOutlierFilter, backproject, filter_drives, filter_frames)
-from dcslam.io.drive import DriveWriter, Frame, read_layer
+from dcslam.filters import (PRESETS, BilateralFilter, DiscontinuityFilter, FilterChain, HiddenPointFilter, RangeFilter,
+                            StatisticalOutlierFilter, backproject, filter_drives, filter_frames)
+from dcslam.io.drive import DriveFrame, DriveWriter, read_layer
 
 K = np.array([[50.0, 0, 24], [0, 50.0, 16], [0, 0, 1]])
 
@@ -140,8 +140,8 @@ def write_drive(path, n=3, h=8, w=12, seed=0):
         for i in range(n):
             dense = rng.uniform(5, 20, (h, w)).astype(np.float32)
             sparse = np.where(rng.random((h, w)) < 0.3, dense, 0).astype(np.float32)
-            writer.append(Frame(rgb=np.zeros((h, w, 3), np.uint8), sparse=sparse, dense=dense, T_world_cam=np.eye(4),
-                                timestamp=0.1 * i, frame_id=i))
+            writer.append(DriveFrame(rgb=np.zeros((h, w, 3), np.uint8), sparse=sparse, dense=dense,
+                                     T_world_cam=np.eye(4), timestamp=0.1 * i, frame_id=i))
     return path
 
 

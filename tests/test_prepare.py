@@ -1,5 +1,4 @@
 """prepare_kitti: KITTI roots (real sample, tiny generated ones) → drive files, splits.json, config."""
-import importlib.util
 import json
 from pathlib import Path
 
@@ -11,10 +10,7 @@ from dcslam.errors import DcslamError
 from dcslam.io import kitti
 from dcslam.io.drive import DriveFile, read_splits
 from dcslam.prepare import THESIS_SPLITS, prepare_kitti, proportional_splits
-
-_spec = importlib.util.spec_from_file_location("kitti_fixtures", Path(__file__).parent / "io" / "kitti_fixtures.py")
-fx = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fx)
+from tests.fixtures import kitti as fx
 
 
 @pytest.fixture

@@ -52,7 +52,8 @@ def masked_mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> 
 
 
 class MaskedMSE:
-    """The MSE training loss with the thesis's ``sparse`` or ``dense`` mask: ``MaskedMSE("dense")(pred, sparse, dense)``."""
+    """The MSE training loss with the thesis's ``sparse`` or ``dense`` mask:
+    ``MaskedMSE("dense")(pred, sparse, dense)``."""
 
     def __init__(self, mask: str = "dense"):
         if mask not in MASKS:
@@ -63,8 +64,9 @@ class MaskedMSE:
         return masked_mse(pred, dense, supervision_mask(sparse, dense, self.mask))
 
 
-def depth_errors(pred: torch.Tensor, dense: torch.Tensor) -> dict[str, float]:
-    """MSE (m²), MAE and RMSE (mm) over pixels with ground truth, and the pixel count.
+def batch_depth_errors(pred: torch.Tensor, dense: torch.Tensor) -> dict[str, float]:
+    """MSE (m²), MAE and RMSE (mm) of a batch over the pixels with ground truth, and the pixel count: the quick
+    training / validation summary (for the devkit's scores of a drive see :func:`dcslam.eval.depth.depth_errors`).
 
     Shape:
         pred, dense: (B, 1, H, W) metres

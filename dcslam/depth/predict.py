@@ -15,7 +15,7 @@ import numpy as np
 from dcslam.depth.data import check_view, downscale_depth
 from dcslam.depth.models import IP_BASIC_NAMES
 from dcslam.errors import DcslamError
-from dcslam.eval.depth import MIN_DEPTH_M
+from dcslam.constants import MIN_DEPTH_M
 
 
 class NetworkCompleter:

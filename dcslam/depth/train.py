@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from dcslam.depth.data import DriveFrames, check_view, frame_windows
-from dcslam.depth.losses import MASKS, MaskedMSE, depth_errors
+from dcslam.depth.losses import MASKS, MaskedMSE, batch_depth_errors
 from dcslam.depth.maps import MapChamfer
 from dcslam.depth.models import architectures, build_model, model_record, save_model
 from dcslam.errors import DcslamError
@@ -150,7 +150,7 @@ def validate(model, drives: list[DriveFrames], map_frames: int, device, map_buil
                 batch = frames.load(window).to(device)
                 pred = model(batch.sparse, (batch.sparse > 0).to(batch.sparse.dtype))
                 chamfers.append(float(chamfer(pred, batch.dense, batch.K, batch.T_world_cam)))
-                e = depth_errors(pred, batch.dense)
+                e = batch_depth_errors(pred, batch.dense)
                 if e["pixels"]:
                     sq += e["mse"] * e["pixels"]
                     ab += e["mae_mm"] * e["pixels"]

@@ -39,11 +39,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from dcslam.constants import MIN_DEPTH_M
 from dcslam.errors import DcslamError
 
 METRICS = ("mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km")
-#: Depths below this (metres) are holes: when scored, in prediction layers, and SLAM's ``FrameSettings.min_depth``.
-MIN_DEPTH_M = 0.1
 #: The devkit's depth of a pixel it could not interpolate (``DepthImage::setInvalid``), scored as is.
 DEVKIT_INVALID_M = -1.0
 #: The two departures in one paragraph, for ``--help`` and the README.

@@ -6,7 +6,8 @@ each cloud, summed over both directions::
     chamfer(A, B) = mean_a min_b ‖a − b‖² + mean_b min_a ‖a − b‖²      (m²)
 
 Beside it: ``accuracy`` = mean distance from the map to the ground truth (m), ``completeness`` = mean distance from
-the ground truth to the map (m). Nearest neighbours are exact (a k-d tree), so millions of points are fine on a CPU.
+the ground truth to the map (m). Nearest neighbours are exact (:mod:`dcslam.geometry.nearest`, the search the
+training loss uses), so millions of points are fine on a CPU.
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
+from dcslam.geometry.nearest import nearest_indices, squared_distances
 
 
 @dataclass(frozen=True)
@@ -41,22 +43,17 @@ def _check_points(points: np.ndarray, name: str) -> np.ndarray:
     return points
 
 
-def nearest_distances(source: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Distance from each source point to its nearest target point. Shapes: (N, 3), (M, 3) → (N,)."""
-    from scipy.spatial import cKDTree
-
-    distances, _ = cKDTree(target).query(source, k=1, workers=-1)
-    return distances
-
-
 def chamfer(map_points: np.ndarray, gt_points: np.ndarray) -> MapScores:
     """Map scores of ``map_points`` (N, 3) against ``gt_points`` (M, 3), metres."""
     map_points = _check_points(map_points, "map")
     gt_points = _check_points(gt_points, "ground-truth map")
-    to_gt = nearest_distances(map_points, gt_points)
-    to_map = nearest_distances(gt_points, map_points)
-    return MapScores(chamfer_m2=float((to_gt ** 2).mean() + (to_map ** 2).mean()), accuracy_m=float(to_gt.mean()),
-                     completeness_m=float(to_map.mean()), map_points=len(map_points), gt_points=len(gt_points))
+    to_gt, to_map = nearest_indices(map_points, gt_points)
+    squared_to_gt = squared_distances(map_points, gt_points, to_gt)
+    squared_to_map = squared_distances(gt_points, map_points, to_map)
+    return MapScores(chamfer_m2=float(squared_to_gt.mean() + squared_to_map.mean()),
+                     accuracy_m=float(np.sqrt(squared_to_gt).mean()),
+                     completeness_m=float(np.sqrt(squared_to_map).mean()),
+                     map_points=len(map_points), gt_points=len(gt_points))
 
 
 def read_points(path: Path | str) -> np.ndarray:

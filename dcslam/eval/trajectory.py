@@ -70,7 +70,7 @@ def invert_se3(T: np.ndarray) -> np.ndarray:
 def rotation_angle(R: np.ndarray) -> np.ndarray:
     """(N, 3, 3) rotations → (N,) angles in radians in [0, π], from the unit quaternion (accurate near 0 and π,
     where ``acos`` of the trace is not)."""
-    from dcslam.io.tum import rotation_to_quaternion
+    from dcslam.geometry.rotations import rotation_to_quaternion
 
     q = rotation_to_quaternion(np.asarray(R, dtype=np.float64))
     return 2.0 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), np.abs(q[..., 3]))

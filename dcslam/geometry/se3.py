@@ -2,7 +2,8 @@
 
 Conventions: ``T_a_b`` maps coordinates in frame b to frame a (``p_a = T_a_b @ p_b``). A twist ``xi`` is
 ``(v, w)``: translation part first, rotation part (axis-angle) last, and ``exp(xi)`` is the 4 x 4 matrix
-``[[R, V v], [0, 1]]``. Pose updates are applied on the left: ``T <- exp(xi) @ T``.
+``[[R, V v], [0, 1]]``. The pose solvers (:mod:`dcslam.slam.solvers`) apply updates on the right,
+``T_world_cam <- T_world_cam @ exp(xi)``, so ``xi`` is a motion expressed in the camera's own frame.
 """
 from __future__ import annotations
 

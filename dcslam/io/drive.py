@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.workspace import atomic_output
+from dcslam.io.atomic import atomic_output
 
 DRIVE_SCHEMA = "dcslam.drive/1"
 LAYER_SCHEMA = "dcslam.layer/1"
@@ -39,7 +39,7 @@ _COMPRESSION = dict(compression="gzip", compression_opts=1, shuffle=True)
 
 
 @dataclass(frozen=True)
-class Frame:
+class DriveFrame:
     """One frame of a drive. Shapes: rgb (H, W, 3) uint8, sparse and dense (H, W) float32 metres,
     T_world_cam (4, 4) float64."""
 
@@ -51,7 +51,7 @@ class Frame:
     frame_id: int
 
 
-def _check_frame(frame: Frame, height: int, width: int) -> None:
+def _check_frame(frame: DriveFrame, height: int, width: int) -> None:
     expect = {"rgb": ((height, width, 3), np.uint8), "sparse": ((height, width), None),
               "dense": ((height, width), None), "T_world_cam": ((4, 4), None)}
     for name, (shape, dtype) in expect.items():
@@ -102,7 +102,7 @@ class DriveWriter:
             raise
         return self
 
-    def append(self, frame: Frame) -> None:
+    def append(self, frame: DriveFrame) -> None:
         _check_frame(frame, self.height, self.width)
         n = len(self._frames)
         self._rgb.resize(n + 1, axis=0)
@@ -197,11 +197,11 @@ class DriveFile:
             raise DcslamError(f"unknown depth kind {kind!r}; expected one of {', '.join(DEPTH_KINDS)}")
         return self._h5[f"depth/{kind}"][i]
 
-    def frame(self, i: int) -> Frame:
-        return Frame(rgb=self.rgb(i), sparse=self.depth("sparse", i), dense=self.depth("dense", i),
+    def frame(self, i: int) -> DriveFrame:
+        return DriveFrame(rgb=self.rgb(i), sparse=self.depth("sparse", i), dense=self.depth("dense", i),
                      T_world_cam=self.poses[i], timestamp=float(self.timestamps[i]), frame_id=int(self.frame_ids[i]))
 
-    def __iter__(self) -> Iterator[Frame]:
+    def __iter__(self) -> Iterator[DriveFrame]:
         for i in range(len(self)):
             yield self.frame(i)
 

@@ -11,7 +11,7 @@ Layout under a KITTI root (real, or written by ``dcslam synth``)::
 
 This module holds the per-file formats (depth PNG, image, Velodyne scan, timestamps) and the drive-level reading:
 :func:`find_drives` lists drives, :func:`index_drive` checks that their files line up and works out timestamps and
-camera-2 poses, :func:`read_drive` yields :class:`dcslam.io.drive.Frame` records. Calibration is in
+camera-2 poses, :func:`read_drive` yields :class:`dcslam.io.drive.DriveFrame` records. Calibration is in
 :mod:`dcslam.io.kitti_calib`, OXTS packets and poses in :mod:`dcslam.io.kitti_oxts` (both re-exported here).
 
 The depth benchmark has depth only for frames 5 .. n-6 of each raw drive; frames are aligned by their number.
@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.io.drive import Frame
+from dcslam.io import png
+from dcslam.io.drive import DriveFrame
 from dcslam.io.kitti_calib import CALIB_FILES, Calibration, project_velodyne, read_calibration  # noqa: F401
-from dcslam.io.kitti_oxts import (OxtsPacket, camera_poses, oxts_to_T_world_imu, read_oxts,  # noqa: F401
-                                  rebase, write_oxts)
+from dcslam.io.kitti_oxts import OxtsPacket, camera_poses, oxts_to_T_world_imu, read_oxts, rebase, write_oxts  # noqa: F401
 
 DEPTH_SCALE = 256.0  # uint16 depth PNG: metres = value / 256, 0 = no value
 
@@ -42,57 +42,23 @@ def frame_name(frame_id: int, suffix: str) -> str:
 
 
 def read_depth_png(path: Path | str) -> np.ndarray:
-    """A KITTI uint16 depth PNG → (H, W) float32 metres (0 = no value). Fails on 8-bit or unreadable files."""
-    import cv2
-
-    path = Path(path)
-    if not path.exists():
-        raise DcslamError(f"depth PNG {path} not found")
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise DcslamError(f"{path}: not a readable PNG (truncated or corrupt?)")
-    if image.dtype != np.uint16 or image.ndim != 2:
-        raise DcslamError(f"{path}: expected a 16-bit single-channel depth PNG, got {image.dtype} with shape "
-                          f"{image.shape}")
-    return image.astype(np.float32) / DEPTH_SCALE
+    """A KITTI uint16 depth PNG → (H, W) float32 metres (value / 256, 0 = no value); see :mod:`dcslam.io.png`."""
+    return png.read_depth_png(path, DEPTH_SCALE)
 
 
-def write_depth_png(path: Path | str, depth_m: np.ndarray) -> None:
-    """(H, W) metres → KITTI uint16 depth PNG (value = round(256 · metres), clipped to 0..65535)."""
-    import cv2
-
-    depth_m = np.asarray(depth_m)
-    if depth_m.ndim != 2:
-        raise DcslamError(f"depth has shape {depth_m.shape}, expected (H, W)")
-    value = np.clip(np.rint(np.nan_to_num(depth_m, nan=0.0) * DEPTH_SCALE), 0, 65535).astype(np.uint16)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), value):
-        raise DcslamError(f"could not write {path}")
+def write_depth_png(path: Path | str, depth_m: np.ndarray) -> Path:
+    """(H, W) metres → KITTI uint16 depth PNG (value = round(256 · metres)); see :mod:`dcslam.io.png`."""
+    return png.write_depth_png(path, depth_m, DEPTH_SCALE)
 
 
 def read_image(path: Path | str) -> np.ndarray:
-    """A KITTI colour PNG → (H, W, 3) uint8 RGB."""
-    import cv2
-
-    path = Path(path)
-    if not path.exists():
-        raise DcslamError(f"image {path} not found")
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise DcslamError(f"{path}: not a readable image (truncated or corrupt?)")
-    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    """A KITTI colour PNG → (H, W, 3) uint8 RGB; see :mod:`dcslam.io.png`."""
+    return png.read_rgb_png(path)
 
 
-def write_image(path: Path | str, rgb: np.ndarray) -> None:
-    """(H, W, 3) uint8 RGB → PNG."""
-    import cv2
-
-    rgb = np.asarray(rgb)
-    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
-        raise DcslamError(f"image has shape {rgb.shape} and dtype {rgb.dtype}, expected (H, W, 3) uint8")
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
-        raise DcslamError(f"could not write {path}")
+def write_image(path: Path | str, rgb: np.ndarray) -> Path:
+    """(H, W, 3) uint8 RGB → PNG (OpenCV's default compression); see :mod:`dcslam.io.png`."""
+    return png.write_rgb_png(path, rgb)
 
 
 def read_velodyne(path: Path | str) -> np.ndarray:
@@ -332,7 +298,7 @@ def index_drive(drive: RawDrive) -> DriveIndex:
     return DriveIndex(drive, calib, ids, stamps[ids], rebase(T_world_cam_raw[ids]))
 
 
-def read_drive(index: DriveIndex) -> Iterator[Frame]:
+def read_drive(index: DriveIndex) -> Iterator[DriveFrame]:
     """The frames of a checked drive, read lazily: image, sparse and dense depth, pose, timestamp, frame number.
 
     Raises :class:`DcslamError` naming the file on an unreadable image, an 8-bit or truncated depth PNG, or sizes
@@ -347,5 +313,5 @@ def read_drive(index: DriveIndex) -> Iterator[Frame]:
             if depth.shape != rgb.shape[:2]:
                 raise DcslamError(f"{drive.depth_path(kind, frame_id)}: depth is {depth.shape[1]}x{depth.shape[0]} "
                                   f"but image {drive.image_path(frame_id).name} is {rgb.shape[1]}x{rgb.shape[0]}")
-        yield Frame(rgb=rgb, sparse=sparse, dense=dense, T_world_cam=index.T_world_cam[i],
+        yield DriveFrame(rgb=rgb, sparse=sparse, dense=dense, T_world_cam=index.T_world_cam[i],
                     timestamp=float(index.timestamps[i]), frame_id=int(frame_id))

@@ -15,12 +15,14 @@ its camera-2 poses sit 3.6 mm from ours. With the exact offset, ``K · T_cam2_ve
 """
 from __future__ import annotations
 
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from dcslam.errors import DcslamError
+from dcslam.io.atomic import atomic_output
 
 CALIB_FILES = ("calib_cam_to_cam.txt", "calib_velo_to_cam.txt", "calib_imu_to_velo.txt")
 
@@ -147,6 +149,24 @@ def read_calibration(date_dir: Path | str) -> Calibration:
         T_velo_imu=transform(imu["R"], _entry(imu, "T", 3, paths[2])),
         size_rect_02=(int(round(size[0])), int(round(size[1]))),
     )
+
+
+def copy_calibration(source_dir: Path | str, date_dir: Path | str, force: bool) -> None:
+    """Copy the three calibration files of ``source_dir`` into ``date_dir`` (``raw/<date>``), each atomically.
+
+    Files already there with the same bytes are left alone; different ones are an error unless ``force``.
+    """
+    source_dir, date_dir = Path(source_dir), Path(date_dir)
+    for name in CALIB_FILES:
+        source, target = source_dir / name, date_dir / name
+        if not source.exists():
+            raise DcslamError(f"calibration file {source} not found (expected KITTI raw layout raw/<date>/{name})")
+        if target.exists() and target.read_bytes() == source.read_bytes():
+            continue
+        if target.exists() and not force:
+            raise DcslamError(f"{target} exists and differs from {source}; pass --force to replace it")
+        with atomic_output(target, force=True) as tmp:
+            shutil.copyfile(source, tmp)
 
 
 def project_velodyne(points: np.ndarray, calib: Calibration, image_size: tuple[int, int] | None = None,

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
+from dcslam.geometry.rotations import rotation_from_rpy
 from dcslam.io.kitti_calib import Calibration
 
 EARTH_RADIUS_M = 6378137.0
@@ -58,6 +59,12 @@ class OxtsPacket:
     velmode: int
     orimode: int
 
+    @classmethod
+    def from_values(cls, values) -> "OxtsPacket":
+        """30 numbers in the order of :data:`OXTS_FIELDS` → a packet (the last five rounded to integers)."""
+        return cls(**{name: (int(round(x)) if name in _INT_FIELDS else float(x))
+                      for name, x in zip(OXTS_FIELDS, values)})
+
     def to_line(self) -> str:
         """The packet as one KITTI text line (floats with 15 significant digits, the last five as integers)."""
         return " ".join(str(int(v)) if isinstance(v, int) else f"{v:.15g}" for v in self.values())
@@ -82,8 +89,7 @@ def parse_oxts_line(line: str, where: str = "OXTS packet") -> OxtsPacket:
         raise DcslamError(f"{where}: values that are not numbers") from None
     if not np.all(np.isfinite(numbers)):
         raise DcslamError(f"{where}: non-finite values")
-    values = {name: (int(round(x)) if name in _INT_FIELDS else x) for name, x in zip(OXTS_FIELDS, numbers)}
-    return OxtsPacket(**values)
+    return OxtsPacket.from_values(numbers)
 
 
 def read_oxts(path: Path | str) -> OxtsPacket:
@@ -103,15 +109,10 @@ def write_oxts(path: Path | str, packet: OxtsPacket) -> None:
     Path(path).write_text(packet.to_line() + "\n")
 
 
-def rotation_xyz(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
-    """Angles (N,) in radians → (N, 3, 3) rotations ``Rz(yaw) · Ry(pitch) · Rx(roll)``."""
-    roll, pitch, yaw = (np.asarray(a, dtype=np.float64) for a in (roll, pitch, yaw))
-    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
-    return np.stack([
-        np.stack([cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr], -1),
-        np.stack([sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr], -1),
-        np.stack([-sp, cp * sr, cp * cr], -1),
-    ], -2)
+def write_oxts_dataformat(path: Path | str) -> None:
+    """Write KITTI's ``oxts/dataformat.txt`` (the field list, verbatim as in the raw recordings)."""
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text(OXTS_DATAFORMAT)
 
 
 def mercator_xyz(lat: np.ndarray, lon: np.ndarray, alt: np.ndarray, scale: float) -> np.ndarray:
@@ -120,6 +121,15 @@ def mercator_xyz(lat: np.ndarray, lon: np.ndarray, alt: np.ndarray, scale: float
     x = scale * EARTH_RADIUS_M * np.deg2rad(lon)
     y = scale * EARTH_RADIUS_M * np.log(np.tan(np.deg2rad(90.0 + lat) / 2.0))
     return np.stack([x, y, alt], -1)
+
+
+def mercator_to_lat_lon_alt(xyz: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The inverse of :func:`mercator_xyz`: (N, 3) Mercator x east, y north, z up → latitudes, longitudes (N,) in
+    degrees and altitudes (N,) in metres."""
+    xyz = np.asarray(xyz, dtype=np.float64)
+    lon = np.rad2deg(xyz[:, 0] / (scale * EARTH_RADIUS_M))
+    lat = np.rad2deg(2 * np.arctan(np.exp(xyz[:, 1] / (scale * EARTH_RADIUS_M)))) - 90.0
+    return lat, lon, xyz[:, 2]
 
 
 def oxts_to_T_world_imu(packets: list[OxtsPacket]) -> np.ndarray:
@@ -132,7 +142,7 @@ def oxts_to_T_world_imu(packets: list[OxtsPacket]) -> np.ndarray:
     alt = np.array([p.alt for p in packets])
     xyz = mercator_xyz(lat, lon, alt, scale=float(np.cos(np.deg2rad(lat[0]))))
     T = np.tile(np.eye(4), (len(packets), 1, 1))
-    T[:, :3, :3] = rotation_xyz([p.roll for p in packets], [p.pitch for p in packets], [p.yaw for p in packets])
+    T[:, :3, :3] = rotation_from_rpy([p.roll for p in packets], [p.pitch for p in packets], [p.yaw for p in packets])
     T[:, :3, 3] = xyz - xyz[0]
     return T
 
@@ -162,3 +172,35 @@ def rebase(T_world_cam: np.ndarray, index: int = 0) -> np.ndarray:
     out[index] = np.eye(4)
     return out
 
+
+OXTS_DATAFORMAT = """lat:   latitude of the oxts-unit (deg)
+lon:   longitude of the oxts-unit (deg)
+alt:   altitude of the oxts-unit (m)
+roll:  roll angle (rad),    0 = level, positive = left side up,      range: -pi   .. +pi
+pitch: pitch angle (rad),   0 = level, positive = front down,        range: -pi/2 .. +pi/2
+yaw:   heading (rad),       0 = east,  positive = counter clockwise, range: -pi   .. +pi
+vn:    velocity towards north (m/s)
+ve:    velocity towards east (m/s)
+vf:    forward velocity, i.e. parallel to earth-surface (m/s)
+vl:    leftward velocity, i.e. parallel to earth-surface (m/s)
+vu:    upward velocity, i.e. perpendicular to earth-surface (m/s)
+ax:    acceleration in x, i.e. in direction of vehicle front (m/s^2)
+ay:    acceleration in y, i.e. in direction of vehicle left (m/s^2)
+ay:    acceleration in z, i.e. in direction of vehicle top (m/s^2)
+af:    forward acceleration (m/s^2)
+al:    leftward acceleration (m/s^2)
+au:    upward acceleration (m/s^2)
+wx:    angular rate around x (rad/s)
+wy:    angular rate around y (rad/s)
+wz:    angular rate around z (rad/s)
+wf:    angular rate around forward axis (rad/s)
+wl:    angular rate around leftward axis (rad/s)
+wu:    angular rate around upward axis (rad/s)
+pos_accuracy:  velocity accuracy (north/east in m)
+vel_accuracy:  velocity accuracy (north/east in m/s)
+navstat:       navigation status (see navstat_to_string)
+numsats:       number of satellites tracked by primary GPS receiver
+posmode:       position mode of primary GPS receiver (see gps_mode_to_string)
+velmode:       velocity mode of primary GPS receiver (see gps_mode_to_string)
+orimode:       orientation mode of primary GPS receiver (see gps_mode_to_string)
+"""

@@ -10,49 +10,10 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.workspace import atomic_output
+from dcslam.geometry.rotations import quaternion_to_rotation, rotation_to_quaternion
+from dcslam.io.atomic import atomic_output
 
 FORMAT = "'timestamp tx ty tz qx qy qz qw' per line"
-
-
-def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) rotation matrices → (..., 4) unit quaternions (qx, qy, qz, qw) with qw >= 0."""
-    R = np.asarray(R, dtype=np.float64)
-    m = R.reshape(-1, 3, 3)
-    q = np.empty((m.shape[0], 4))
-    tr = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
-    # Shepperd's method: pick the largest of (w, x, y, z) to divide by, for accuracy everywhere.
-    cands = np.stack([tr, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], axis=1)
-    pick = np.argmax(cands, axis=1)
-    for i in range(m.shape[0]):
-        a = m[i]
-        if pick[i] == 0:
-            s = 2.0 * np.sqrt(max(1.0 + tr[i], 1e-300))
-            q[i] = [(a[2, 1] - a[1, 2]) / s, (a[0, 2] - a[2, 0]) / s, (a[1, 0] - a[0, 1]) / s, 0.25 * s]
-        elif pick[i] == 1:
-            s = 2.0 * np.sqrt(max(1.0 + a[0, 0] - a[1, 1] - a[2, 2], 1e-300))
-            q[i] = [0.25 * s, (a[0, 1] + a[1, 0]) / s, (a[0, 2] + a[2, 0]) / s, (a[2, 1] - a[1, 2]) / s]
-        elif pick[i] == 2:
-            s = 2.0 * np.sqrt(max(1.0 + a[1, 1] - a[0, 0] - a[2, 2], 1e-300))
-            q[i] = [(a[0, 1] + a[1, 0]) / s, 0.25 * s, (a[1, 2] + a[2, 1]) / s, (a[0, 2] - a[2, 0]) / s]
-        else:
-            s = 2.0 * np.sqrt(max(1.0 + a[2, 2] - a[0, 0] - a[1, 1], 1e-300))
-            q[i] = [(a[0, 2] + a[2, 0]) / s, (a[1, 2] + a[2, 1]) / s, 0.25 * s, (a[1, 0] - a[0, 1]) / s]
-    q[q[:, 3] < 0] *= -1
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    return q.reshape(R.shape[:-2] + (4,))
-
-
-def quaternion_to_rotation(q: np.ndarray) -> np.ndarray:
-    """(..., 4) quaternions (qx, qy, qz, qw), normalised here → (..., 3, 3) rotation matrices."""
-    q = np.asarray(q, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    x, y, z, w = np.moveaxis(q, -1, 0)
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
 
 
 def write_tum(path: Path | str, timestamps: np.ndarray, T_world_cam: np.ndarray, force: bool = False) -> Path:

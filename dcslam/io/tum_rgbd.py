@@ -44,7 +44,8 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.workspace import atomic_output
+from dcslam.io import png
+from dcslam.io.atomic import atomic_output
 
 DEPTH_SCALE = 5000.0  # 16-bit depth PNG: metres = value / 5000, 0 = no value
 MAX_DIFFERENCE_S = 0.02
@@ -235,67 +236,23 @@ def associate(a: np.ndarray, b: np.ndarray, max_difference: float = MAX_DIFFEREN
 
 # ------------------------------------------------------------------------------------------------ images
 def read_depth_png(path: Path | str, scale: float = DEPTH_SCALE) -> np.ndarray:
-    """A 16-bit depth PNG → (H, W) float32 metres (value / ``scale``, 0 = no value)."""
-    import cv2
-
-    path = Path(path)
-    if not path.exists():
-        raise DcslamError(f"depth image {path} not found")
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise DcslamError(f"{path}: not a readable image (truncated or corrupt?)")
-    if image.dtype != np.uint16 or image.ndim != 2:
-        raise DcslamError(f"{path}: expected a 16-bit single-channel depth PNG (metres = value / {scale:g}), got "
-                          f"{image.dtype} with shape {image.shape}")
-    return image.astype(np.float32) / np.float32(scale)
+    """A 16-bit depth PNG → (H, W) float32 metres (value / ``scale``, 0 = no value); see :mod:`dcslam.io.png`."""
+    return png.read_depth_png(path, scale)
 
 
 def write_depth_png(path: Path | str, depth_m: np.ndarray, scale: float = DEPTH_SCALE) -> Path:
-    """(H, W) metres → 16-bit PNG, value = round(scale · metres); depth beyond 65535 / scale (13.1 m at 5000) and
-    non-finite depth become 0 (no value)."""
-    import cv2
-
-    depth_m = np.asarray(depth_m, dtype=np.float64)
-    if depth_m.ndim != 2:
-        raise DcslamError(f"depth has shape {depth_m.shape}, expected (H, W)")
-    value = np.rint(np.nan_to_num(depth_m, nan=0.0, posinf=0.0, neginf=0.0) * scale)
-    value[(value < 0) | (value > 65535)] = 0
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), value.astype(np.uint16)):
-        raise DcslamError(f"could not write {path}")
-    return Path(path)
+    """(H, W) metres → 16-bit PNG, value = round(scale · metres); see :mod:`dcslam.io.png`."""
+    return png.write_depth_png(path, depth_m, scale)
 
 
 def read_rgb_png(path: Path | str) -> np.ndarray:
-    """An 8-bit colour (or grey) image → (H, W, 3) uint8 RGB."""
-    import cv2
-
-    path = Path(path)
-    if not path.exists():
-        raise DcslamError(f"colour image {path} not found")
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise DcslamError(f"{path}: not a readable image (truncated or corrupt?)")
-    if image.dtype != np.uint8:
-        raise DcslamError(f"{path}: expected an 8-bit colour image, got {image.dtype} with shape {image.shape}")
-    if image.ndim == 2:
-        return np.repeat(image[..., None], 3, axis=2)
-    if image.ndim == 3 and image.shape[2] in (3, 4):
-        return cv2.cvtColor(image[..., :3], cv2.COLOR_BGR2RGB)
-    raise DcslamError(f"{path}: expected an 8-bit colour image, got shape {image.shape}")
+    """An 8-bit colour (or grey) image → (H, W, 3) uint8 RGB; see :mod:`dcslam.io.png`."""
+    return png.read_rgb_png(path)
 
 
 def write_rgb_png(path: Path | str, rgb: np.ndarray) -> Path:
-    """(H, W, 3) uint8 RGB → PNG."""
-    import cv2
-
-    rgb = np.asarray(rgb)
-    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
-        raise DcslamError(f"image has shape {rgb.shape} and dtype {rgb.dtype}, expected (H, W, 3) uint8")
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_PNG_COMPRESSION, 1]):
-        raise DcslamError(f"could not write {path}")
-    return Path(path)
+    """(H, W, 3) uint8 RGB → PNG (fast compression, as sequences are large); see :mod:`dcslam.io.png`."""
+    return png.write_rgb_png(path, rgb, compression=1)
 
 
 # ------------------------------------------------------------------------------------------------ writing

@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.io.tum_rgbd import (DEPTH_SCALE, HEIGHT, ICL, ICL_K, INTRINSICS_FILE, MAX_DIFFERENCE_S, MAX_POSE_GAP_S,
-                                TUM, TUM_K, WIDTH, format_time, associate, read_associations, read_depth_png,
+from dcslam.geometry.rotations import quaternion_to_rotation, rotation_to_quaternion, slerp
+from dcslam.io.tum_rgbd import (DEPTH_SCALE, HEIGHT, ICL, ICL_K, INTRINSICS_FILE, MAX_DIFFERENCE_S, MAX_POSE_GAP_S, TUM,
+                                TUM_K, WIDTH, associate, format_time, read_associations, read_depth_png,
                                 read_intrinsics, read_list, read_rgb_png)
 
 
@@ -34,8 +35,6 @@ def interpolate_poses(times: np.ndarray, gt_times: np.ndarray, T_gt: np.ndarray,
     Between two poses at most ``max_pose_gap`` apart: interpolated (lerp, slerp); otherwise the nearest pose if
     within ``max_difference``; otherwise none. Returns (T (N, 4, 4) float64, found (N,) bool).
     """
-    from dcslam.io.tum import quaternion_to_rotation, rotation_to_quaternion
-
     times = np.asarray(times, dtype=np.float64)
     gt_times = np.asarray(gt_times, dtype=np.float64)
     T = np.tile(np.eye(4), (len(times), 1, 1))
@@ -51,22 +50,12 @@ def interpolate_poses(times: np.ndarray, gt_times: np.ndarray, T_gt: np.ndarray,
         if gt_times[i] <= t <= gt_times[j] and i != j and gt_times[j] - gt_times[i] <= max_pose_gap:
             w = (t - gt_times[i]) / (gt_times[j] - gt_times[i])
             T[k, :3, 3] = (1 - w) * T_gt[i, :3, 3] + w * T_gt[j, :3, 3]
-            T[k, :3, :3] = quaternion_to_rotation(_slerp(q_gt[i], q_gt[j], w))
+            T[k, :3, :3] = quaternion_to_rotation(slerp(q_gt[i], q_gt[j], w))
             found[k] = True
         elif abs(gt_times[nearest] - t) <= max_difference:
             T[k] = T_gt[nearest]
             found[k] = True
     return T, found
-
-
-def _slerp(q0: np.ndarray, q1: np.ndarray, w: float) -> np.ndarray:
-    if float(q0 @ q1) < 0:
-        q1 = -q1
-    dot = min(float(q0 @ q1), 1.0)
-    angle = np.arccos(dot)
-    if angle < 1e-9:
-        return q0
-    return (np.sin((1 - w) * angle) * q0 + np.sin(w * angle) * q1) / np.sin(angle)
 
 
 # ------------------------------------------------------------------------------------------------ sequences

@@ -5,8 +5,8 @@ from dataclasses import dataclass
 
 import torch
 
+from dcslam.constants import MIN_DEPTH_M
 from dcslam.errors import DcslamError
-from dcslam.eval.depth import MIN_DEPTH_M
 from dcslam.geometry.camera import backproject, check_depth, check_K
 from dcslam.geometry.normals import vertex_normals
 

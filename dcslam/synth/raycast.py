@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from dcslam.synth.scene import BOX, CYLINDER, ELLIPSOID, Shape
-from dcslam.synth.trajectory import Terrain
+from dcslam.synth.shapes import BOX, CYLINDER, ELLIPSOID, Shape
+from dcslam.synth.terrain import Terrain
 
 _EDGES = [(i, j) for i in range(8) for j in range(i + 1, 8) if (i ^ j) in (1, 2, 4)]
 NO_HIT, GROUND = -2, -1

@@ -1,18 +1,12 @@
 """`dcslam demo-icl`: exit codes, files written, bad input (one line on stderr, exit code 1)."""
-import importlib.util
 import json
 import shutil
-from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
 from dcslam.cli import app
-
-_spec = importlib.util.spec_from_file_location(
-    "depth_fixtures", Path(__file__).parents[1] / "depth" / "depth_fixtures.py")
-fixtures = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fixtures)
+from tests.fixtures import depth as fixtures
 
 RESULTS = {"model.pt", "results.json", "results.csv", "results.md", "denoising.png"}
 TINY = ["--steps", "2", "--batch-size", "2", "--features", "4", "--layers", "3", "--device", "cpu"]

@@ -5,7 +5,7 @@ import pytest
 from typer.testing import CliRunner
 
 from dcslam.cli import app
-from dcslam.io.drive import DriveWriter, Frame, Layer, read_layer, write_layer
+from dcslam.io.drive import DriveFrame, DriveWriter, Layer, read_layer, write_layer
 
 K = np.array([[20.0, 0, 12], [0, 20.0, 8], [0, 0, 1]])
 runner = CliRunner()
@@ -20,7 +20,7 @@ def make_workspace(root, drives=("d0", "d1"), n=3, h=16, w=24):
             for i in range(n):
                 dense = rng.uniform(2, 30, (h, w)).astype(np.float32)
                 sparse = np.where(rng.random((h, w)) < 0.3, dense, 0).astype(np.float32)
-                writer.append(Frame(rgb=np.zeros((h, w, 3), np.uint8), sparse=sparse, dense=dense,
+                writer.append(DriveFrame(rgb=np.zeros((h, w, 3), np.uint8), sparse=sparse, dense=dense,
                                     T_world_cam=np.eye(4), timestamp=0.1 * i, frame_id=i))
     (root / "drives" / "splits.json").write_text(json.dumps({"train": [], "val": [], "test": list(drives)}))
     for name in drives:

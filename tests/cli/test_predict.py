@@ -1,5 +1,3 @@
-import importlib.util
-from pathlib import Path
 
 import pytest
 import torch
@@ -8,11 +6,7 @@ from typer.testing import CliRunner
 from dcslam.cli import app
 from dcslam.depth.models import build_model, save_model
 from dcslam.io.drive import DriveFile, read_layer
-
-_spec = importlib.util.spec_from_file_location(
-    "depth_fixtures", Path(__file__).parents[1] / "depth" / "depth_fixtures.py")
-fixtures = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fixtures)
+from tests.fixtures import depth as fixtures
 
 
 @pytest.fixture

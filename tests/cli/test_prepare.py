@@ -1,5 +1,4 @@
 """`dcslam prepare-kitti` through the command line: exit codes, messages and the files written."""
-import importlib.util
 import json
 from pathlib import Path
 
@@ -10,10 +9,7 @@ from typer.testing import CliRunner
 from dcslam.cli import app
 from dcslam.io import kitti
 from dcslam.io.drive import DriveFile, read_splits
-
-_spec = importlib.util.spec_from_file_location("kitti_fixtures", Path(__file__).parents[1] / "io" / "kitti_fixtures.py")
-fx = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fx)
+from tests.fixtures import kitti as fx
 
 REAL = "2011_09_26_drive_0001_sync"
 

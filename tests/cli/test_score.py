@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 from typer.testing import CliRunner
 
 from dcslam.cli import app
-from dcslam.io.drive import DriveWriter, Frame, Layer, write_layer
+from dcslam.io.drive import DriveFrame, DriveWriter, Layer, write_layer
 from dcslam.io.tum import write_tum
 
 K = np.array([[20.0, 0, 12], [0, 20.0, 8], [0, 0, 1]])
@@ -56,7 +56,7 @@ def ws(tmp_path):
             for i, T in enumerate(gt_poses()):
                 dense = rng.uniform(2, 30, (H, W)).astype(np.float32)
                 sparse = np.where(rng.random((H, W)) < 0.3, dense, 0).astype(np.float32)
-                writer.append(Frame(rgb=np.zeros((H, W, 3), np.uint8), sparse=sparse, dense=dense, T_world_cam=T,
+                writer.append(DriveFrame(rgb=np.zeros((H, W, 3), np.uint8), sparse=sparse, dense=dense, T_world_cam=T,
                                     timestamp=10 + 0.1 * i, frame_id=i))
     (root / "drives" / "splits.json").write_text(json.dumps({"train": [], "val": [], "test": list(drives)}))
     write_run(root, "mse-dense", "mse", "dense", 1, [{"chamfer": 3.0, "mse": 2.0, "mae_mm": 900.0, "rmse_mm": 1500.0},

@@ -5,7 +5,7 @@ import pytest
 from typer.testing import CliRunner
 
 from dcslam.cli import app
-from dcslam.io.drive import DriveWriter, Frame, Layer, write_layer
+from dcslam.io.drive import DriveFrame, DriveWriter, Layer, write_layer
 from dcslam.io.ply import read_ply
 from dcslam.io.tum import read_tum
 from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
@@ -25,7 +25,7 @@ def workspace(tmp_path_factory):
             dense = scene.render(poses[i], K, H, W).float().numpy()
             sparse = dense * lidar_mask(H, W).numpy()
             rgb = np.full((H, W, 3), 40 * i, np.uint8)
-            writer.append(Frame(rgb, sparse, dense, poses[i].numpy(), 0.1 * i, i))
+            writer.append(DriveFrame(rgb, sparse, dense, poses[i].numpy(), 0.1 * i, i))
     (ws / "drives" / "splits.json").write_text(json.dumps({"train": [], "val": [], "test": ["street_0001"]}))
     return ws
 

@@ -1,16 +1,10 @@
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
 from dcslam.cli import app
-
-_spec = importlib.util.spec_from_file_location(
-    "depth_fixtures", Path(__file__).parents[1] / "depth" / "depth_fixtures.py")
-fixtures = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fixtures)
+from tests.fixtures import depth as fixtures
 
 
 @pytest.fixture

@@ -1,12 +1,9 @@
-"""Fixtures of small analytic drive files for the depth tests (builders in depth_fixtures.py)."""
-import importlib.util
+"""Fixtures of small analytic drive files for the depth tests (builders in tests/fixtures/depth.py)."""
 from pathlib import Path
 
 import pytest
 
-_spec = importlib.util.spec_from_file_location("depth_fixtures", Path(__file__).with_name("depth_fixtures.py"))
-fixtures = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fixtures)
+from tests.fixtures import depth as fixtures
 
 
 @pytest.fixture

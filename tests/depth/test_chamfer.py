@@ -29,16 +29,18 @@ class TestChamfer:
         b = torch.rand(25, 3, generator=g, dtype=torch.float64, requires_grad=True)
         assert torch.autograd.gradcheck(chamfer_distance, (a, b), eps=1e-7)
 
-    def test_identical_clouds_zero_and_symmetric(self):
-        a = torch.rand(100, 3)
+    def test_identical_clouds_zero_and_symmetric(self, device, dtype):
+        a = torch.rand(100, 3, device=device, dtype=dtype)
         assert chamfer_distance(a, a.clone()).item() == 0
-        b = torch.rand(70, 3)
+        b = torch.rand(70, 3, device=device, dtype=dtype)
         assert chamfer_distance(a, b).item() == pytest.approx(chamfer_distance(b, a).item())
 
-    def test_known_answer_shift(self):
-        a = torch.tensor([[0.0, 0, 0], [10.0, 0, 0]])
-        b = a + torch.tensor([0.0, 0.5, 0])
-        assert chamfer_distance(a, b).item() == pytest.approx(0.5)  # 0.25 each way
+    def test_known_answer_shift(self, device, dtype):
+        a = torch.tensor([[0.0, 0, 0], [10.0, 0, 0]], device=device, dtype=dtype)
+        b = a + torch.tensor([0.0, 0.5, 0], device=device, dtype=dtype)
+        distance = chamfer_distance(a, b)
+        assert distance.device.type == device.type and distance.dtype == dtype
+        assert distance.item() == pytest.approx(0.5)  # 0.25 each way
 
     def test_nearest_neighbours_exact(self):
         a, b = torch.rand(500, 3), torch.rand(400, 3)

@@ -1,11 +1,11 @@
 """Two CPU processes with the gloo backend train one step each with DistributedDataParallel: same weights after."""
-import importlib.util
 from pathlib import Path
 
 import torch
 import torch.multiprocessing as mp
 
 from dcslam.depth.train import TrainConfig, train
+from tests.fixtures import depth as depth_fixtures
 
 
 def _worker(rank, world, init_file, ws, out):
@@ -24,10 +24,7 @@ def _worker(rank, world, init_file, ws, out):
 
 
 def test_two_gloo_processes_hold_identical_weights(tmp_path):
-    spec = importlib.util.spec_from_file_location("depth_fixtures", Path(__file__).with_name("depth_fixtures.py"))
-    fixtures = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(fixtures)
-    ws = fixtures.write_workspace(tmp_path / "ws", n=3)
+    ws = depth_fixtures.write_workspace(tmp_path / "ws", n=3)
     mp.spawn(_worker, args=(2, str(tmp_path / "init"), str(ws), str(tmp_path)), nprocs=2, join=True)
     a = torch.load(tmp_path / "rank0.pt", weights_only=True)
     b = torch.load(tmp_path / "rank1.pt", weights_only=True)

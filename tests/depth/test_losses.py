@@ -3,26 +3,33 @@ import math
 import pytest
 import torch
 
-from dcslam.depth.losses import MaskedMSE, depth_errors, masked_mse, supervision_mask
+from dcslam.depth.losses import MaskedMSE, batch_depth_errors, masked_mse, supervision_mask
 from dcslam.errors import DcslamError
 
 
-def _pair():
-    dense = torch.zeros(1, 1, 2, 3)
+def _pair(device="cpu", dtype=torch.float32):
+    dense = torch.zeros(1, 1, 2, 3, device=device, dtype=dtype)
     dense[0, 0, 0] = torch.tensor([1.0, 2.0, 3.0])  # bottom row: no ground truth
-    sparse = torch.zeros(1, 1, 2, 3)
+    sparse = torch.zeros(1, 1, 2, 3, device=device, dtype=dtype)
     sparse[0, 0, 0, 0] = 1.0
     sparse[0, 0, 1, 1] = 7.0  # sparse value without ground truth
-    pred = torch.full((1, 1, 2, 3), 2.0, requires_grad=True)
+    pred = torch.full((1, 1, 2, 3), 2.0, device=device, dtype=dtype, requires_grad=True)
     return pred, sparse, dense
 
 
-def test_dense_mask_ignores_pixels_without_ground_truth():
-    pred, sparse, dense = _pair()
+def test_dense_mask_ignores_pixels_without_ground_truth(device, dtype):
+    pred, sparse, dense = _pair(device, dtype)
     loss = MaskedMSE("dense")(pred, sparse, dense)
     assert loss.item() == pytest.approx((1 + 0 + 1) / 3)  # not diluted, not trained on the zero targets
+    assert loss.device.type == device.type and loss.dtype == dtype
     (grad,) = torch.autograd.grad(loss, pred)
     assert grad[0, 0, 1].eq(0).all()
+
+
+def test_masked_mse_gradcheck_float64():
+    pred, sparse, dense = _pair(dtype=torch.float64)
+    mask = supervision_mask(sparse, dense, "dense")
+    assert torch.autograd.gradcheck(lambda p: masked_mse(p, dense, mask), (pred,))
 
 
 def test_sparse_mask():
@@ -47,12 +54,12 @@ def test_empty_mask_is_zero_with_zero_gradient():
     assert pred.grad.eq(0).all()
 
 
-def test_depth_errors():
-    pred, _, dense = _pair()
-    e = depth_errors(pred.detach(), dense)
+def test_batch_depth_errors(device, dtype):
+    pred, _, dense = _pair(device, dtype)
+    e = batch_depth_errors(pred.detach(), dense)
     assert e["pixels"] == 3 and e["mae_mm"] == pytest.approx(2000 / 3)
     assert e["rmse_mm"] == pytest.approx(math.sqrt(2 / 3) * 1000)
-    assert math.isnan(depth_errors(pred.detach(), torch.zeros_like(dense))["mae_mm"])
+    assert math.isnan(batch_depth_errors(pred.detach(), torch.zeros_like(dense))["mae_mm"])
 
 
 def test_bad_input():

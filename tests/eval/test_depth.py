@@ -2,10 +2,9 @@ import numpy as np
 import pytest
 
 from dcslam.errors import DcslamError
-from dcslam.eval.depth import (MIN_DEPTH_M, depth_errors, interpolate_background, mean_errors, score_drive,
-                               score_frames)
+from dcslam.eval.depth import MIN_DEPTH_M, depth_errors, interpolate_background, mean_errors, score_drive, score_frames
 from dcslam.filters import DiscontinuityFilter
-from dcslam.io.drive import DriveWriter, Frame, Layer, write_layer
+from dcslam.io.drive import DriveFrame, DriveWriter, Layer, write_layer
 
 
 class TestInterpolateBackground:
@@ -120,7 +119,7 @@ def write_drive(path, n=3, h=8, w=12, seed=0):
             sparse = np.where(rng.random((h, w)) < 0.3, dense, 0).astype(np.float32)
             T = np.eye(4)
             T[2, 3] = i
-            writer.append(Frame(rgb=np.zeros((h, w, 3), np.uint8), sparse=sparse, dense=dense, T_world_cam=T,
+            writer.append(DriveFrame(rgb=np.zeros((h, w, 3), np.uint8), sparse=sparse, dense=dense, T_world_cam=T,
                                 timestamp=0.1 * i, frame_id=i))
     return path
 

@@ -9,14 +9,13 @@ K = torch.tensor([[50.0, 0, 15.5], [0, 55.0, 11.5], [0, 0, 1]], dtype=torch.floa
 
 
 class TestBackproject:
-    @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
     @pytest.mark.parametrize("batch", [1, 3])
-    def test_projects_back_to_its_pixels(self, dtype, batch):
-        depth = torch.rand(batch, 1, 24, 32, dtype=dtype) * 10 + 1
-        vertex = backproject(depth, K.to(dtype))
-        assert vertex.shape == (batch, 3, 24, 32)
-        uv, z = project(vertex.permute(0, 2, 3, 1).reshape(batch, -1, 3), K.to(dtype))
-        grid = pixel_grid(24, 32, dtype).reshape(2, -1).T.expand(batch, -1, -1)
+    def test_projects_back_to_its_pixels(self, device, dtype, batch):
+        depth = torch.rand(batch, 1, 24, 32, dtype=dtype, device=device) * 10 + 1
+        vertex = backproject(depth, K.to(device, dtype))
+        assert vertex.shape == (batch, 3, 24, 32) and vertex.device.type == device.type
+        uv, z = project(vertex.permute(0, 2, 3, 1).reshape(batch, -1, 3), K.to(device, dtype))
+        grid = pixel_grid(24, 32, dtype).to(device).reshape(2, -1).T.expand(batch, -1, -1)
         tol = 1e-3 if dtype == torch.float32 else 1e-9
         torch.testing.assert_close(uv, grid, atol=tol, rtol=0)
         torch.testing.assert_close(z, depth.reshape(batch, -1))

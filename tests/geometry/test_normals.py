@@ -17,16 +17,15 @@ def _plane_depth(normal, offset, H=24, W=32, dtype=torch.float64):
 
 
 class TestVertexNormals:
-    @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-    def test_plane_known_answer(self, dtype):
+    def test_plane_known_answer(self, device, dtype):
         n = torch.tensor([0.3, -0.4, -1.0], dtype=torch.float64)
         n = n / n.norm()
-        depth = _plane_depth(n.tolist(), -5.0).to(dtype)
-        normals, valid = vertex_normals(backproject(depth, K.to(dtype)))
-        assert valid.all()
+        depth = _plane_depth(n.tolist(), -5.0).to(device, dtype)
+        normals, valid = vertex_normals(backproject(depth, K.to(device, dtype)))
+        assert valid.all() and normals.device.type == device.type and normals.dtype == dtype
         tol = 1e-4 if dtype == torch.float32 else 1e-9
         torch.testing.assert_close(normals[0].permute(1, 2, 0).reshape(-1, 3),
-                                   n.to(dtype).expand(24 * 32, 3), atol=tol, rtol=0)
+                                   n.to(device, dtype).expand(24 * 32, 3), atol=tol, rtol=0)
 
     def test_faces_camera(self):
         depth = torch.full((2, 1, 8, 9), 3.0, dtype=torch.float64)

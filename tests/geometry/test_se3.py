@@ -26,14 +26,14 @@ class TestSkew:
 
 
 class TestSO3:
-    @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-    def test_exp_is_rotation_and_log_inverts(self, dtype):
-        w = _random_twists(20, dtype)[:, 3:]
-        w = w / w.norm(dim=1, keepdim=True) * torch.linspace(0, 3.0, 20, dtype=dtype)[:, None]
+    def test_exp_is_rotation_and_log_inverts(self, device, dtype):
+        w = _random_twists(20, dtype)[:, 3:].to(device)
+        w = w / w.norm(dim=1, keepdim=True) * torch.linspace(0, 3.0, 20, dtype=dtype, device=device)[:, None]
         R = so3_exp(w)
-        eye = torch.eye(3, dtype=dtype).expand(20, 3, 3)
+        assert R.device.type == device.type and R.dtype == dtype
+        eye = torch.eye(3, dtype=dtype, device=device).expand(20, 3, 3)
         torch.testing.assert_close(R @ R.transpose(-1, -2), eye, **TOL[dtype])
-        torch.testing.assert_close(torch.linalg.det(R), torch.ones(20, dtype=dtype), **TOL[dtype])
+        torch.testing.assert_close(torch.linalg.det(R), torch.ones(20, dtype=dtype, device=device), **TOL[dtype])
         tol = dict(atol=1e-4, rtol=1e-4) if dtype == torch.float32 else TOL[dtype]
         torch.testing.assert_close(so3_log(R), w, **tol)
 
@@ -69,12 +69,11 @@ class TestSO3:
 
 
 class TestSE3:
-    @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
     @pytest.mark.parametrize("batch", [(), (1,), (7,), (2, 3)])
-    def test_exp_log_round_trip(self, dtype, batch):
-        xi = _random_twists(max(1, math.prod(batch)), dtype, 0.8).reshape(*batch, 6)
+    def test_exp_log_round_trip(self, device, dtype, batch):
+        xi = _random_twists(max(1, math.prod(batch)), dtype, 0.8).reshape(*batch, 6).to(device)
         T = se3_exp(xi)
-        assert T.shape == (*batch, 4, 4)
+        assert T.shape == (*batch, 4, 4) and T.device.type == device.type and T.dtype == dtype
         tol = dict(atol=1e-4, rtol=1e-4) if dtype == torch.float32 else TOL[dtype]
         torch.testing.assert_close(se3_log(T), xi, **tol)
 

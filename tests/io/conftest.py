@@ -1,12 +1,9 @@
-"""Fixtures of KITTI roots for the io tests (builders in kitti_fixtures.py)."""
-import importlib.util
+"""Fixtures of KITTI roots for the io tests (builders in tests/fixtures/kitti.py)."""
 from pathlib import Path
 
 import pytest
 
-_spec = importlib.util.spec_from_file_location("kitti_fixtures", Path(__file__).with_name("kitti_fixtures.py"))
-fixtures = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fixtures)
+from tests.fixtures import kitti as fixtures
 
 
 @pytest.fixture

@@ -6,21 +6,21 @@ import numpy as np
 import pytest
 
 from dcslam.errors import DcslamError
-from dcslam.io.drive import (DRIVE_SCHEMA, DriveFile, DriveWriter, Frame, Layer, list_drives, load_depth, read_layer,
-                             read_splits, write_layer)
+from dcslam.io.drive import (DRIVE_SCHEMA, DriveFile, DriveFrame, DriveWriter, Layer, list_drives, load_depth,
+                             read_layer, read_splits, write_layer)
 
 H, W = 6, 10
 K = np.array([[50.0, 0, 5], [0, 50, 3], [0, 0, 1]])
 
 
-def make_frames(n: int, seed: int = 0) -> list[Frame]:
+def make_frames(n: int, seed: int = 0) -> list[DriveFrame]:
     rng = np.random.default_rng(seed)
     frames = []
     for i in range(n):
         T = np.eye(4)
         T[:3, 3] = rng.normal(size=3)
         dense = (rng.uniform(1, 80, (H, W)) * (rng.random((H, W)) < 0.5)).astype(np.float32)
-        frames.append(Frame(rgb=rng.integers(0, 256, (H, W, 3), dtype=np.uint8), sparse=dense * (dense > 40),
+        frames.append(DriveFrame(rgb=rng.integers(0, 256, (H, W, 3), dtype=np.uint8), sparse=dense * (dense > 40),
                             dense=dense, T_world_cam=T, timestamp=100.0 + 0.1 * i, frame_id=5 + i))
     return frames
 
@@ -87,7 +87,7 @@ class TestDriveWriterChecks:
     ])
     def test_bad_frame_leaves_no_file(self, tmp_path, change, match):
         good = make_frames(2)
-        bad = Frame(**{**good[1].__dict__, **change})
+        bad = DriveFrame(**{**good[1].__dict__, **change})
         with pytest.raises(DcslamError, match=match):
             write(tmp_path / "d1.h5", [good[0], bad])
         assert _files(tmp_path) == []

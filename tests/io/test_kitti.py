@@ -7,7 +7,8 @@ import pytest
 
 from dcslam.errors import DcslamError
 from dcslam.io import kitti
-from dcslam.io.kitti_oxts import mercator_xyz, parse_oxts_line, rotation_xyz
+from dcslam.io.kitti_oxts import (OxtsPacket, mercator_to_lat_lon_alt, mercator_xyz, parse_oxts_line,
+                                  write_oxts_dataformat)
 
 SAMPLE = Path(__file__).parents[1] / "data" / "kitti-sample"
 DATE_DIR = SAMPLE / "raw" / "2011_09_26"
@@ -143,7 +144,7 @@ class TestCalibration:
 
     def test_missing_entry(self, tmp_path):
         path = self._copy(tmp_path) / "calib_velo_to_cam.txt"
-        path.write_text("".join(l for l in path.read_text().splitlines(True) if not l.startswith("T:")))
+        path.write_text("".join(line for line in path.read_text().splitlines(True) if not line.startswith("T:")))
         with pytest.raises(DcslamError, match="missing entry 'T'"):
             kitti.read_calibration(tmp_path)
 
@@ -207,17 +208,6 @@ class TestOxts:
         assert np.median(np.abs(steps / logged - 1)) < 0.02
         assert np.abs(steps / logged - 1).max() < 0.05
 
-    def test_rotation_order_is_z_y_x(self):
-        R = rotation_xyz([0.3], [0.2], [0.1])[0]
-        def rot(axis, a):
-            c, s = np.cos(a), np.sin(a)
-            i, j = [k for k in range(3) if k != axis]
-            m = np.eye(3)
-            m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
-            return m if axis != 1 else m.T
-        assert R == pytest.approx(rot(2, 0.1) @ rot(1, 0.2) @ rot(0, 0.3))
-        assert rotation_xyz([0.0], [0.0], [np.pi / 2])[0] @ [1, 0, 0] == pytest.approx([0, 1, 0])
-
     def test_mercator_known_answer(self):
         scale = np.cos(np.deg2rad(49.0))
         xyz = mercator_xyz([49.0, 49.001], [8.0, 8.001], [100.0, 101.0], scale)
@@ -225,6 +215,18 @@ class TestOxts:
         assert d[0] == pytest.approx(scale * 6378137.0 * np.deg2rad(0.001))
         assert d[1] == pytest.approx(6378137.0 * np.deg2rad(0.001), rel=1e-4)  # 1/cos(lat) · cos(lat0) ≈ 1
         assert d[2] == 1.0
+
+    def test_mercator_inverse(self):
+        scale = np.cos(np.deg2rad(49.0))
+        lat, lon, alt = [49.0, 49.01, 48.99], [8.0, 8.4, 7.9], [100.0, 101.0, 99.5]
+        back = mercator_to_lat_lon_alt(mercator_xyz(lat, lon, alt, scale), scale)
+        np.testing.assert_allclose(np.stack(back), [lat, lon, alt], rtol=0, atol=1e-11)
+
+    def test_packet_from_values_and_dataformat_file(self, tmp_path, packets):
+        assert OxtsPacket.from_values(packets[3].values()) == packets[3]
+        assert isinstance(OxtsPacket.from_values(np.array(packets[3].values(), float)).numsats, int)
+        write_oxts_dataformat(tmp_path / "dataformat.txt")
+        assert (tmp_path / "dataformat.txt").read_bytes() == (RAW / "oxts" / "dataformat.txt").read_bytes()
 
     def test_camera_poses(self, packets, calib):
         T_world_imu = kitti.oxts_to_T_world_imu(packets)

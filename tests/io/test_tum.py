@@ -1,9 +1,10 @@
-"""TUM trajectory files and the quaternion helpers."""
+"""TUM trajectory files."""
 import numpy as np
 import pytest
 
 from dcslam.errors import DcslamError
-from dcslam.io.tum import quaternion_to_rotation, read_tum, rotation_to_quaternion, write_tum
+from dcslam.geometry.rotations import quaternion_to_rotation
+from dcslam.io.tum import read_tum, write_tum
 
 
 def random_poses(n: int, seed: int = 0) -> np.ndarray:
@@ -12,34 +13,6 @@ def random_poses(n: int, seed: int = 0) -> np.ndarray:
     T[:, :3, :3] = quaternion_to_rotation(rng.normal(size=(n, 4)))
     T[:, :3, 3] = rng.uniform(-500, 500, (n, 3))
     return T
-
-
-class TestQuaternions:
-    def test_known_answers(self):
-        Rz90 = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
-        assert rotation_to_quaternion(Rz90) == pytest.approx([0, 0, np.sqrt(0.5), np.sqrt(0.5)])
-        assert rotation_to_quaternion(np.eye(3)) == pytest.approx([0, 0, 0, 1])
-        assert quaternion_to_rotation([0, 0, 1, 1]) == pytest.approx(Rz90)  # normalised on the way
-
-    @pytest.mark.parametrize("axis", range(3))
-    def test_half_turns(self, axis):
-        q = np.zeros(4)
-        q[axis] = 1.0
-        R = quaternion_to_rotation(q)
-        assert np.allclose(np.diag(R), [1 if i == axis else -1 for i in range(3)])
-        back = rotation_to_quaternion(R)
-        assert abs(back[axis]) == pytest.approx(1.0) and quaternion_to_rotation(back) == pytest.approx(R)
-
-    def test_batch_shapes_and_round_trip(self):
-        q = np.random.default_rng(3).normal(size=(2, 5, 4))
-        R = quaternion_to_rotation(q)
-        assert R.shape == (2, 5, 3, 3)
-        assert np.abs(R @ np.swapaxes(R, -1, -2) - np.eye(3)).max() < 1e-12
-        assert np.allclose(np.linalg.det(R), 1.0)
-        back = rotation_to_quaternion(R)
-        assert back.shape == (2, 5, 4) and np.all(back[..., 3] >= 0)
-        expect = q / np.linalg.norm(q, axis=-1, keepdims=True) * np.sign(q[..., 3:])
-        assert back == pytest.approx(expect, abs=1e-12)
 
 
 class TestTumFile:

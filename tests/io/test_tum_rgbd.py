@@ -1,5 +1,5 @@
-"""TUM RGB-D and ICL-NUIM file formats: lists, associations, depth and colour PNGs, intrinsics (IclWriter round trips through
-tests/io/test_tum_sequence.py)."""
+"""TUM RGB-D and ICL-NUIM file formats: lists, associations, depth and colour PNGs, intrinsics (IclWriter round
+trips through tests/io/test_tum_sequence.py)."""
 import cv2
 import numpy as np
 import pytest
@@ -117,7 +117,7 @@ class TestImages:
 
     def test_unreadable_and_missing(self, tmp_path):
         (tmp_path / "broken.png").write_bytes(b"\x89PNG not really")
-        with pytest.raises(DcslamError, match="not a readable image"):
+        with pytest.raises(DcslamError, match="not a readable PNG"):
             tr.read_depth_png(tmp_path / "broken.png")
         with pytest.raises(DcslamError, match="not found"):
             tr.read_rgb_png(tmp_path / "none.png")

@@ -1,7 +1,5 @@
 """Indexing TUM RGB-D and ICL-NUIM sequence folders: pose lookup, pairing, intrinsics, ground-truth names,
-errors; the folders are written by IclWriter or by hand (tum_fixtures.py)."""
-import importlib.util
-from pathlib import Path
+errors; the folders are written by IclWriter or by hand (tests/fixtures/tum.py)."""
 
 import numpy as np
 import pytest
@@ -9,10 +7,8 @@ import pytest
 from dcslam.errors import DcslamError
 from dcslam.io import tum_rgbd as tr
 from dcslam.io import tum_sequence as ts
+from tests.fixtures import tum as fx
 
-_spec = importlib.util.spec_from_file_location("tum_fixtures", Path(__file__).with_name("tum_fixtures.py"))
-fx = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(fx)
 H, W, pose, write_tum_sequence, write_icl_sequence = fx.H, fx.W, fx.pose, fx.write_tum_sequence, fx.write_icl_sequence
 
 

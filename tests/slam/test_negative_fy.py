@@ -7,11 +7,12 @@ import pytest
 import torch
 
 from dcslam.geometry.se3 import pose_error
-from dcslam.slam.fusion import PointFusion, surfel_radius
 from dcslam.slam.frame import prepare_frame
+from dcslam.slam.fusion import PointFusion, surfel_radius
 from dcslam.slam.odometry import ICPOdometry
 from dcslam.slam.pipeline import SLAM
 from dcslam.synth import indoor
+from dcslam.synth.raycast import CameraGrid
 
 FRAMES, SCALE = 12, 0.25
 Y_DOWN = np.diag([-1.0, -1.0, 1.0])  # ICL camera (x, y up, z) -> ordinary camera (x right, y down, z): a rotation
@@ -23,10 +24,10 @@ def sequence():
     room = indoor.build_room(rng)
     T = indoor.handheld_trajectory(room, FRAMES, rng)
     K, width, height = indoor.camera_K(SCALE)
-    look = indoor._Look(np.array([0.6, 0.45, 0.3], np.float32), True)
+    look = indoor.Look(np.array([0.6, 0.45, 0.3], np.float32), True)
 
     def render(K_, T_):
-        return [indoor.render(room, look, indoor.CameraGrid(K_, width, height), t, rng)[0] for t in T_]
+        return [indoor.render(room, look, CameraGrid(K_, width, height), t, rng)[0] for t in T_]
 
     K_down = K.copy()
     K_down[1, 1] *= -1

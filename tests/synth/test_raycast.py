@@ -2,16 +2,17 @@
 import numpy as np
 import pytest
 
+from dcslam.geometry.rotations import rotation_from_rpy
 from dcslam.synth.raycast import NO_HIT, CameraGrid, cast, intersect, intersect_terrain, local_normals
-from dcslam.synth.scene import BOX, CYLINDER, ELLIPSOID, Shape
-from dcslam.synth.sensors import make_lidar_grid
-from dcslam.synth.trajectory import Terrain, rotation_xyz
+from dcslam.synth.street.scene import BOX, CYLINDER, ELLIPSOID, Shape
+from dcslam.synth.street.sensors import make_lidar_grid
+from dcslam.synth.street.trajectory import Terrain
 
 FLAT = Terrain(amplitude=np.zeros(1), wave=np.ones((1, 2)), phase=np.zeros(1))
 
 
 def shape(kind, center, half, yaw=0.0, pitch=0.0):
-    return Shape(kind, rotation_xyz([0.0], [pitch], [yaw])[0], np.asarray(center, float), np.asarray(half, float),
+    return Shape(kind, rotation_from_rpy([0.0], [pitch], [yaw])[0], np.asarray(center, float), np.asarray(half, float),
                  0, np.ones(3))
 
 
@@ -70,7 +71,7 @@ def test_ray_rectangles_are_conservative(grid_kind):
         grid = make_lidar_grid(1.0)
     rng = np.random.default_rng(3)
     T = np.eye(4)
-    T[:3, :3] = rotation_xyz([0.02], [-0.03], [0.4])[0] @ (np.array([[0, 0, 1.0], [-1, 0, 0], [0, -1, 0]])
+    T[:3, :3] = rotation_from_rpy([0.02], [-0.03], [0.4])[0] @ (np.array([[0, 0, 1.0], [-1, 0, 0], [0, -1, 0]])
                                                              if grid_kind == "camera" else np.eye(3))
     T[:3, 3] = [0, 0, 1.7]
     shapes = [shape(int(rng.integers(3)), np.append(rng.uniform(-25, 25, 2), rng.uniform(-1, 6)),

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from dcslam.errors import DcslamError
-from dcslam.workspace import atomic_output
+from dcslam.io.atomic import atomic_output
 
 MODEL_FORMAT = "dcslam.model/1"
 IP_BASIC_NAMES = ("ip-basic-fast", "ip-basic-multiscale")

@@ -6,12 +6,13 @@ from dcslam.errors import DcslamError
 
 
 class TestSparseConv:
-    def test_smoke_shapes(self):
-        layer = SparseConv(1, 4, 5)
-        x = torch.rand(2, 1, 12, 16)
-        m = (torch.rand(2, 1, 12, 16) > 0.7).float()
+    def test_smoke_shapes(self, device, dtype):
+        layer = SparseConv(1, 4, 5).to(device, dtype)
+        x = torch.rand(2, 1, 12, 16, device=device, dtype=dtype)
+        m = (torch.rand(2, 1, 12, 16, device=device) > 0.7).to(dtype)
         y, m2 = layer(x, m)
         assert y.shape == (2, 4, 12, 16) and m2.shape == (2, 1, 12, 16)
+        assert y.device.type == device.type and y.dtype == m2.dtype == dtype
         assert (y >= 0).all()
 
     def test_known_answer_normalised_average(self):
@@ -66,8 +67,9 @@ def _call(layer, x, m, w, b):
 class TestSparseConvNet:
     def test_architecture_is_the_papers(self):
         net = SparseConvNet()
-        assert [l.kernel_size for l in net.layers] == [11, 7, 5, 3, 3, 1]
-        assert [(l.in_channels, l.out_channels) for l in net.layers] == [(1, 16)] + [(16, 16)] * 4 + [(16, 1)]
+        assert [layer.kernel_size for layer in net.layers] == [11, 7, 5, 3, 3, 1]
+        channels = [(layer.in_channels, layer.out_channels) for layer in net.layers]
+        assert channels == [(1, 16)] + [(16, 16)] * 4 + [(16, 1)]
 
     @pytest.mark.parametrize("batch", [1, 3])
     def test_cardinality(self, batch):

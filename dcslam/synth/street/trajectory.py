@@ -1,4 +1,4 @@
-"""The street's centre path, the terrain, the car's true motion, and the OXTS packets that describe it.
+"""The street's centre path, the car's true motion on the terrain, and the OXTS packets that describe it.
 
 World frame: x east, y north, z up (the frame of KITTI's Mercator/ENU poses), metres. The ego path is a smooth
 curve of bounded curvature; the terrain is a gentle height field (slopes of a few per cent); the car follows the
@@ -11,51 +11,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dcslam.io.kitti_oxts import rotation_xyz
+from dcslam.geometry.rotations import rotation_from_rpy, rpy_from_rotation
+from dcslam.io.kitti_oxts import mercator_to_lat_lon_alt, mercator_xyz
+from dcslam.synth.terrain import Terrain
 
-EARTH_RADIUS_M = 6378137.0
 GRAVITY = 9.81
 LIDAR_HEIGHT_M = 1.73
-
-
-@dataclass(frozen=True)
-class Terrain:
-    """Ground height ``h(x, y) = Σ a_i sin(k_i · (x, y) + φ_i)``: (K,) amplitudes, (K, 2) wave vectors, (K,) phases."""
-
-    amplitude: np.ndarray
-    wave: np.ndarray
-    phase: np.ndarray
-
-    @classmethod
-    def random(cls, rng: np.random.Generator) -> "Terrain":
-        wavelength = rng.uniform(180.0, 420.0, 3)
-        direction = rng.uniform(0, 2 * np.pi, 3)
-        wave = (2 * np.pi / wavelength)[:, None] * np.stack([np.cos(direction), np.sin(direction)], -1)
-        slope = rng.uniform(0.006, 0.018, 3)  # per-wave maximum slope; the sum stays below ~4 %
-        return cls(amplitude=slope / np.linalg.norm(wave, axis=1), wave=wave, phase=rng.uniform(0, 2 * np.pi, 3))
-
-    def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Heights (...) at points x, y (...)."""
-        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
-        arg = x[..., None] * self.wave[:, 0] + y[..., None] * self.wave[:, 1] + self.phase
-        return np.sin(arg) @ self.amplitude
-
-    def around(self, x0: float, y0: float, dx: np.ndarray, dy: np.ndarray):
-        """Height and gradient (h, dh/dx, dh/dy), each (n,) float32, at offsets dx, dy (n,) float32 from the point
-        (x0, y0): float32 arithmetic around a float64 origin, for speed on many rays."""
-        phase = (self.phase + self.wave @ np.array([x0, y0])).astype(np.float32)
-        arg = dx[:, None] * self.wave[:, 0].astype(np.float32) + dy[:, None] * self.wave[:, 1].astype(np.float32)
-        arg += phase
-        amplitude = self.amplitude.astype(np.float32)
-        c = np.cos(arg) * amplitude
-        return (np.sin(arg) @ amplitude, c @ self.wave[:, 0].astype(np.float32),
-                c @ self.wave[:, 1].astype(np.float32))
-
-    def gradient(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(dh/dx, dh/dy) at points x, y (...)."""
-        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
-        c = np.cos(x[..., None] * self.wave[:, 0] + y[..., None] * self.wave[:, 1] + self.phase) * self.amplitude
-        return c @ self.wave[:, 0], c @ self.wave[:, 1]
 
 
 @dataclass(frozen=True)
@@ -145,17 +106,9 @@ class Drive:
         pitch = -np.arctan(gx * forward[:, 0] + gy * forward[:, 1]) + wob[1]
         yaw = heading + wob[2]
         T = np.tile(np.eye(4), (len(t), 1, 1))
-        T[:, :3, :3] = rotation_xyz(roll, pitch, yaw)  # the Velodyne axes follow the car body (x fwd, y left, z up)
+        T[:, :3, :3] = rotation_from_rpy(roll, pitch, yaw)  # Velodyne axes follow the car body (x fwd, y left, z up)
         T[:, :3, 3] = np.concatenate([xy, (self.terrain.height(xy[:, 0], xy[:, 1]) + LIDAR_HEIGHT_M)[:, None]], 1)
         return T
-
-
-def rpy_from_rotation(R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(N, 3, 3) rotations ``Rz(yaw) Ry(pitch) Rx(roll)`` → roll, pitch, yaw (N,) each."""
-    pitch = -np.arcsin(np.clip(R[:, 2, 0], -1, 1))
-    roll = np.arctan2(R[:, 2, 1], R[:, 2, 2])
-    yaw = np.arctan2(R[:, 1, 0], R[:, 0, 0])
-    return roll, pitch, yaw
 
 
 def oxts_packets(T_world_imu_of, times: np.ndarray, lat0_deg: float, lon0_deg: float, alt0_m: float,
@@ -185,13 +138,8 @@ def oxts_packets(T_world_imu_of, times: np.ndarray, lat0_deg: float, lon0_deg: f
     a_body = np.einsum("nji,nj->ni", R, accel)
 
     scale = np.cos(np.deg2rad(lat0_deg))
-    mx0 = scale * EARTH_RADIUS_M * np.deg2rad(lon0_deg)
-    my0 = scale * EARTH_RADIUS_M * np.log(np.tan(np.deg2rad(90.0 + lat0_deg) / 2))
-    mx = mx0 + (p[:, 0] - p[0, 0])
-    my = my0 + (p[:, 1] - p[0, 1])
-    lon = np.rad2deg(mx / (scale * EARTH_RADIUS_M))
-    lat = np.rad2deg(2 * np.arctan(np.exp(my / (scale * EARTH_RADIUS_M)))) - 90.0
-    alt = alt0_m + (p[:, 2] - p[0, 2])
+    origin = mercator_xyz([lat0_deg], [lon0_deg], [alt0_m], scale)[0]
+    lat, lon, alt = mercator_to_lat_lon_alt(origin + (p - p[0]), scale)
     n = len(times)
     return np.stack([
         lat, lon, alt, roll, pitch, yaw,
@@ -202,41 +150,3 @@ def oxts_packets(T_world_imu_of, times: np.ndarray, lat0_deg: float, lon0_deg: f
         rng.uniform(0.02, 0.4, n), rng.uniform(0.01, 0.03, n),
         np.full(n, 4), np.full(n, 8), np.full(n, 6), np.full(n, 6), np.full(n, 6),
     ], -1)
-
-
-def format_oxts(packet: np.ndarray) -> str:
-    """One packet (30,) → a KITTI OXTS text line (15 significant digits, the last five fields as integers)."""
-    return " ".join([f"{v:.15g}" for v in packet[:25]] + [str(int(round(v))) for v in packet[25:]])
-
-
-OXTS_DATAFORMAT = """lat:   latitude of the oxts-unit (deg)
-lon:   longitude of the oxts-unit (deg)
-alt:   altitude of the oxts-unit (m)
-roll:  roll angle (rad),    0 = level, positive = left side up,      range: -pi   .. +pi
-pitch: pitch angle (rad),   0 = level, positive = front down,        range: -pi/2 .. +pi/2
-yaw:   heading (rad),       0 = east,  positive = counter clockwise, range: -pi   .. +pi
-vn:    velocity towards north (m/s)
-ve:    velocity towards east (m/s)
-vf:    forward velocity, i.e. parallel to earth-surface (m/s)
-vl:    leftward velocity, i.e. parallel to earth-surface (m/s)
-vu:    upward velocity, i.e. perpendicular to earth-surface (m/s)
-ax:    acceleration in x, i.e. in direction of vehicle front (m/s^2)
-ay:    acceleration in y, i.e. in direction of vehicle left (m/s^2)
-ay:    acceleration in z, i.e. in direction of vehicle top (m/s^2)
-af:    forward acceleration (m/s^2)
-al:    leftward acceleration (m/s^2)
-au:    upward acceleration (m/s^2)
-wx:    angular rate around x (rad/s)
-wy:    angular rate around y (rad/s)
-wz:    angular rate around z (rad/s)
-wf:    angular rate around forward axis (rad/s)
-wl:    angular rate around leftward axis (rad/s)
-wu:    angular rate around upward axis (rad/s)
-pos_accuracy:  velocity accuracy (north/east in m)
-vel_accuracy:  velocity accuracy (north/east in m/s)
-navstat:       navigation status (see navstat_to_string)
-numsats:       number of satellites tracked by primary GPS receiver
-posmode:       position mode of primary GPS receiver (see gps_mode_to_string)
-velmode:       velocity mode of primary GPS receiver (see gps_mode_to_string)
-orimode:       orientation mode of primary GPS receiver (see gps_mode_to_string)
-"""

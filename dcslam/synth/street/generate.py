@@ -1,4 +1,4 @@
-"""Write synthetic drives in the KITTI raw + depth-completion layout (see :mod:`dcslam.io.kitti`).
+"""Write synthetic drives in the KITTI raw + depth-completion layout (see the KITTI formats of :mod:`dcslam.io`).
 
 Per drive ``2011_09_26_drive_<1000 + index>_sync``::
 
@@ -26,14 +26,26 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
+from dcslam.io.atomic import write_json_atomic, write_text_atomic
 from dcslam.io.kitti import frame_name, write_depth_png, write_image, write_timestamps, write_velodyne
-from dcslam.synth.calib import DATE, SensorRig, copy_calibration, load_rig
+from dcslam.io.kitti_calib import Calibration, copy_calibration, read_calibration
+from dcslam.io.kitti_oxts import OxtsPacket, write_oxts, write_oxts_dataformat
 from dcslam.synth.raycast import CameraGrid
-from dcslam.synth.scene import Scene, build_scene
-from dcslam.synth.sensors import (GroundTexture, consistent_groundtruth, make_lidar_grid, project_points,
-                                  render_camera, scan_lidar, stereo_valid)
-from dcslam.synth.trajectory import OXTS_DATAFORMAT, Drive, Motion, Path as StreetPath, Terrain, format_oxts, \
-    oxts_packets
+from dcslam.synth.street.scene import Scene, build_scene
+from dcslam.synth.street.sensors import (GroundTexture, consistent_groundtruth, make_lidar_grid, project_points,
+                                         render_camera, scan_lidar, stereo_valid)
+from dcslam.synth.street.trajectory import Drive, Motion, oxts_packets
+from dcslam.synth.street.trajectory import Path as StreetPath
+from dcslam.synth.terrain import Terrain
+
+DATE = "2011_09_26"
+CALIB_DIR = Path(__file__).parents[1] / f"calib_{DATE}"  # the real 2011-09-26 calibration (package data, verbatim)
+
+
+def street_calibration() -> Calibration:
+    """The real KITTI 2011-09-26 calibration that synthetic drives are rendered with and written beside."""
+    return read_calibration(CALIB_DIR)
+
 
 GT_WINDOW = 5  # ground truth accumulates the scans of frames i − 5 … i + 5; KITTI annotates frames 5 … N − 6
 FIRST_DRIVE_NUMBER = 1000
@@ -69,7 +81,7 @@ class DriveReport:
     seconds: float
 
 
-def make_drive(seed: int, index: int, frames: int, rig: SensorRig) -> tuple[DriveTruth, np.random.Generator]:
+def make_drive(seed: int, index: int, frames: int, calib: Calibration) -> tuple[DriveTruth, np.random.Generator]:
     """The trajectory, timestamps, OXTS packets and scene of drive ``index`` of ``seed`` (deterministic)."""
     rng = np.random.default_rng([seed, index])
     dt = np.clip(rng.normal(0.1036, 0.0015, frames), 0.0998, 0.1102)
@@ -81,10 +93,10 @@ def make_drive(seed: int, index: int, frames: int, rig: SensorRig) -> tuple[Driv
     scene = build_scene(drive, rng, -130.0, length + 150.0)
 
     def T_world_imu_of(t):
-        return drive.T_world_velo(t) @ rig.T_velo_imu
+        return drive.T_world_velo(t) @ calib.T_velo_imu
 
     T_world_imu = T_world_imu_of(t_rel)
-    T_world_cam2 = T_world_imu @ np.linalg.inv(rig.T_cam2_imu)
+    T_world_cam2 = T_world_imu @ np.linalg.inv(calib.T_cam2_imu)
     T_world_cam2 = np.linalg.inv(T_world_cam2[0]) @ T_world_cam2
     oxts = oxts_packets(T_world_imu_of, t_rel, lat0_deg=49.0 + rng.uniform(0.0, 0.05),
                         lon0_deg=8.38 + rng.uniform(0.0, 0.08), alt0_m=110.0 + rng.uniform(0.0, 10.0), rng=rng)
@@ -95,7 +107,7 @@ def _t_rel(truth: DriveTruth) -> np.ndarray:
     return truth.timestamps - truth.timestamps[0]
 
 
-def write_drive(truth: DriveTruth, rng: np.random.Generator, rig: SensorRig, raw_dir: Path, depth_dir: Path,
+def write_drive(truth: DriveTruth, rng: np.random.Generator, calib: Calibration, raw_dir: Path, depth_dir: Path,
                 lidar_azimuth_step_deg: float = 0.08, on_frame=None) -> DriveReport:
     """Render and write every file of one drive into ``raw_dir`` (the ``<drive>`` folder of ``raw/<date>``) and
     ``depth_dir`` (its ``depth_completion/<split>/<drive>`` folder)."""
@@ -104,21 +116,21 @@ def write_drive(truth: DriveTruth, rng: np.random.Generator, rig: SensorRig, raw
     drive = scene.drive
     t_rel = _t_rel(truth)
     n = len(t_rel)
-    camera = CameraGrid(rig.K_cam2, rig.width, rig.height)
+    width, height = calib.size_rect_02
+    camera = CameraGrid(calib.K_cam2, width, height)
     lidar = make_lidar_grid(lidar_azimuth_step_deg)
     ground = GroundTexture(scene)
     T_world_velo = drive.T_world_velo(t_rel)
-    T_world_cam = truth.T_world_imu @ np.linalg.inv(rig.T_cam2_imu)
+    T_world_cam = truth.T_world_imu @ np.linalg.inv(calib.T_cam2_imu)
     T_cam_world = np.linalg.inv(T_world_cam)
 
     for sensor in ("image_02", "oxts", "velodyne_points"):
         write_timestamps(raw_dir / sensor / "timestamps.txt", truth.timestamps)
     write_timestamps(raw_dir / "velodyne_points" / "timestamps_start.txt", truth.timestamps - 0.05)
     write_timestamps(raw_dir / "velodyne_points" / "timestamps_end.txt", truth.timestamps + 0.05)
-    (raw_dir / "oxts" / "dataformat.txt").write_text(OXTS_DATAFORMAT)
-    (raw_dir / "oxts" / "data").mkdir(parents=True, exist_ok=True)
+    write_oxts_dataformat(raw_dir / "oxts" / "dataformat.txt")
     for k, packet in enumerate(truth.oxts):
-        (raw_dir / "oxts" / "data" / frame_name(k, ".txt")).write_text(format_oxts(packet) + "\n")
+        write_oxts(raw_dir / "oxts" / "data" / frame_name(k, ".txt"), OxtsPacket.from_values(packet))
 
     scans_world: dict[int, np.ndarray] = {}
     scans_velo: dict[int, np.ndarray] = {}
@@ -136,11 +148,11 @@ def write_drive(truth: DriveTruth, rng: np.random.Generator, rig: SensorRig, raw
         stereo[k] = stereo_valid(rgb)
         i = k - GT_WINDOW
         if i >= GT_WINDOW:
-            raw_i = project_points(scans_velo[i] @ rig.T_cam2_velo[:3, :3].T.astype(np.float32)
-                                   + rig.T_cam2_velo[:3, 3].astype(np.float32), rig.K_cam2, rig.width, rig.height)
+            raw_i = project_points(scans_velo[i] @ calib.T_cam2_velo[:3, :3].T.astype(np.float32)
+                                   + calib.T_cam2_velo[:3, 3].astype(np.float32), calib.K_cam2, width, height)
             window = np.concatenate([scans_world[j] for j in range(i - GT_WINDOW, i + GT_WINDOW + 1)])
             points_cam = (window @ T_cam_world[i][:3, :3].T + T_cam_world[i][:3, 3]).astype(np.float32)
-            gt_i = consistent_groundtruth(points_cam, true_depth[i], rig.K_cam2, stereo[i])
+            gt_i = consistent_groundtruth(points_cam, true_depth[i], calib.K_cam2, stereo[i])
             write_depth_png(depth_dir / "proj_depth" / "velodyne_raw" / "image_02" / frame_name(i, ".png"), raw_i)
             write_depth_png(depth_dir / "proj_depth" / "groundtruth" / "image_02" / frame_name(i, ".png"), gt_i)
             sparse.append(float(np.mean(raw_i > 0)))
@@ -180,9 +192,9 @@ def generate(out_root: Path | str, drives: int = 6, frames: int = 60, seed: int 
         taken = [p for name in names for p in (date_dir / name, depth_root / name) if _occupied(p)]
         if taken:
             raise DcslamError(f"{taken[0]} exists; pass --force to replace it")
-    rig = load_rig()
-    copy_calibration(date_dir, force)
-    from dcslam.workspace import stage_config, write_json_atomic, write_text_atomic
+    calib = street_calibration()
+    copy_calibration(CALIB_DIR, date_dir, force)
+    from dcslam.workspace import stage_config
 
     settings = {"out": out_root, "drives": drives, "frames": frames, "seed": seed,
                 "lidar_azimuth_step_deg": lidar_azimuth_step_deg, "groundtruth_window": GT_WINDOW}
@@ -191,14 +203,14 @@ def generate(out_root: Path | str, drives: int = 6, frames: int = 60, seed: int 
     write_json_atomic(out_root / "synth_config.json", stage_config("synth", settings))
     reports = []
     for index, name in enumerate(names):
-        truth, rng = make_drive(seed, index, frames, rig)
+        truth, rng = make_drive(seed, index, frames, calib)
         raw_tmp = date_dir / f".{name}.tmp-{os.getpid()}"
         depth_tmp = depth_root / f".{name}.tmp-{os.getpid()}"
         try:
             for tmp in (raw_tmp, depth_tmp):
                 shutil.rmtree(tmp, ignore_errors=True)
                 tmp.mkdir(parents=True)
-            reports.append(write_drive(truth, rng, rig, raw_tmp, depth_tmp, lidar_azimuth_step_deg, on_frame))
+            reports.append(write_drive(truth, rng, calib, raw_tmp, depth_tmp, lidar_azimuth_step_deg, on_frame))
             for tmp, final in ((raw_tmp, date_dir / name), (depth_tmp, depth_root / name)):
                 if final.exists():
                     shutil.rmtree(final)

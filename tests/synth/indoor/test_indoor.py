@@ -10,6 +10,7 @@ from dcslam.io import tum_rgbd as tr
 from dcslam.io.tum import read_tum
 from dcslam.io.tum_sequence import index_sequence
 from dcslam.synth import indoor
+from dcslam.synth.raycast import CameraGrid
 
 
 @pytest.fixture(scope="module")
@@ -66,8 +67,8 @@ def test_depth_agrees_with_poses_only_through_the_negative_fy():
     room = indoor.build_room(rng)
     T = indoor.handheld_trajectory(room, 7, rng)
     K, width, height = indoor.camera_K(0.25)
-    grid = indoor.CameraGrid(K, width, height)
-    look = indoor._Look(np.array([0.6, 0.45, 0.3], np.float32), False)
+    grid = CameraGrid(K, width, height)
+    look = indoor.Look(np.array([0.6, 0.45, 0.3], np.float32), False)
     d0, d6 = (indoor.render(room, look, grid, T[k], rng)[0] for k in (0, 6))
 
     def reprojection_error(K_used):

@@ -5,9 +5,9 @@ import pytest
 from dcslam.errors import DcslamError
 from dcslam.io.kitti import read_depth_png, read_image, read_timestamps, read_velodyne
 from dcslam.synth import generate, make_drive
-from dcslam.synth.calib import load_rig
 from dcslam.synth.raycast import CameraGrid
-from dcslam.synth.sensors import GroundTexture, render_camera
+from dcslam.synth.street.generate import street_calibration
+from dcslam.synth.street.sensors import GroundTexture, render_camera
 
 FRAMES = 11  # the fewest with a depth frame (frame 5)
 
@@ -22,12 +22,12 @@ def kitti(tmp_path_factory):
 @pytest.fixture(scope="module")
 def frame5():
     """True depth and image of frame 5 of the fixture drive, rendered again."""
-    rig = load_rig()
+    rig = street_calibration()
     truth, rng = make_drive(3, 0, FRAMES, rig)
     T_world_cam = truth.T_world_imu[5] @ np.linalg.inv(rig.T_cam2_imu)
     scene = truth.scene
     t = truth.timestamps[5] - truth.timestamps[0]
-    return render_camera(scene, GroundTexture(scene), CameraGrid(rig.K_cam2, rig.width, rig.height), T_world_cam,
+    return render_camera(scene, GroundTexture(scene), CameraGrid(rig.K_cam2, *rig.size_rect_02), T_world_cam,
                          float(t), rng)
 
 
@@ -129,7 +129,7 @@ def test_an_interrupted_run_leaves_no_partial_drive(tmp_path):
 
 
 def test_same_seed_same_drive_other_seed_other_drive():
-    rig = load_rig()
+    rig = street_calibration()
     a, b, c = make_drive(4, 0, 20, rig)[0], make_drive(4, 0, 20, rig)[0], make_drive(5, 0, 20, rig)[0]
     np.testing.assert_array_equal(a.oxts, b.oxts)
     np.testing.assert_array_equal(a.timestamps, b.timestamps)

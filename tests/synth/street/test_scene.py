@@ -2,14 +2,13 @@
 import numpy as np
 import pytest
 
-from dcslam.synth.calib import load_rig
-from dcslam.synth.generate import make_drive
-from dcslam.synth.scene import CAR, FACADE, FOLIAGE, METAL, SIDEWALK  # noqa: F401
+from dcslam.synth.street.generate import make_drive, street_calibration
+from dcslam.synth.street.scene import CAR, FACADE, FOLIAGE, METAL, SIDEWALK  # noqa: F401
 
 
 @pytest.fixture(scope="module")
 def truth():
-    return make_drive(2, 0, 60, load_rig())[0]
+    return make_drive(2, 0, 60, street_calibration())[0]
 
 
 def test_street_has_the_kinds_of_objects_of_kitti_streets(truth):

@@ -1,8 +1,8 @@
 """Projections of scans into camera 2 and the KITTI-style ground-truth consistency check."""
 import numpy as np
 
-from dcslam.synth.sensors import consistent_groundtruth, hdl64_elevations_deg, make_lidar_grid, project_points, \
-    stereo_valid
+from dcslam.synth.street.sensors import (consistent_groundtruth, hdl64_elevations_deg, make_lidar_grid, project_points,
+                                         stereo_valid)
 
 K = np.array([[50.0, 0, 20], [0, 50.0, 10], [0, 0, 1]])
 

@@ -11,37 +11,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dcslam.synth.trajectory import Drive, rotation_xyz
-
-BOX, CYLINDER, ELLIPSOID = 0, 1, 2
+from dcslam.geometry.rotations import rotation_from_rpy
+from dcslam.synth.shapes import BOX, CYLINDER, ELLIPSOID, Shape  # noqa: F401 (street builders use all three)
+from dcslam.synth.street.trajectory import Drive
 
 # materials: index → (name, LiDAR reflectance); colours are per object
 ASPHALT, GRASS, SIDEWALK, FACADE, GLASS, CAR, TIRE, BARK, FOLIAGE, METAL, HEDGE, ROOF = range(12)
 REFLECTANCE = np.array([0.15, 0.3, 0.35, 0.4, 0.05, 0.5, 0.05, 0.25, 0.3, 0.6, 0.3, 0.3], dtype=np.float32)
 
 LANE_WIDTH_M = 3.5
-
-
-@dataclass(frozen=True)
-class Shape:
-    """One solid: ``kind`` (BOX, CYLINDER along local z, ELLIPSOID), pose ``R_world_obj`` (3, 3) and ``center``
-    (3,), ``half`` (3,) half extents (cylinder: radius, radius, half height; ellipsoid: radii), material and colour."""
-
-    kind: int
-    R_world_obj: np.ndarray
-    center: np.ndarray
-    half: np.ndarray
-    material: int
-    color: np.ndarray
-
-    @property
-    def radius(self) -> float:
-        return float(np.linalg.norm(self.half))
-
-    def corners(self) -> np.ndarray:
-        """The 8 corners (8, 3) in the world of the shape's oriented bounding box."""
-        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64)
-        return self.center + (signs * self.half) @ self.R_world_obj.T
 
 
 @dataclass(frozen=True)
@@ -83,7 +61,7 @@ class Scene:
                 continue
             yaw = heading + (0.0 if car.direction > 0 else np.pi)
             z = terrain.height(xy[0], xy[1])
-            R = rotation_xyz([0.0], [0.0], [yaw])[0]
+            R = rotation_from_rpy([0.0], [0.0], [yaw])[0]
             origin = np.array([xy[0], xy[1], z])
             shapes += [Shape(p.kind, R @ p.R_world_obj, origin + R @ p.center, p.half, p.material, p.color)
                        for p in car.parts]
@@ -94,9 +72,9 @@ def _car_parts(rng: np.random.Generator) -> tuple:
     length, width = rng.uniform(3.9, 4.8), rng.uniform(1.7, 1.9)
     color = rng.choice(np.array([[0.7, 0.1, 0.1], [0.1, 0.2, 0.6], [0.8, 0.8, 0.8], [0.15, 0.15, 0.15],
                                  [0.5, 0.5, 0.55], [0.9, 0.9, 0.85], [0.2, 0.4, 0.2]]))
-    I = np.eye(3)
-    body = Shape(BOX, I, np.array([0.0, 0.0, 0.75]), np.array([length / 2, width / 2, 0.4]), CAR, color)
-    cabin = Shape(BOX, I, np.array([-0.2, 0.0, 1.35]), np.array([length * 0.3, width / 2 - 0.08, 0.25]), GLASS,
+    R_level = np.eye(3)
+    body = Shape(BOX, R_level, np.array([0.0, 0.0, 0.75]), np.array([length / 2, width / 2, 0.4]), CAR, color)
+    cabin = Shape(BOX, R_level, np.array([-0.2, 0.0, 1.35]), np.array([length * 0.3, width / 2 - 0.08, 0.25]), GLASS,
                   color * 0.5)
     R_wheel = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # local z (cylinder axis) → car y
     wheels = tuple(Shape(CYLINDER, R_wheel, np.array([sx * (length / 2 - 0.75), sy * (width / 2 - 0.1), 0.33]),
@@ -118,7 +96,7 @@ class _Builder:
         metres above the ground (``sunk`` metres more below) to ``bottom + height``."""
         xy, yaw, z = self.frame(s, lateral)
         z = z if z0 is None else z0
-        R = rotation_xyz([0.0], [pitch], [yaw])[0]
+        R = rotation_from_rpy([0.0], [pitch], [yaw])[0]
         zc = z + bottom + (height - sunk) / 2
         self.shapes.append(Shape(BOX, R, np.array([xy[0], xy[1], zc]),
                                  np.array([along / 2, across / 2, (height + sunk) / 2]), material, np.asarray(color)))
@@ -130,7 +108,7 @@ class _Builder:
 
     def ellipsoid(self, s, lateral, radii, center_height, material, color):
         xy, yaw, z = self.frame(s, lateral)
-        R = rotation_xyz([0.0], [0.0], [yaw])[0]
+        R = rotation_from_rpy([0.0], [0.0], [yaw])[0]
         self.shapes.append(Shape(ELLIPSOID, R, np.array([xy[0], xy[1], z + center_height]), np.asarray(radii, float),
                                  material, np.asarray(color)))
 
@@ -153,7 +131,7 @@ class _Builder:
 
     def parked_car(self, s, lateral):
         xy, yaw, z = self.frame(s, lateral, yaw_offset=self.rng.normal(0, 0.03))
-        R = rotation_xyz([0.0], [0.0], [yaw])[0]
+        R = rotation_from_rpy([0.0], [0.0], [yaw])[0]
         origin = np.array([xy[0], xy[1], z])
         for p in _car_parts(self.rng):
             self.shapes.append(Shape(p.kind, R @ p.R_world_obj, origin + R @ p.center, p.half, p.material, p.color))

@@ -7,9 +7,11 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from dcslam.synth import scene as sc
+from dcslam.synth.noise import cell_noise, value_noise
 from dcslam.synth.raycast import GROUND, NO_HIT, CameraGrid, LidarGrid, cast, local_normals
-from dcslam.synth.scene import Scene, Shape
+from dcslam.synth.shapes import Shape
+from dcslam.synth.street import scene as sc
+from dcslam.synth.street.scene import Scene
 
 MAX_RANGE_M = 120.0  # LiDAR
 CAMERA_RANGE_M = 160.0
@@ -33,36 +35,6 @@ def make_lidar_grid(azimuth_step_deg: float = 0.08) -> LidarGrid:
 
 
 # ----------------------------------------------------------------------------------------------------- textures
-def _hash(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray) -> np.ndarray:
-    h = (ix * 73856093) ^ (iy * 19349663) ^ (iz * 83492791)
-    h = (h ^ (h >> 13)) * 1274126177
-    return ((h ^ (h >> 16)) & 0xFFFF).astype(np.float32) / 65535.0
-
-
-def value_noise(p: np.ndarray, cell: float) -> np.ndarray:
-    """Smooth pseudo-random values in [0, 1] (n,) at points p (n, 3), varying over ``cell`` metres."""
-    q = p / cell
-    i = np.floor(q)
-    f = (q - i).astype(np.float32)
-    f = f * f * (3 - 2 * f)
-    i = i.astype(np.int64)
-    out = np.zeros(len(p), dtype=np.float32)
-    for dx in (0, 1):
-        wx = f[:, 0] if dx else 1 - f[:, 0]
-        for dy in (0, 1):
-            wy = f[:, 1] if dy else 1 - f[:, 1]
-            for dz in (0, 1):
-                wz = f[:, 2] if dz else 1 - f[:, 2]
-                out += wx * wy * wz * _hash(i[:, 0] + dx, i[:, 1] + dy, i[:, 2] + dz)
-    return out
-
-
-def cell_noise(p: np.ndarray, cell: float) -> np.ndarray:
-    """Blocky pseudo-random values in [0, 1] (n,), constant over cubes of ``cell`` metres."""
-    i = np.floor(p / cell).astype(np.int64)
-    return _hash(i[:, 0], i[:, 1], i[:, 2])
-
-
 def shape_albedo(shape: Shape, p_world: np.ndarray, p_local: np.ndarray, n_local: np.ndarray) -> np.ndarray:
     """Surface colours (n, 3) in [0, 1] of ``shape`` at world points (n, 3) / local points and normals (n, 3)."""
     m, base = shape.material, shape.color.astype(np.float32)

@@ -1,0 +1,5 @@
+"""Numbers that several packages must agree on, kept below all of them so that imports run one way."""
+
+MIN_DEPTH_M = 0.1
+"""Depths below 0.1 m are holes, not depths: no KITTI sensor measures that near. Predictions are cut there, SLAM
+frames ignore nearer pixels, and scoring (:mod:`dcslam.eval.depth`) counts nearer predictions as missing."""

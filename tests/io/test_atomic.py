@@ -1,0 +1,38 @@
+"""Atomic writes: the file appears whole or not at all, and is not replaced without force."""
+import json
+
+import pytest
+
+from dcslam.errors import DcslamError
+from dcslam.io.atomic import atomic_output, write_json_atomic, write_text_atomic
+
+
+def test_text_and_json_round_trip(tmp_path):
+    write_text_atomic(tmp_path / "a" / "b.txt", "hello\n")
+    assert (tmp_path / "a" / "b.txt").read_text() == "hello\n"
+    write_json_atomic(tmp_path / "c.json", {"path": tmp_path, "n": 3})
+    assert json.loads((tmp_path / "c.json").read_text()) == {"path": str(tmp_path), "n": 3}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a", "c.json"]
+
+
+def test_existing_file_needs_force(tmp_path):
+    write_text_atomic(tmp_path / "x.txt", "old")
+    with pytest.raises(DcslamError, match="--force"):
+        write_text_atomic(tmp_path / "x.txt", "new", force=False)
+    assert (tmp_path / "x.txt").read_text() == "old"
+
+
+def test_interrupted_write_leaves_the_old_file_and_no_temporary(tmp_path):
+    (tmp_path / "x.txt").write_text("old")
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_output(tmp_path / "x.txt", force=True) as tmp:
+            tmp.write_text("half")
+            raise KeyboardInterrupt
+    assert [p.name for p in tmp_path.iterdir()] == ["x.txt"]
+    assert (tmp_path / "x.txt").read_text() == "old"
+
+
+def test_json_refuses_objects_it_cannot_write(tmp_path):
+    with pytest.raises(TypeError, match="object"):
+        write_json_atomic(tmp_path / "y.json", {"x": object()})
+    assert not list(tmp_path.iterdir())
