@@ -39,7 +39,7 @@ from dcslam.depth.data import check_view, frame_windows
 from dcslam.depth.losses import depth_errors
 from dcslam.depth.maps import MapChamfer
 from dcslam.errors import DcslamError
-from dcslam.eval.tables import Column, Table
+from dcslam.report.tables import Column, Table
 from dcslam.progress import Bar, track
 from dcslam.workspace import atomic_output, stage_config, write_json_atomic, write_text_atomic
 
@@ -388,7 +388,7 @@ def run_denoising(out_dir: Path | str, config: DenoiseConfig, *, force: bool = F
     and ``force`` is false."""
     from dcslam.depth.models import build_model, save_model
     from dcslam.depth.train import resolve_device
-    from dcslam.eval.report import check_outputs
+    from dcslam.report.scores import check_outputs
 
     out_dir = Path(out_dir)
     config.check()
@@ -424,55 +424,3 @@ def run_denoising(out_dir: Path | str, config: DenoiseConfig, *, force: bool = F
     write_text_atomic(out_dir / "results.md", table.to_markdown())
     plot_denoising(out_dir / "denoising.png", scores["examples"], config.sigma_m)
     return DenoiseResult(out_dir, table, scores, losses, seconds)
-
-
-def demo_drives(root: Path | str, *, sequences: int = 4, frames: int = 30, seed: int = 0, force: bool = False,
-                on_frame=None) -> Path:
-    """The demo's indoor data under ``root``: ``sequences`` generated rooms in the ICL-NUIM layout (``root/tum``,
-    :func:`dcslam.synth.indoor.generate_indoor`) converted to drive files + ``splits.json`` (``root/drives``,
-    :func:`dcslam.prepare_tum.prepare_tum`; the last room is the test split). Kept when ``root/data.json`` says it
-    was made with the same settings; made again when they differ only with ``force``. Returns the drives folder."""
-    import json
-
-    from dcslam.prepare_tum import prepare_tum
-    from dcslam.synth.indoor import generate_indoor
-
-    if sequences < 2:
-        raise DcslamError(f"the demo needs at least 2 sequences (one held out), got {sequences}")
-    root = Path(root)
-    settings = {"sequences": sequences, "frames": frames, "seed": seed}
-    stamp, drives = root / "data.json", root / "drives"
-    if stamp.exists():
-        try:
-            made = json.loads(stamp.read_text()).get("settings")
-        except json.JSONDecodeError:
-            made = None
-        if made == settings and (drives / "splits.json").exists():
-            return drives
-        if not force:
-            raise DcslamError(f"{root} holds indoor data made with other settings ({made}); pass --force to make "
-                              "it again, or --drives to use it")
-    generate_indoor(root / "tum", sequences=sequences, frames=frames, seed=seed, force=True, on_frame=on_frame)
-    prepare_tum(root / "tum", drives, force=True)
-    write_json_atomic(stamp, stage_config("demo-icl data", settings))
-    return drives
-
-
-def drives_of(path: Path | str) -> tuple[list[Path], list[Path]]:
-    """(training drives, test drives) of a drive file (no test drives: its last frames are held out) or of a folder
-    with ``splits.json`` (train and val drives train, test drives are held out)."""
-    from dcslam.io.drive import read_splits
-
-    path = Path(path)
-    if path.is_file():
-        return [path], []
-    if not path.is_dir():
-        raise DcslamError(f"{path} not found; give a drive file or a folder with splits.json "
-                          "(run `dcslam prepare-tum` first)")
-    splits = read_splits(path / "splits.json")
-    named = lambda names: [path / f"{name}.h5" for name in names]  # noqa: E731
-    train, test = named(splits["train"] + splits["val"]), named(splits["test"])
-    missing = [p for p in train + test if not p.exists()]
-    if missing:
-        raise DcslamError(f"{missing[0]} (named in {path / 'splits.json'}) not found; run `dcslam prepare-tum` again")
-    return train, test

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.depth.data import check_view, downscale_depth
-from dcslam.depth.models import IP_BASIC_NAMES
+from dcslam.depth.models import ALIASES, CLASSICAL, IP_BASIC_NAMES, build_classical, classical_name
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import MIN_DEPTH_M
 
@@ -57,16 +57,24 @@ class Predictor:
     config: dict
 
 
+def classical_predictor(name: str) -> Predictor:
+    """A registered classical completer (:data:`dcslam.depth.models.CLASSICAL`; aliases such as ``ip-basic``
+    resolve to their registered name, which is the layer's ``made_by`` and folder name)."""
+    from dataclasses import asdict, is_dataclass
+
+    registered = classical_name(name)
+    if registered is None:
+        raise DcslamError(f"unknown completer {name!r}; expected one of {', '.join([*CLASSICAL, *ALIASES])}")
+    completer = build_classical(registered)
+    config = asdict(completer) if is_dataclass(completer) else {}
+    return Predictor(completer, registered, {"model": registered, **config})
+
+
 def ip_basic_predictor(name: str) -> Predictor:
     """``ip-basic-fast`` or ``ip-basic-multiscale`` (``ip-basic`` = fast)."""
-    from dcslam.depth.models.ip_basic import IPBasic
-
-    if name == "ip-basic":
-        name = "ip-basic-fast"
-    if name not in IP_BASIC_NAMES:
+    if classical_name(name) not in IP_BASIC_NAMES:
         raise DcslamError(f"unknown IP-Basic variant {name!r}; expected one of {', '.join(IP_BASIC_NAMES)}")
-    completer = IPBasic(name.removeprefix("ip-basic-"))
-    return Predictor(completer, name, {"model": name, "variant": completer.variant, "max_depth": completer.max_depth})
+    return classical_predictor(name)
 
 
 def run_predictor(run_dir: Path | str, device) -> Predictor:

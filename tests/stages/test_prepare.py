@@ -10,7 +10,7 @@ import pytest
 from dcslam.errors import DcslamError
 from dcslam.io import kitti
 from dcslam.io.drive import DriveFile, read_splits
-from dcslam.prepare import THESIS_SPLITS, prepare_kitti, proportional_splits
+from dcslam.stages.prepare import THESIS_SPLITS, prepare_kitti, proportional_splits
 
 _spec = importlib.util.spec_from_file_location("kitti_fixtures", Path(__file__).parent / "io" / "kitti_fixtures.py")
 fx = importlib.util.module_from_spec(_spec)

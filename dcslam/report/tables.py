@@ -23,7 +23,7 @@ from pathlib import Path
 
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import DepthErrors, mean_errors
-from dcslam.eval.layers import TrajectoryPair, find_layer, score_layer_depth, score_layer_trajectories
+from dcslam.report.layers import TrajectoryPair, find_layer, score_layer_depth, score_layer_trajectories
 from dcslam.workspace import Workspace
 
 THESIS_FIGURES = Path(__file__).with_name("thesis_tables.json")
@@ -284,5 +284,5 @@ def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str]) -> Ta
         "per image, averaged over all test images",
         "ATE: evo APE translation after SE(3) Umeyama alignment; RPE: evo, consecutive frames; RMSE averaged over "
         "the test drives",
-        "thesis columns: the thesis's own figures (dcslam/eval/thesis_tables.json; — where not filled in)"]
+        "thesis columns: the thesis's own figures (dcslam/report/thesis_tables.json; — where not filled in)"]
     return table

@@ -9,7 +9,7 @@ from dcslam.errors import DcslamError
 from dcslam.io import tum_rgbd as tr
 from dcslam.io.drive import DriveFile, read_splits
 from dcslam.io.tum import read_tum, write_tum
-from dcslam.prepare_tum import prepare_tum, sparse_subsample
+from dcslam.stages.prepare_tum import prepare_tum, sparse_subsample
 from dcslam.synth.indoor import generate_indoor
 
 SCALE = 0.1  # 64 x 48 images
