@@ -2,16 +2,19 @@
 
 The data are ``drives`` (a drive file, or a folder with splits.json), else indoor rooms generated in the ICL-NUIM
 layout and prepared under ``<workspace>/demo-icl/`` (kept for the next run; the last room is held out). The
-experiment itself is :func:`dcslam.denoise.run_denoising`; it writes ``<workspace>/results/demo-icl/``.
+experiment (:func:`run_denoising`; the algorithm in :mod:`dcslam.depth.denoise`) writes ``<workspace>/results/demo-icl/``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import time
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
-from dcslam.workspace import Workspace, stage_config, write_json_atomic
+from dcslam.workspace import Workspace, stage_config, write_json_atomic, write_text_atomic
+
+OUTPUT_FILES = ("model.pt", "results.json", "results.csv", "results.md", "denoising.png")
 
 
 @dataclass(frozen=True)
@@ -38,8 +41,8 @@ class DemoIclConfig:
         self.denoise_config().check()
 
     def denoise_config(self, train_drives: list | None = None, test_drives: list | None = None):
-        """The :class:`dcslam.denoise.DenoiseConfig` of this run."""
-        from dcslam.denoise import DenoiseConfig
+        """The :class:`dcslam.depth.denoise.DenoiseConfig` of this run."""
+        from dcslam.depth.denoise import DenoiseConfig
 
         return DenoiseConfig(sigma_m=self.sigma, steps=self.steps, lr=self.lr, batch_size=self.batch_size,
                              patch=self.patch, map_frames=self.map_frames, scale=self.scale, features=self.features,
@@ -47,9 +50,65 @@ class DemoIclConfig:
                              train_drives=list(train_drives or []), test_drives=list(test_drives or []))
 
 
+@dataclass
+class DenoiseResult:
+    out_dir: Path
+    table: object               # a dcslam.report.tables.Table
+    scores: dict
+    losses: list
+    seconds: float
+
+
+def run_denoising(out_dir: Path | str, config, *, force: bool = False,
+                  map_builder=None) -> DenoiseResult:
+    """The whole experiment into ``out_dir`` (see :mod:`dcslam.depth.denoise`); fails before any work if an output exists
+    and ``force`` is false."""
+    import torch
+
+    from dcslam.depth.denoise import DepthDenoiser, pointfusion_builder, split_frames, train_denoiser
+    from dcslam.depth.models import build_model, save_model
+    from dcslam.depth.train import resolve_device
+    from dcslam.report.denoising import evaluate, plot_denoising, results_table
+    from dcslam.report.scores import check_outputs
+
+    out_dir = Path(out_dir)
+    config.check()
+    if not config.train_drives:
+        raise DcslamError("no training drives; run `dcslam prepare-tum` first, or give --drives")
+    check_outputs([out_dir / name for name in OUTPUT_FILES], force)
+    start = time.perf_counter()
+    device = resolve_device(config.device)
+    torch.manual_seed(config.seed)
+    map_builder = map_builder or pointfusion_builder(config.map_voxel_m)
+    train_frames, test_frames = split_frames(config)
+    net = build_model("dncnn", channels=1, features=config.features, depth=config.layers)
+    with torch.no_grad():  # the residual layer starts at zero: training starts from the identity (output = input)
+        net.body[-1].weight.zero_()
+        net.body[-1].bias.zero_()
+    model = DepthDenoiser(net, config.depth_scale_m).to(device)
+    losses = train_denoiser(model, train_frames, config, device, map_builder)
+    scores = evaluate(model, test_frames, config, device, map_builder)
+    table = results_table(scores, config)
+    seconds = time.perf_counter() - start
+
+    settings = {**asdict(config), "train_drives": [str(p) for p in config.train_drives],
+                "test_drives": [str(p) for p in config.test_drives], "resolved_device": str(device)}
+    split = {"train": {f.name: f.frame_ids for f in train_frames}, "test": {f.name: f.frame_ids for f in test_frames}}
+    save_model(out_dir / "model.pt", net, meta={"experiment": "demo-icl", "depth_scale_m": config.depth_scale_m,
+                                               "sigma_m": config.sigma_m, "scale": config.scale,
+                                               "steps": config.steps})
+    record = stage_config("denoise", settings)
+    record.update(scores={k: scores[k] for k in ("noisy", "denoised", "frames", "pixels")}, frames=split,
+                  losses=losses, seconds=seconds)
+    write_json_atomic(out_dir / "results.json", record)
+    write_text_atomic(out_dir / "results.csv", table.to_csv())
+    write_text_atomic(out_dir / "results.md", table.to_markdown())
+    plot_denoising(out_dir / "denoising.png", scores["examples"], config.sigma_m)
+    return DenoiseResult(out_dir, table, scores, losses, seconds)
+
+
 def run(ws: Workspace, config: DemoIclConfig, *, force: bool = False):
-    """Generate (or reuse) the data, run the experiment; returns a :class:`dcslam.denoise.DenoiseResult`."""
-    from dcslam.denoise import OUTPUT_FILES, run_denoising
+    """Generate (or reuse) the data, run the experiment; returns a :class:`DenoiseResult`."""
     from dcslam.progress import Bar
     from dcslam.report.scores import check_outputs
 

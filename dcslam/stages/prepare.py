@@ -185,6 +185,10 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
     return PrepareResult(source, tuple(written), out_splits, splits_path, config_path, tuple(notes))
 
 
+HELP = ("Convert KITTI raw + depth-completion drives (real, or from `dcslam synth`) into one HDF5 drive file each, "
+        "with only the frames that have depth, camera-2 poses from OXTS, and splits.json.")
+
+
 @dataclass(frozen=True)
 class PrepareConfig:
     """Options of ``dcslam prepare-kitti``."""
@@ -209,3 +213,6 @@ def run(ws: Workspace, config: PrepareConfig, *, force: bool = False) -> Prepare
     """:func:`prepare_kitti` with the workspace's default folders (its record: ``<out>/prepare-kitti.json``)."""
     return prepare_kitti(config.kitti or ws.kitti, config.out or ws.drives, splits_file=config.splits,
                          max_frames=config.max_frames, include_unsplit=config.all_drives, force=force)
+
+
+CONFIG = PrepareConfig

@@ -152,6 +152,20 @@ def prepare_tum(src: Path | str, out_dir: Path | str, *, intrinsics: np.ndarray 
     return PrepareResult("tum", tuple(written), out_splits, splits_path, config_path, tuple(notes))
 
 
+HELP = (
+    "Convert TUM RGB-D or ICL-NUIM sequences (real, or from `dcslam synth --indoor`) into one HDF5 drive file each "
+    "plus splits.json, the format `dcslam slam`, `train` and `score` read.\n\n"
+    "A sequence folder holds associations.txt (ICL-NUIM: 't depth/N.png t rgb/N.png') or rgb.txt and depth.txt "
+    "(TUM: associated by nearest timestamp, at most 0.02 s apart), 16-bit depth PNGs (5000 = 1 m) and a TUM "
+    "trajectory (groundtruth.txt or *.gt.freiburg, also looked for in the parent folder). Poses are interpolated "
+    "at each depth timestamp; frames without one are dropped.\n\n"
+    "Intrinsics: --intrinsics, else the folder's intrinsics.txt, else TUM's ROS default (525, 525, 319.5, 239.5) or "
+    "ICL-NUIM's (481.2, -480, 319.5, 239.5): its negative fy is real (the camera's y axis points up) and is kept.\n\n"
+    "depth/dense is the sensor depth; depth/sparse keeps every --sparse-stride-th row and column of it "
+    "(LiDAR-like, 4 % of pixels at 5)."
+)
+
+
 @dataclass(frozen=True)
 class PrepareTumConfig:
     """Options of ``dcslam prepare-tum``."""
@@ -192,3 +206,6 @@ def run(ws: Workspace, config: PrepareTumConfig, *, force: bool = False) -> Prep
     return prepare_tum(config.tum or ws.root / "tum", config.out or ws.drives, intrinsics=config.K(),
                        sparse_stride=config.sparse_stride, max_frames=config.max_frames, stride=config.stride,
                        splits_file=config.splits, force=force)
+
+
+CONFIG = PrepareTumConfig
