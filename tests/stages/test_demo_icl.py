@@ -173,10 +173,10 @@ def test_demo_drives_refuses_other_settings_without_force(tmp_path):
 def test_stage_config_maps_to_the_experiment_and_runs_on_given_drives(rooms, tmp_path):
     from dcslam.workspace import Workspace
 
-    config = DemoIclConfig(sigma=0.02, steps=2, batch_size=2, patch=16, features=4, layers=2, scale=1.0,
+    config = DemoIclConfig(sigma=0.02, steps=2, batch_size=2, patch=16, features=4, layers=3, scale=1.0,
                            drives=rooms, device="cpu")
     experiment = config.denoise_config()
-    assert (experiment.sigma_m, experiment.steps, experiment.features, experiment.layers) == (0.02, 2, 4, 2)
+    assert (experiment.sigma_m, experiment.steps, experiment.features, experiment.layers) == (0.02, 2, 4, 3)
     with pytest.raises(DcslamError, match="sigma"):
         DemoIclConfig(sigma=0)
     result = run(Workspace(tmp_path / "ws"), config)
