@@ -199,7 +199,7 @@ def find_layer(ws: Workspace, ref: str) -> LayerRef | None:
         root = ws.root / folder
         name = name or _latest_layer(root, made_by)
         return LayerRef(name, root / name, made_by=made_by) if (root / name).is_dir() else None
-    for kind, (folder, made_by) in LAYER_KINDS.items():
+    for folder, made_by in LAYER_KINDS.values() if Path(ref).name == ref else ():  # a bare name
         if (ws.root / folder / ref).is_dir():
             return LayerRef(ref, ws.root / folder / ref, made_by=made_by)
     path = Path(ref)

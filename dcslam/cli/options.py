@@ -22,7 +22,6 @@ ConfigOption = Annotated[Optional[Path], typer.Option(
     "--config", help="Read the options from this TOML (or YAML) file; options given here override it.")]
 PrintConfigOption = Annotated[bool, typer.Option(
     "--print-config", help="Print the configuration this command would run, as TOML, and exit.")]
-SHARED = ("workspace", "config_file", "print_config", "force")
 
 
 def _choice_enum(name: str, choices) -> type[enum.Enum]:
@@ -40,7 +39,9 @@ def _parameter(cls, field) -> inspect.Parameter:
     if optional or is_list:
         annotation = Optional[annotation]
     flags = meta.get("flags", (f"--{field.name.replace('_', '-')}",))
-    extra = {k: meta[k] for k in ("min", "max", "show_default") if k in meta}
+    extra = {k: meta[k] for k in ("min", "max", "show_default", "metavar") if k in meta}
+    if is_list and "choices" not in meta and "metavar" not in meta:
+        extra["metavar"] = "PATH" if base is Path else base.__name__.upper()
     if "validate" in meta:
         extra["callback"] = _usage_check(meta["validate"], flags[0])
     default = None if field.default is dataclasses.MISSING else field.default

@@ -2,7 +2,8 @@
 
 A stage's options are the fields of its configuration dataclass. Each field carries, in ``metadata``, what the
 command line needs and nothing else declares again: ``help``, and optionally ``choices`` (an unknown value is a usage
-error), ``min`` / ``max``, ``flags`` (option names when they are not ``--field-name``), ``show_default`` and
+error), ``min`` / ``max``, ``flags`` (option names when they are not ``--field-name``), ``show_default``,
+``metavar``, ``validate`` (a function that raises DcslamError on a bad value: a usage error on the command line) and
 ``internal`` (a field set by code, never an option or a config-file key). :func:`option` builds such a field.
 
 A configuration file holds the same keys as the options (``map_frames``, not ``--map-frames``), in TOML (read with
@@ -23,7 +24,8 @@ _MISSING = dataclasses.MISSING
 
 
 def option(default=_MISSING, *, help: str, default_factory=_MISSING, **meta):
-    """A configuration field with its help text (and ``choices``, ``min``, ``max``, ``flags``, ``show_default``)."""
+    """A configuration field with its help text (and ``choices``, ``min``, ``max``, ``flags``, ``show_default``,
+    ``metavar``, ``validate``)."""
     metadata = {"help": help, **meta}
     if default_factory is not _MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=metadata)
@@ -75,7 +77,7 @@ def from_mapping(cls, values: dict, source: str = "configuration"):
     known = {f.name: f for f in options_of(cls)}
     unknown = sorted(set(values) - set(known))
     if unknown:
-        raise DcslamError(f"{source}: unknown key {unknown[0]!r}; expected some of {', '.join(known)}")
+        raise DcslamError(f"{source}: unknown key {unknown[0]!r}; expected one of {', '.join(known)}")
     kwargs = {}
     for key, value in values.items():
         base, optional, is_list = split_type(field_type(cls, key))
@@ -120,14 +122,27 @@ def read_config_file(path: Path | str) -> dict:
 
 def to_dict(config) -> dict:
     """The options of a configuration as plain JSON / TOML values (paths as strings)."""
-    def plain(value):
-        if isinstance(value, Path):
-            return str(value)
-        if isinstance(value, (list, tuple)):
-            return [plain(v) for v in value]
-        return value
+    return {f.name: to_dict_value(getattr(config, f.name)) for f in options_of(type(config))}
 
-    return {f.name: plain(getattr(config, f.name)) for f in options_of(type(config))}
+
+def changed(config) -> dict:
+    """The options of a configuration that differ from their defaults (for a one-line description of a run)."""
+    values = to_dict(config)
+    out = {}
+    for f in options_of(type(config)):
+        default = f.default_factory() if f.default is _MISSING and f.default_factory is not _MISSING else f.default
+        if values[f.name] != to_dict_value(default):
+            out[f.name] = values[f.name]
+    return out
+
+
+def to_dict_value(value):
+    """One option's value as a plain JSON / TOML value (paths as strings)."""
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, (list, tuple)):
+        return [to_dict_value(v) for v in value]
+    return value
 
 
 def _toml_value(value) -> str:

@@ -16,7 +16,7 @@ DEPTHS = ("sparse", "dense", "predicted", "filtered")
 class FilterConfig:
     """Options of ``dcslam filter``."""
 
-    filters: list[str] = option(default_factory=list, flags=("--filter", "-f"), help=filter_help(),
+    filters: list[str] = option(default_factory=list, flags=("--filter", "-f"), metavar="SPEC", help=filter_help(),
                                 validate=parse_filter)
     depth: str = option("predicted", choices=DEPTHS, help="Input: sparse, dense (from the drive files), predicted "
                                                           "(predictions/<run>/) or filtered (filtered/<run>/).")

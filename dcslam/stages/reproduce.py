@@ -22,7 +22,7 @@ from pathlib import Path
 from dcslam.errors import DcslamError
 from dcslam.stages import filter as filter_stage
 from dcslam.stages import predict, prepare, score, slam, synth, train
-from dcslam.stages.config import code_version, option, to_dict
+from dcslam.stages.config import changed, code_version, option, to_dict
 from dcslam.workspace import Workspace, write_json_atomic
 
 RECIPES = {  # run name → `dcslam train` options (Table 5.1 / 5.2 rows of the thesis)
@@ -141,7 +141,8 @@ class Pipeline:
         if self.up_to_date(stage):
             self.log(f"[skip] {stage.name}: up to date")
             return None
-        self.log(f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} {to_dict(stage.config)}")
+        options = " ".join(f"{k}={v}" for k, v in changed(stage.config).items())
+        self.log(f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} {options}".rstrip())
         start = time.perf_counter()
         try:
             result = stage.run(self.ws, stage.config, force=True)
