@@ -21,11 +21,22 @@ def _slug(text: str) -> str:
 
 @dataclass
 class ScoreResult:
-    """A scored table and the CSV it was written to; ``shown`` is the part worth printing."""
+    """A scored table and the CSV it was written to (its configuration beside it: the same name, ``.json``);
+    ``shown`` is the part worth printing."""
 
     table: object
     out: Path
     shown: object = None
+
+
+def _write(stage: str, config, table, out: Path, shown=None) -> ScoreResult:
+    from dcslam.report.scores import write_table_csv
+    from dcslam.stages.config import to_dict
+    from dcslam.workspace import stage_config, write_json_atomic
+
+    write_table_csv(table, out, force=True)
+    write_json_atomic(out.with_suffix(".json"), stage_config(stage, to_dict(config)), force=True)
+    return ScoreResult(table, out, table if shown is None else shown)
 
 
 def _file_or_layer_output(ws: Workspace, kind: str, path: Path | None, gt: Path | None, layer: str | None,
@@ -63,14 +74,13 @@ class ScoreDepthConfig:
 
 
 def run_depth(ws: Workspace, config: ScoreDepthConfig, *, force: bool = False) -> ScoreResult:
-    from dcslam.report.scores import check_outputs, depth_table, write_table_csv
+    from dcslam.report.scores import check_outputs, depth_table
     from dcslam.workspace import select_drives
 
     out = config.out or ws.results / f"depth_{_slug(Path(config.layer).name)}.csv"
     check_outputs([out], force)
     table = depth_table(ws, config.layer, select_drives(ws, config.drive), interpolate=not config.raw)
-    write_table_csv(table, out, force=force)
-    return ScoreResult(table, out, table)
+    return _write("score-depth", config, table, out)
 
 
 @dataclass(frozen=True)
@@ -86,7 +96,7 @@ class ScoreTrajectoryConfig:
 
 def run_trajectory(ws: Workspace, config: ScoreTrajectoryConfig, *, force: bool = False) -> ScoreResult:
     from dcslam.report.layers import load_pair, score_layer_trajectories
-    from dcslam.report.scores import TRAJECTORY_SHOWN, trajectory_table, write_table_csv
+    from dcslam.report.scores import TRAJECTORY_SHOWN, trajectory_table
     from dcslam.report.tables import Table
     from dcslam.workspace import select_drives
 
@@ -97,10 +107,9 @@ def run_trajectory(ws: Workspace, config: ScoreTrajectoryConfig, *, force: bool 
     else:
         pairs = {config.est.stem: load_pair(config.est, config.gt)}
     table = trajectory_table(pairs, f"trajectory errors of {name}")
-    write_table_csv(table, out, force=force)
     brief = Table(table.title, [c for c in table.columns if c.key in ("trajectory", *TRAJECTORY_SHOWN)],
                   table.rows, table.notes)
-    return ScoreResult(table, out, brief)
+    return _write("score-trajectory", config, table, out, brief)
 
 
 @dataclass(frozen=True)
@@ -117,7 +126,7 @@ class ScoreMapConfig:
 
 def run_map(ws: Workspace, config: ScoreMapConfig, *, force: bool = False) -> ScoreResult:
     from dcslam.eval.maps import score_map
-    from dcslam.report.scores import map_table, write_table_csv
+    from dcslam.report.scores import map_table
     from dcslam.workspace import select_drives
 
     name, out = _file_or_layer_output(ws, "map", config.map_path, config.gt, config.layer, config.out, force,
@@ -128,8 +137,7 @@ def run_map(ws: Workspace, config: ScoreMapConfig, *, force: bool = False) -> Sc
     else:
         scores = {config.map_path.stem: score_map(config.map_path, config.gt)}
     table = map_table(scores, f"map of {name} against {config.gt_layer if config.layer else config.gt.name}")
-    write_table_csv(table, out, force=force)
-    return ScoreResult(table, out, table)
+    return _write("score-map", config, table, out)
 
 
 @dataclass(frozen=True)

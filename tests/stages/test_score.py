@@ -12,9 +12,12 @@ from dcslam.stages.score import (ScoreDepthConfig, ScoreTablesConfig, ScoreTraje
 def test_depth_trajectory_and_tables(ws):
     result = run_depth(ws, ScoreDepthConfig(layer="sparse", raw=True))
     assert result.out == ws.results / "depth_sparse.csv" and result.out.stat().st_size > 0
+    record = json.loads((ws.results / "depth_sparse.json").read_text())
+    assert record["stage"] == "score-depth" and record["settings"]["raw"] is True
     slam.run(ws, slam.SlamStageConfig(odometry="gt", frames=2))
     result = run_trajectory(ws, ScoreTrajectoryConfig(layer="dense"))
     assert result.out == ws.results / "trajectory_dense.csv"
+    assert json.loads((ws.results / "trajectory_dense.json").read_text())["settings"]["layer"] == "dense"
     assert result.table.rows[0]["poses"] == 2
     report = run_tables(ws, ScoreTablesConfig())
     assert (ws.results / "table_5_2.md").exists()
