@@ -14,7 +14,8 @@ import argparse
 from pathlib import Path
 
 from dcslam.depth.models import classical_name
-from dcslam.depth.predict import classical_predictor, predict_drive, run_predictor
+from dcslam.depth.predict import classical_predictor
+from dcslam.stages.predict import predict_drive, run_predictor
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import mean_errors, score_drive
 from dcslam.report.tables import Column, Table
@@ -24,7 +25,7 @@ from dcslam.io.drive import read_splits
 from dcslam.slam.fusion import PointFusion
 from dcslam.slam.odometry import ICPOdometry
 from dcslam.slam.pipeline import SLAM
-from dcslam.slam.run import run_drive, write_outputs
+from dcslam.stages.slam import run_drive, write_outputs
 from dcslam.workspace import Workspace, require, write_text_atomic
 
 FILTERS = ["range:min=1,max=60", "bilateral:sigma_color=2", "outlier", "hidden", "edges", "thesis-range",

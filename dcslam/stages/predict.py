@@ -6,6 +6,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from dcslam.depth.models import ALIASES, CLASSICAL
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
@@ -40,10 +42,52 @@ class PredictResult:
     made_by: str
 
 
+def run_predictor(run_dir: Path | str, device):
+    """The best model of a training run (``runs/<run>/model.pt``), with the run's scale, as a
+    :class:`dcslam.depth.predict.Predictor`."""
+    import json
+
+    from dcslam.depth.models import load_model
+    from dcslam.depth.predict import NetworkCompleter, Predictor
+
+    run_dir = Path(run_dir)
+    model, meta = load_model(run_dir / "model.pt", device=str(device))
+    scale = float(meta.get("scale", 1.0))
+    config = {"run": run_dir.name, "model_file": str(run_dir / "model.pt"), "arch": model.ARCH,
+              "hparams": model.hparams, "scale": scale, "checkpoint": {k: meta[k] for k in ("epoch", "step") if k in meta}}
+    config_path = run_dir / "config.json"
+    if config_path.exists():
+        config["train_settings"] = json.loads(config_path.read_text()).get("settings", {})
+    return Predictor(NetworkCompleter(model, device, scale, run_dir.name), run_dir.name, config)
+
+
+def predict_drive(predictor, drive_path: Path | str, out_path: Path | str, force: bool = False,
+                  progress: bool = True) -> Path:
+    """Complete every frame's sparse depth of a drive and write the layer ``out_path`` atomically.
+
+    The layer holds ``depth`` (N, H, W) float32 metres, the same frames as the drive.
+    """
+    from dcslam.io.drive import DriveFile, Layer, write_layer
+    from dcslam.progress import track
+
+    out_path = Path(out_path)
+    if out_path.exists() and not force:
+        raise DcslamError(f"{out_path} exists; pass --force to overwrite it")
+    with DriveFile(drive_path) as drive:
+        n, h, w = drive.shape
+        depth = np.zeros((n, h, w), np.float32)
+        frames = range(n)
+        for i in (track(frames, f"predict {drive.name}") if progress else frames):
+            depth[i] = predictor.completer(drive.depth("sparse", i))
+        layer = Layer(depth=depth, drive=drive.path.name, made_by=predictor.made_by,
+                      config={**predictor.config, "drive_file": str(drive.path)})
+    return write_layer(out_path, layer, force=force)
+
+
 def predictor(ws: Workspace, config: PredictConfig):
     """The :class:`dcslam.depth.predict.Predictor` of ``config`` (a classical completer, or a run's best model)."""
     from dcslam.depth.models import classical_name
-    from dcslam.depth.predict import classical_predictor, run_predictor
+    from dcslam.depth.predict import classical_predictor
     from dcslam.depth.train import resolve_device
     from dcslam.workspace import require
 
@@ -56,7 +100,6 @@ def predictor(ws: Workspace, config: PredictConfig):
 def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> PredictResult:
     """Write ``<out>/<drive>.h5`` for every drive of the split (or ``config.drive``); nothing is overwritten without
     ``force`` (checked before any work)."""
-    from dcslam.depth.predict import predict_drive
     from dcslam.io.drive import read_splits
     from dcslam.workspace import require
 
