@@ -25,12 +25,12 @@ import torch
 from dcslam.depth.data import DriveFrames, check_view, frame_windows
 from dcslam.depth.losses import MASKS, MaskedMSE, depth_errors
 from dcslam.depth.maps import MapChamfer
+from dcslam.depth.recipes import LOSSES, map_frames_of, selection_key
 from dcslam.depth.models import architectures, build_model, model_record, save_model
 from dcslam.errors import DcslamError
 from dcslam.progress import Bar
 from dcslam.workspace import atomic_output, stage_config, write_json_atomic
 
-LOSSES = ("mse", "chamfer")
 RUN_FILES = ("model.pt", "last.pt", "metrics.jsonl", "config.json", "curves.png")
 
 
@@ -73,7 +73,8 @@ class TrainConfig:
     @property
     def chunk(self) -> int:
         """Frames per optimisation step: one multi-frame map window, else one batch."""
-        return self.map_frames if self.loss == "chamfer" and self.map_frames > 1 else self.batch_size
+        frames = map_frames_of(self.loss, self.map_frames)
+        return frames if frames > 1 else self.batch_size
 
 
 @dataclass
@@ -292,7 +293,7 @@ def _train_loop(run_dir, config, device, train_frames, val_frames, resume, map_b
     if per_rank == 0:
         raise DcslamError(f"{len(chunks)} training steps per epoch cannot be shared by {world} processes")
     mine = chunks[rank::world][:per_rank]
-    map_frames_val = config.map_frames if config.loss == "chamfer" else 1
+    map_frames_val = map_frames_of(config.loss, config.map_frames)
     model.train()
 
     def checkpoint(epoch_, next_chunk_):
@@ -332,7 +333,7 @@ def _train_loop(run_dir, config, device, train_frames, val_frames, resume, map_b
             if rank == 0 and val_frames:
                 last_val = validate(model, val_frames, map_frames_val, device, map_builder)
                 write({"kind": "val", "epoch": epoch, "step": step, **last_val})
-                key = "chamfer" if config.loss == "chamfer" else "mse"
+                key = selection_key(config.loss)
                 if best is None or last_val[key] < best[key]:
                     best = {**last_val, "epoch": epoch, "step": step}
                     save_model(run_dir / "model.pt", model, meta={"run": run_dir.name, "epoch": epoch, "step": step,

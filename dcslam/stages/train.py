@@ -10,18 +10,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dcslam.depth.models import ARCHITECTURES
+from dcslam.depth.recipes import LOSSES, MASKS, run_name, selection_key
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
 from dcslam.workspace import Workspace
 
-LOSSES = ("mse", "chamfer")
-MASKS = ("dense", "sparse")
 MODELS = tuple(ARCHITECTURES)
-
-
-def run_name(loss: str, mask: str, map_frames: int) -> str:
-    """The default run name of a recipe: ``mse-<mask>`` or ``chamfer-<map frames>`` (the one place it is made)."""
-    return f"{loss}-{mask}" if loss == "mse" else f"{loss}-{map_frames}"
 
 
 @dataclass(frozen=True)
@@ -90,7 +84,7 @@ def read_result(run_dir: Path):
         raise DcslamError(f"{metrics} not found; the distributed run wrote no metrics")
     rows = [json.loads(line) for line in metrics.read_text().splitlines() if line.strip()]
     settings = json.loads((run_dir / "config.json").read_text()).get("settings", {})
-    key = "chamfer" if settings.get("loss") == "chamfer" else "mse"
+    key = selection_key(settings.get("loss"))
     val = [r for r in rows if r["kind"] == "val"]
     best = min(val, key=lambda r: r[key]) if val else None
     return TrainResult(run_dir=run_dir, steps=sum(r["kind"] == "train" for r in rows),

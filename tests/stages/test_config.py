@@ -94,10 +94,9 @@ def test_unset_fields_are_comments_and_paths_are_strings():
     assert to_dict(predict.PredictConfig(run="r", drive=[Path("a.h5")]))["drive"] == ["a.h5"]
 
 
-def test_train_model_choices_are_the_registered_architectures():
-    from dcslam.depth.losses import MASKS
+def test_train_choices_come_from_the_registries():
+    from dcslam.depth import losses, recipes
     from dcslam.depth.models import ARCHITECTURES
-    from dcslam.depth.train import LOSSES
 
     assert train.MODELS == tuple(ARCHITECTURES)
-    assert set(train.MASKS) == set(MASKS) and set(train.LOSSES) == set(LOSSES)
+    assert train.MASKS is recipes.MASKS is losses.MASKS and train.LOSSES is recipes.LOSSES
