@@ -1,4 +1,5 @@
-"""``dcslam train``: train a depth-completion network on the training drives of a workspace into ``runs/<name>/``.
+"""``dcslam train``: train a depth-completion network on the training drives of a workspace into ``runs/<name>/``
+(:func:`train` keeps the run folder; the training itself is :func:`dcslam.depth.train.train_loop`).
 
 With ``nproc`` > 1 the run is launched on that many local processes through torchrun (DistributedDataParallel),
 each of which runs this module's :func:`main` on the same configuration file.
@@ -6,14 +7,14 @@ each of which runs this module's :func:`main` on the same configuration file.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from dcslam.depth.models import ARCHITECTURES
 from dcslam.depth.recipes import LOSSES, MASKS, run_name, selection_key
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
-from dcslam.workspace import Workspace
+from dcslam.workspace import Workspace, stage_config, write_json_atomic
 
 MODELS = tuple(ARCHITECTURES)
 
@@ -69,6 +70,87 @@ class TrainStageConfig:
                            train_drives=train_drives, val_drives=val_drives)
 
 
+RUN_FILES = ("model.pt", "last.pt", "metrics.jsonl", "config.json", "curves.png")
+
+
+def _prepare_run_dir(run_dir: Path, force: bool, resume: bool) -> None:
+    existing = [name for name in RUN_FILES if (run_dir / name).exists()]
+    if resume:
+        if not (run_dir / "last.pt").exists():
+            raise DcslamError(f"{run_dir / 'last.pt'} not found; nothing to resume (start the run without --resume)")
+        return
+    if existing and not force:
+        raise DcslamError(f"run {run_dir} exists; pass --force to overwrite it or --resume to continue it")
+    for name in existing:
+        (run_dir / name).unlink()
+    run_dir.mkdir(parents=True, exist_ok=True)
+
+
+def _saved_config(run_dir: Path, config):
+    """On resume: the run's own configuration, with only the number of epochs (and the device) taken from
+    ``config``."""
+    from dcslam.depth.train import TrainConfig
+
+    try:
+        settings = json.loads((run_dir / "config.json").read_text())["settings"]
+    except (OSError, KeyError, json.JSONDecodeError) as exc:
+        raise DcslamError(f"{run_dir / 'config.json'}: cannot resume from it ({exc})") from None
+    known = {k: v for k, v in settings.items() if k in TrainConfig.__dataclass_fields__}
+    known["epochs"] = config.epochs
+    known["device"] = config.device
+    return TrainConfig(**known)
+
+
+def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = False, map_builder=None):
+    """Train one run (a :class:`dcslam.depth.train.TrainConfig`) into ``run_dir`` and return its
+    :class:`dcslam.depth.train.TrainResult`.
+
+    The folder gets ``config.json`` (the settings, resolved device and world size), ``curves.png`` (after every
+    epoch) and what :func:`dcslam.depth.train.train_loop` writes. An existing run fails without ``force`` (which
+    removes its files first); ``resume`` continues it from ``last.pt`` with its own settings (only the number of
+    epochs and the device are taken from ``config``).
+    """
+    import torch
+
+    from dcslam.depth.data import DriveFrames
+    from dcslam.depth.train import barrier, rank_and_world, resolve_device, seed_all, train_loop
+    from dcslam.report.plots import plot_training_curves
+
+    run_dir = Path(run_dir)
+    rank, world = rank_and_world()
+    if rank == 0:
+        _prepare_run_dir(run_dir, force, resume)
+    barrier()
+    if resume:
+        config = _saved_config(run_dir, config)
+    config.check()
+    device = resolve_device(config.device)
+    if world > 1 and device.type == "cuda":
+        device = torch.device("cuda", rank % torch.cuda.device_count())
+    seed_all(config.seed)
+
+    open_drives = []
+    try:
+        train_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop)
+                        for p in config.train_drives]
+        open_drives += train_frames
+        val_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop)
+                      for p in config.val_drives]
+        open_drives += val_frames
+        if rank == 0 and not resume:
+            settings = asdict(config)
+            settings["train_drives"] = [str(p) for p in config.train_drives]
+            settings["val_drives"] = [str(p) for p in config.val_drives]
+            settings["resolved_device"] = str(device)
+            settings["world_size"] = world
+            write_json_atomic(run_dir / "config.json", stage_config("train", settings))
+        return train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world,
+                          on_epoch=lambda: plot_training_curves(run_dir / "curves.png", run_dir / "metrics.jsonl"))
+    finally:
+        for frames in open_drives:
+            frames.close()
+
+
 def _drive_paths(ws: Workspace, names: list[str]) -> list[Path]:
     from dcslam.workspace import require
 
@@ -112,7 +194,7 @@ def run(ws: Workspace, config: TrainStageConfig, *, force: bool = False):
             raise DcslamError(f"distributed training of {run_dir} failed (torchrun exit code {code})")
         return read_result(run_dir)
 
-    from dcslam.depth.train import resolve_device, train
+    from dcslam.depth.train import resolve_device
     from dcslam.io.drive import read_splits
 
     splits = read_splits(ws.splits)

@@ -5,7 +5,8 @@ from pathlib import Path
 import torch
 import torch.multiprocessing as mp
 
-from dcslam.depth.train import TrainConfig, train
+from dcslam.depth.train import TrainConfig
+from dcslam.stages.train import train
 
 
 def _worker(rank, world, init_file, ws, out):
