@@ -63,7 +63,7 @@ def main() -> None:
                   f"ground truth {100 * np.mean([r.groundtruth_density for r in depth]):.1f} % "
                   f"(real KITTI 0001/5: 4.1 %, 19.5 %)")
         try:
-            from dcslam.prepare import prepare_kitti
+            from dcslam.stages.prepare import prepare_kitti
         except ImportError:
             print("prepare-kitti: not available")
             return

@@ -73,8 +73,10 @@ def main() -> None:
 
     from dcslam.depth.models import build_model
     from dcslam.depth.models.ip_basic import IPBasic
-    from dcslam.depth.predict import NetworkCompleter, run_predictor
-    from dcslam.depth.train import TrainConfig, train
+    from dcslam.depth.predict import NetworkCompleter
+    from dcslam.stages.predict import run_predictor
+    from dcslam.depth.train import TrainConfig
+    from dcslam.stages.train import train
     from dcslam.io.drive import read_splits
     from dcslam.workspace import Workspace
 

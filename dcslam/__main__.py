@@ -1,3 +1,4 @@
-from dcslam.cli import main
+"""`python -m dcslam`: the command line (dcslam.cli)."""
+import dcslam.cli
 
-main()
+dcslam.cli.main()

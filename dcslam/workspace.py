@@ -24,7 +24,6 @@ from pathlib import Path
 
 from dcslam import __version__
 from dcslam.errors import DcslamError
-from dcslam.io.atomic import atomic_output, write_json_atomic, write_text_atomic  # noqa: F401 (moved to io/)
 
 ENV_VAR = "DCSLAM_WORKSPACE"
 
@@ -95,3 +94,110 @@ def require(path: Path, made_by: str) -> Path:
     if not Path(path).exists():
         raise DcslamError(f"{path} not found; run `{made_by}` first")
     return Path(path)
+
+
+# --- depth layers: the one resolver -------------------------------------------------------------------------------
+
+DRIVE_DEPTH = ("sparse", "dense")
+LAYER_KINDS = {"predicted": ("predictions", "dcslam predict"), "filtered": ("filtered", "dcslam filter")}
+
+
+@dataclass(frozen=True)
+class LayerRef:
+    """A depth layer over many drives, resolved by :func:`resolve_layer`.
+
+    ``name`` is what its SLAM outputs and scores go by (``slam/<name>/``); ``folder`` holds ``<drive>.h5`` layer
+    files, ``file`` is one layer file used for every drive, and neither is set for the drive files' own ``sparse``
+    / ``dense`` depth. ``made_by`` names the command that makes the layer.
+    """
+
+    name: str
+    folder: Path | None = None
+    file: Path | None = None
+    made_by: str = "dcslam prepare-kitti"
+
+    def source(self, drive: str) -> str | Path:
+        """What :func:`dcslam.io.drive.load_depth` takes for one drive."""
+        if self.file is not None:
+            return self.file
+        return self.name if self.folder is None else self.folder / f"{drive}.h5"
+
+    def require(self, drive: str) -> str | Path:
+        """Like :meth:`source`, but fails with one line naming the maker when the drive's layer file is missing."""
+        source = self.source(drive)
+        if isinstance(source, Path) and not source.exists():
+            raise DcslamError(f"{source} not found; run `{self.made_by}` first")
+        return source
+
+
+def _latest_layer(root: Path, made_by: str) -> str:
+    runs = sorted((p for p in root.glob("*") if p.is_dir() and any(p.glob("*.h5"))),
+                  key=lambda p: p.stat().st_mtime) if root.exists() else []
+    if not runs:
+        raise DcslamError(f"no layers in {root}; run `{made_by}` first")
+    return runs[-1].name
+
+
+def find_layer(ws: Workspace, ref: str) -> LayerRef | None:
+    """The layer ``ref`` names, or ``None``. The grammar, everywhere in dcslam:
+
+    ``sparse`` | ``dense`` (the drive files' depth) | ``predicted/<run>`` | ``filtered/<name>`` | ``predicted`` or
+    ``filtered`` alone (the most recent such layer) | ``<name>`` (looked for in predictions/, then filtered/) |
+    a folder of ``<drive>.h5`` layer files | one ``.h5`` layer file.
+    """
+    if ref in DRIVE_DEPTH:
+        return LayerRef(ref)
+    kind, slash, name = ref.partition("/")
+    if kind in LAYER_KINDS and (slash or not name):
+        folder, made_by = LAYER_KINDS[kind]
+        root = ws.root / folder
+        name = name or _latest_layer(root, made_by)
+        return LayerRef(name, root / name, made_by=made_by) if (root / name).is_dir() else None
+    for folder, made_by in LAYER_KINDS.values() if Path(ref).name == ref else ():  # a bare name
+        if (ws.root / folder / ref).is_dir():
+            return LayerRef(ref, ws.root / folder / ref, made_by=made_by)
+    path = Path(ref)
+    if path.is_dir():
+        return LayerRef(path.name, path, made_by="dcslam predict")
+    if path.is_file():
+        return LayerRef(path.stem, file=path, made_by="dcslam predict")
+    return None
+
+
+def resolve_layer(ws: Workspace, ref: str) -> LayerRef:
+    """Like :func:`find_layer`, but fails with one line naming the commands that make layers."""
+    layer = find_layer(ws, ref)
+    if layer is None:
+        kind, _, name = ref.partition("/")
+        if kind in LAYER_KINDS and name:
+            folder, made_by = LAYER_KINDS[kind]
+            raise DcslamError(f"{ws.root / folder / name} not found; run `{made_by}` first")
+        raise DcslamError(f"no depth layer {ref!r}: not sparse or dense, and neither {ws.predictions / ref} nor "
+                          f"{ws.filtered / ref} exists; run `dcslam predict` or `dcslam filter` first")
+    return layer
+
+
+def layer_reference(depth: str, run: str | None) -> str:
+    """The layer reference of the commands' ``--depth KIND [--run NAME]`` pair (``predicted`` + ``x`` →
+    ``predicted/x``; a folder given as ``--run`` is kept as a path)."""
+    if depth in LAYER_KINDS and run:
+        return run if Path(run).is_dir() else f"{depth}/{run}"
+    return depth
+
+
+def select_drives(ws: Workspace, drives: list[str] | None = None, split: str = "test") -> list[str]:
+    """``drives`` if given, else the drives of ``split`` in ``splits.json``."""
+    from dcslam.io.drive import read_splits
+
+    drives = list(drives) if drives else list(read_splits(ws.splits)[split])
+    if not drives:
+        raise DcslamError(f"{ws.splits}: no {split} drives; pass --drive or rerun `dcslam prepare-kitti`")
+    return drives
+
+
+def drive_file(ws: Workspace, drive: str) -> Path:
+    """``drives/<drive>.h5`` (or ``drive`` itself when it is a ``.h5`` path), checked to exist."""
+    path = Path(drive) if str(drive).endswith(".h5") else ws.drives / f"{drive}.h5"
+    if not path.exists():
+        raise DcslamError(f"drive file {path} not found; run `dcslam prepare-kitti` first")
+    return path

@@ -13,21 +13,21 @@ Usage:
 import argparse
 from pathlib import Path
 
-from typer import BadParameter
-
-from dcslam.cli.filter import parse_filter
-from dcslam.depth.predict import ip_basic_predictor, predict_drive, run_predictor
+from dcslam.depth.models import classical_name
+from dcslam.depth.predict import classical_predictor
+from dcslam.stages.predict import predict_drive, run_predictor
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import mean_errors, score_drive
-from dcslam.eval.tables import Column, Table
+from dcslam.report.tables import Column, Table
 from dcslam.eval.trajectory import score_trajectory
-from dcslam.filters import FilterChain, filter_drives
+from dcslam.filters import FilterChain, filter_drives, parse_filter
 from dcslam.io.drive import read_splits
 from dcslam.slam.fusion import PointFusion
 from dcslam.slam.odometry import ICPOdometry
 from dcslam.slam.pipeline import SLAM
-from dcslam.slam.run import run_drive, write_outputs
-from dcslam.workspace import Workspace, require, write_text_atomic
+from dcslam.stages.slam import run_drive, write_outputs
+from dcslam.io.atomic import write_text_atomic
+from dcslam.workspace import Workspace, require
 
 FILTERS = ["range:min=1,max=60", "bilateral:sigma_color=2", "outlier", "hidden", "edges", "thesis-range",
            "thesis-bilateral"]
@@ -64,7 +64,7 @@ def main() -> None:
 
     # 1. the completer's layers (a trained run is loaded with the scale it trained at), then each filter chain's
     predicted = layers["(none)"]
-    predictor = ip_basic_predictor(a.model) if a.model.startswith("ip-basic") else run_predictor(
+    predictor = classical_predictor(a.model) if classical_name(a.model) else run_predictor(
         require(ws.runs / a.model, "dcslam train"), "cpu")
     for drive in drives:
         if a.force or not predicted[drive.stem].exists():  # else reuse what `dcslam predict` wrote
@@ -99,5 +99,5 @@ def main() -> None:
 if __name__ == "__main__":
     try:
         main()
-    except (DcslamError, BadParameter) as exc:
+    except DcslamError as exc:
         raise SystemExit(f"error: {exc}") from None

@@ -23,10 +23,10 @@ from generated_end_to_end import RECIPES, complete_slam_score, dcslam, options  
 from dcslam.depth.predict import ip_basic_predictor
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import depth_errors, mean_errors
-from dcslam.eval.tables import Column, Table
+from dcslam.report.tables import Column, Table
 from dcslam.io.drive import DriveFile, read_splits
 from dcslam.io.kitti import find_drives, index_drive, read_depth_png
-from dcslam.workspace import write_text_atomic
+from dcslam.io.atomic import write_text_atomic
 
 
 def complete_frames_only(a, reason: str) -> None:

@@ -53,11 +53,6 @@ def known_errors(command):
     return wrapper
 
 
-def not_yet_built(name: str, issue: str) -> None:
-    typer.echo(f"error: `dcslam {name}` is not yet built ({issue})", err=True)
-    raise typer.Exit(1)
-
-
 def summary(text: str) -> None:
     """A short result summary on stdout."""
     sys.stdout.write(text.rstrip("\n") + "\n")

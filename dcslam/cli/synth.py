@@ -1,13 +1,11 @@
-"""`dcslam synth`: generate KITTI-format drives from procedural street scenes."""
+"""`dcslam synth`: generate KITTI-format drives from procedural street scenes (options: dcslam.stages.synth)."""
 from __future__ import annotations
-
-from pathlib import Path
-from typing import Annotated, Optional
 
 import typer
 
-from dcslam.cli.app import ForceOption, WorkspaceOption, app, known_errors, summary
-
+from dcslam.cli.app import app, summary
+from dcslam.cli.options import stage_command
+from dcslam.stages import synth
 
 HELP = (
     "Generate synthetic drives in the KITTI raw + depth-completion layout, so that everything downstream runs "
@@ -30,59 +28,25 @@ HELP = (
 )
 
 
-@app.command("synth", help=HELP)
-@known_errors
-def synth_command(
-    workspace: WorkspaceOption = None,
-    out: Annotated[Optional[Path], typer.Option(
-        "--out", "-o", help="KITTI root to write into (raw/ and depth_completion/); with --indoor, the folder of "
-                            "the sequences.", show_default="<workspace>/kitti, with --indoor <workspace>/tum")] = None,
-    drives: Annotated[int, typer.Option("--drives", "-n", min=1,
-                                        help="Number of drives (with --indoor: sequences) to generate.")] = 6,
-    frames: Annotated[int, typer.Option(
-        "--frames", "-f", min=1,
-        help="Raw frames per drive (10 Hz). Like KITTI, only frames 5 … N−6 get depth maps, so N ≥ 11.")] = 60,
-    seed: Annotated[int, typer.Option("--seed", "-s", help="Random seed; each drive's scene and path follow "
-                                                            "from (seed, drive index).")] = 0,
-    azimuth_step: Annotated[float, typer.Option(
-        "--lidar-azimuth-step", help="LiDAR azimuth step in degrees across the 64 beams (each laser fires every "
-                                     "second step, as the HDL-64E).")] = 0.08,
-    indoor: Annotated[bool, typer.Option(
-        "--indoor", help="Write indoor sequences in the ICL-NUIM layout instead of KITTI drives.")] = False,
-    scale: Annotated[float, typer.Option(
-        "--scale", min=0.05, max=4.0, help="With --indoor: image size as a fraction of 640 × 480 (intrinsics "
-                                           "scaled to match).")] = 1.0,
-    force: ForceOption = False,
-) -> None:
-    from dcslam.progress import Bar
-    from dcslam.workspace import Workspace
-
-    if indoor:
-        from dcslam.synth.indoor import generate_indoor
-
-        root = out if out is not None else Workspace.resolve(workspace).root / "tum"
-        with Bar("synth --indoor", total=drives * frames) as bar:
-            result = generate_indoor(root, sequences=drives, frames=frames, seed=seed, force=force,
-                                     on_frame=bar.advance, scale=scale)
-        n = sum(s.frames for s in result.sequences)
-        seconds = sum(s.seconds for s in result.sequences)
-        density = sum(s.depth_density for s in result.sequences) / len(result.sequences)
-        summary(f"wrote {len(result.sequences)} indoor sequence(s) ({n} frames, {seconds / max(n, 1):.2f} s/frame, "
-                f"depth on {100 * density:.1f} % of pixels) to {root}")
+def report(result: synth.SynthResult) -> None:
+    for note in result.notes:
+        typer.echo(f"note: {note}", err=True)
+    if result.indoor:
+        sequences = result.reports
+        n = sum(s.frames for s in sequences)
+        seconds = sum(s.seconds for s in sequences)
+        density = sum(s.depth_density for s in sequences) / len(sequences)
+        summary(f"wrote {len(sequences)} indoor sequence(s) ({n} frames, {seconds / max(n, 1):.2f} s/frame, "
+                f"depth on {100 * density:.1f} % of pixels) to {result.root}")
         return
-    from dcslam.synth import generate
-
-    root = out if out is not None else Workspace.resolve(workspace).kitti
-    if frames < 11:
-        typer.echo(f"note: with --frames {frames} < 11 no frame gets depth maps (KITTI skips 5 at each end)",
-                   err=True)
-    with Bar("synth", total=drives * frames) as bar:
-        reports = generate(root, drives=drives, frames=frames, seed=seed, force=force,
-                           lidar_azimuth_step_deg=azimuth_step, on_frame=bar.advance)
+    reports = result.reports
     total_frames = sum(r.frames for r in reports)
     seconds = sum(r.seconds for r in reports)
     depth = [r for r in reports if r.depth_frames]
     densities = (f"; sparse {100 * sum(r.sparse_density for r in depth) / len(depth):.1f} %, ground truth "
                  f"{100 * sum(r.groundtruth_density for r in depth) / len(depth):.1f} % of pixels") if depth else ""
     summary(f"wrote {len(reports)} drives ({total_frames} frames, {seconds / max(total_frames, 1):.2f} s/frame) "
-            f"to {root}{densities}")
+            f"to {result.root}{densities}")
+
+
+synth_command = stage_command(app, "synth", synth.SynthConfig, synth.run, report, help=HELP)

@@ -8,9 +8,8 @@ from __future__ import annotations
 
 import torch
 
+from dcslam.depth.recipes import MASKS
 from dcslam.errors import DcslamError
-
-MASKS = ("sparse", "dense")
 
 
 def _check_same(*tensors: torch.Tensor) -> None:

@@ -1,4 +1,5 @@
-"""Running a depth completer over drives and writing one prediction layer per drive.
+"""Depth completers as predictors: a trained network or a registered classical completer, with its provenance.
+(Running one over drives and writing layers is :mod:`dcslam.stages.predict`.)
 
 A completer maps one sparse depth map (H, W) float32 metres to a dense one of the same shape: IP-Basic directly,
 or a trained network through :class:`NetworkCompleter` (which applies the down-scaling the run was trained with and
@@ -6,14 +7,12 @@ brings the prediction back to full resolution).
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from dcslam.depth.data import check_view, downscale_depth
-from dcslam.depth.models import IP_BASIC_NAMES
+from dcslam.depth.models import ALIASES, CLASSICAL, IP_BASIC_NAMES, build_classical, classical_name
 from dcslam.errors import DcslamError
 from dcslam.constants import MIN_DEPTH_M
 
@@ -57,51 +56,21 @@ class Predictor:
     config: dict
 
 
+def classical_predictor(name: str) -> Predictor:
+    """A registered classical completer (:data:`dcslam.depth.models.CLASSICAL`; aliases such as ``ip-basic``
+    resolve to their registered name, which is the layer's ``made_by`` and folder name)."""
+    from dataclasses import asdict, is_dataclass
+
+    registered = classical_name(name)
+    if registered is None:
+        raise DcslamError(f"unknown completer {name!r}; expected one of {', '.join([*CLASSICAL, *ALIASES])}")
+    completer = build_classical(registered)
+    config = asdict(completer) if is_dataclass(completer) else {}
+    return Predictor(completer, registered, {"model": registered, **config})
+
+
 def ip_basic_predictor(name: str) -> Predictor:
     """``ip-basic-fast`` or ``ip-basic-multiscale`` (``ip-basic`` = fast)."""
-    from dcslam.depth.models.ip_basic import IPBasic
-
-    if name == "ip-basic":
-        name = "ip-basic-fast"
-    if name not in IP_BASIC_NAMES:
+    if classical_name(name) not in IP_BASIC_NAMES:
         raise DcslamError(f"unknown IP-Basic variant {name!r}; expected one of {', '.join(IP_BASIC_NAMES)}")
-    completer = IPBasic(name.removeprefix("ip-basic-"))
-    return Predictor(completer, name, {"model": name, "variant": completer.variant, "max_depth": completer.max_depth})
-
-
-def run_predictor(run_dir: Path | str, device) -> Predictor:
-    """The best model of a training run (``runs/<run>/model.pt``), with the run's scale."""
-    from dcslam.depth.models import load_model
-
-    run_dir = Path(run_dir)
-    model, meta = load_model(run_dir / "model.pt", device=str(device))
-    scale = float(meta.get("scale", 1.0))
-    config = {"run": run_dir.name, "model_file": str(run_dir / "model.pt"), "arch": model.ARCH,
-              "hparams": model.hparams, "scale": scale, "checkpoint": {k: meta[k] for k in ("epoch", "step") if k in meta}}
-    config_path = run_dir / "config.json"
-    if config_path.exists():
-        config["train_settings"] = json.loads(config_path.read_text()).get("settings", {})
-    return Predictor(NetworkCompleter(model, device, scale, run_dir.name), run_dir.name, config)
-
-
-def predict_drive(predictor: Predictor, drive_path: Path | str, out_path: Path | str, force: bool = False,
-                  progress: bool = True) -> Path:
-    """Complete every frame's sparse depth of a drive and write the layer ``out_path`` atomically.
-
-    The layer holds ``depth`` (N, H, W) float32 metres, the same frames as the drive.
-    """
-    from dcslam.io.drive import DriveFile, Layer, write_layer
-    from dcslam.progress import track
-
-    out_path = Path(out_path)
-    if out_path.exists() and not force:
-        raise DcslamError(f"{out_path} exists; pass --force to overwrite it")
-    with DriveFile(drive_path) as drive:
-        n, h, w = drive.shape
-        depth = np.zeros((n, h, w), np.float32)
-        frames = range(n)
-        for i in (track(frames, f"predict {drive.name}") if progress else frames):
-            depth[i] = predictor.completer(drive.depth("sparse", i))
-        layer = Layer(depth=depth, drive=drive.path.name, made_by=predictor.made_by,
-                      config={**predictor.config, "drive_file": str(drive.path)})
-    return write_layer(out_path, layer, force=force)
+    return classical_predictor(name)

@@ -5,8 +5,9 @@ with ground-truth poses (``map_frames`` frames per map). AdamW (lr 1e-3, weight 
 per drive; the training drives in turn; after each epoch a validation pass without back-propagation averaged over
 the validation drives (chamfer, MSE, MAE, RMSE); the best validation checkpoint is kept.
 
-A run folder holds ``config.json``, ``metrics.jsonl`` (one JSON object per training step and per validation),
-``model.pt`` (best validation), ``last.pt`` (resume state, written after every drive) and ``curves.png``.
+:func:`train_loop` writes into a run folder ``metrics.jsonl`` (one JSON object per training step and per validation),
+``model.pt`` (best validation) and ``last.pt`` (resume state, written after every drive); the run folder itself (its
+``config.json``, ``curves.png``, overwriting and resuming) is :func:`dcslam.stages.train.train`'s.
 Distributed training (DistributedDataParallel) is used when ``torch.distributed`` is initialised: the chunks of
 frames of each epoch are dealt out round-robin to the ranks (each rank the same number), rank 0 validates and
 writes every file.
@@ -16,7 +17,7 @@ from __future__ import annotations
 import json
 import math
 import random
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -25,13 +26,12 @@ import torch
 from dcslam.depth.data import DriveFrames, check_view, frame_windows
 from dcslam.depth.losses import MASKS, MaskedMSE, batch_depth_errors
 from dcslam.depth.maps import MapChamfer
+from dcslam.depth.recipes import LOSSES, map_frames_of, selection_key
 from dcslam.depth.models import architectures, build_model, model_record, save_model
 from dcslam.errors import DcslamError
 from dcslam.progress import Bar
-from dcslam.workspace import atomic_output, stage_config, write_json_atomic
+from dcslam.io.atomic import atomic_output
 
-LOSSES = ("mse", "chamfer")
-RUN_FILES = ("model.pt", "last.pt", "metrics.jsonl", "config.json", "curves.png")
 
 
 @dataclass
@@ -73,7 +73,8 @@ class TrainConfig:
     @property
     def chunk(self) -> int:
         """Frames per optimisation step: one multi-frame map window, else one batch."""
-        return self.map_frames if self.loss == "chamfer" and self.map_frames > 1 else self.batch_size
+        frames = map_frames_of(self.loss, self.map_frames)
+        return frames if frames > 1 else self.batch_size
 
 
 @dataclass
@@ -99,7 +100,7 @@ def resolve_device(device: str) -> torch.device:
     return resolved
 
 
-def _dist():
+def rank_and_world() -> tuple[int, int]:
     """(rank, world size) of the running torch.distributed group, (0, 1) without one."""
     import torch.distributed as dist
 
@@ -108,14 +109,14 @@ def _dist():
     return 0, 1
 
 
-def _barrier() -> None:
+def barrier() -> None:
     import torch.distributed as dist
 
     if dist.is_available() and dist.is_initialized():
         dist.barrier()
 
 
-def _seed(seed: int) -> None:
+def seed_all(seed: int) -> None:
     random.seed(seed)
     np.random.seed(seed)
     torch.manual_seed(seed)
@@ -164,100 +165,19 @@ def validate(model, drives: list[DriveFrames], map_frames: int, device, map_buil
     return {key: float(np.mean([d[key] for d in per_drive])) for key in ("chamfer", "mse", "mae_mm", "rmse_mm")}
 
 
-def _prepare_run_dir(run_dir: Path, force: bool, resume: bool) -> None:
-    existing = [name for name in RUN_FILES if (run_dir / name).exists()]
-    if resume:
-        if not (run_dir / "last.pt").exists():
-            raise DcslamError(f"{run_dir / 'last.pt'} not found; nothing to resume (start the run without --resume)")
-        return
-    if existing and not force:
-        raise DcslamError(f"run {run_dir} exists; pass --force to overwrite it or --resume to continue it")
-    for name in existing:
-        (run_dir / name).unlink()
-    run_dir.mkdir(parents=True, exist_ok=True)
-
-
-def _saved_config(run_dir: Path, config: TrainConfig) -> TrainConfig:
-    """On resume: the run's own configuration, with only the number of epochs taken from ``config``."""
-    try:
-        settings = json.loads((run_dir / "config.json").read_text())["settings"]
-    except (OSError, KeyError, json.JSONDecodeError) as exc:
-        raise DcslamError(f"{run_dir / 'config.json'}: cannot resume from it ({exc})") from None
-    known = {k: v for k, v in settings.items() if k in TrainConfig.__dataclass_fields__}
-    known["epochs"] = config.epochs
-    known["device"] = config.device
-    return TrainConfig(**known)
-
-
-def _plot_curves(run_dir: Path, metrics_path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    rows = [json.loads(line) for line in metrics_path.read_text().splitlines() if line.strip()]
-    train = [(r["step"], r["loss"]) for r in rows if r["kind"] == "train"]
-    val = [r for r in rows if r["kind"] == "val"]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
-    if train:
-        axes[0].plot(*zip(*train), lw=0.8, label="training loss")
-    axes[0].set_xlabel("step")
-    axes[0].set_ylabel("loss")
-    axes[0].set_yscale("log")
-    axes[0].legend()
-    if val:
-        steps = [r["step"] for r in val]
-        axes[1].plot(steps, [r["rmse_mm"] for r in val], "o-", label="val RMSE (mm)")
-        axes[1].plot(steps, [r["mae_mm"] for r in val], "s-", label="val MAE (mm)")
-        twin = axes[1].twinx()
-        twin.plot(steps, [r["chamfer"] for r in val], "^--", color="tab:green", label="val chamfer (m²)")
-        twin.set_ylabel("chamfer (m²)")
-        twin.legend(loc="upper center")
-    axes[1].set_xlabel("step")
-    axes[1].set_ylabel("mm")
-    axes[1].legend(loc="upper right")
-    fig.tight_layout()
-    with atomic_output(run_dir / "curves.png", force=True) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
-
-
 def _chunks(drives: list[DriveFrames], chunk: int) -> list[tuple[int, range]]:
     """(drive index, frame positions) of every optimisation step of one epoch: drives in turn."""
     return [(d, window) for d, frames in enumerate(drives) for window in frame_windows(len(frames), chunk)]
 
 
-def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resume: bool = False,
-          map_builder=None) -> TrainResult:
-    """Train one run into ``run_dir`` (see the module docstring for what it writes) and return its summary."""
-    run_dir = Path(run_dir)
-    rank, world = _dist()
-    if rank == 0:
-        _prepare_run_dir(run_dir, force, resume)
-    _barrier()
-    if resume:
-        config = _saved_config(run_dir, config)
-    config.check()
-    device = resolve_device(config.device)
-    if world > 1 and device.type == "cuda":
-        device = torch.device("cuda", rank % torch.cuda.device_count())
-    _seed(config.seed)
+def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[DriveFrames],
+               val_frames: list[DriveFrames],
+               resume: bool = False, map_builder=None, rank: int = 0, world: int = 1, on_epoch=None) -> TrainResult:
+    """The training of one run (see the module docstring) on opened drives; ``run_dir`` exists.
 
-    open_drives = []
-    try:
-        train_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop)
-                        for p in config.train_drives]
-        open_drives += train_frames
-        val_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop)
-                      for p in config.val_drives]
-        open_drives += val_frames
-        return _train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world)
-    finally:
-        for frames in open_drives:
-            frames.close()
-
-
-def _train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world) -> TrainResult:
+    Writes ``metrics.jsonl``, ``last.pt`` (after every drive and epoch) and ``model.pt`` (best validation) on rank 0,
+    and calls ``on_epoch()`` there after each epoch. With ``resume``, continues from ``last.pt``.
+    """
     model = build_model(config.model, **config.model_hparams).to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     metrics_path = run_dir / "metrics.jsonl"
@@ -273,12 +193,6 @@ def _train_loop(run_dir, config, device, train_frames, val_frames, resume, map_b
             lines = metrics_path.read_text().splitlines(keepends=True) if metrics_path.exists() else []
             metrics_path.write_text("".join(lines[:state["metrics_lines"]]))
     elif rank == 0:
-        settings = asdict(config)
-        settings["train_drives"] = [str(p) for p in config.train_drives]
-        settings["val_drives"] = [str(p) for p in config.val_drives]
-        settings["resolved_device"] = str(device)
-        settings["world_size"] = world
-        write_json_atomic(run_dir / "config.json", stage_config("train", settings))
         metrics_path.write_text("")
 
     wrapped = model
@@ -292,7 +206,7 @@ def _train_loop(run_dir, config, device, train_frames, val_frames, resume, map_b
     if per_rank == 0:
         raise DcslamError(f"{len(chunks)} training steps per epoch cannot be shared by {world} processes")
     mine = chunks[rank::world][:per_rank]
-    map_frames_val = config.map_frames if config.loss == "chamfer" else 1
+    map_frames_val = map_frames_of(config.loss, config.map_frames)
     model.train()
 
     def checkpoint(epoch_, next_chunk_):
@@ -332,7 +246,7 @@ def _train_loop(run_dir, config, device, train_frames, val_frames, resume, map_b
             if rank == 0 and val_frames:
                 last_val = validate(model, val_frames, map_frames_val, device, map_builder)
                 write({"kind": "val", "epoch": epoch, "step": step, **last_val})
-                key = "chamfer" if config.loss == "chamfer" else "mse"
+                key = selection_key(config.loss)
                 if best is None or last_val[key] < best[key]:
                     best = {**last_val, "epoch": epoch, "step": step}
                     save_model(run_dir / "model.pt", model, meta={"run": run_dir.name, "epoch": epoch, "step": step,
@@ -344,8 +258,8 @@ def _train_loop(run_dir, config, device, train_frames, val_frames, resume, map_b
                                                               "crop": config.crop})
             epoch, next_chunk = epoch + 1, 0
             checkpoint(epoch, 0)
-            if rank == 0:
-                _plot_curves(run_dir, metrics_path)
-            _barrier()
+            if rank == 0 and on_epoch is not None:
+                on_epoch()
+            barrier()
     return TrainResult(run_dir=run_dir, steps=step, epochs=epoch, best=best, last_val=last_val, model=model)
 

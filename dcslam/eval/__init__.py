@@ -1,2 +1,2 @@
-"""Scores: depth errors (KITTI devkit), trajectory errors (thesis localisation accuracy, evo ATE / RPE), map
-chamfer distance, and the thesis's Tables 5.1 / 5.2 assembled from a workspace."""
+"""Pure metrics: depth errors (KITTI devkit), trajectory errors (thesis localisation accuracy, evo ATE / RPE, KITTI
+drift), map chamfer distance, depth PSNR. Workspace-aware scoring and the thesis's tables are :mod:`dcslam.report`."""

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.workspace import atomic_output
+from dcslam.io.atomic import atomic_output
 
 FORMAT = "12 numbers per line, the 3x4 matrix [R | t] row-major"
 #: Largest accepted ``max |RᵀR − I|`` and ``|det R − 1|``: the benchmark's files print 6 significant digits, which

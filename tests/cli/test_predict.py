@@ -19,12 +19,19 @@ def _run(*args):
 
 
 def test_predict_ip_basic_default_test_split(ws):
+    """``ip-basic`` is an alias: the layer goes by the registered name, the one `score tables` looks for."""
     result = _run("predict", "-w", str(ws), "--model", "ip-basic")
     assert result.exit_code == 0, result.output
-    layer = read_layer(ws / "predictions" / "ip-basic" / "drive_d.h5")
+    layer = read_layer(ws / "predictions" / "ip-basic-fast" / "drive_d.h5")
+    assert layer.made_by == "ip-basic-fast"
     with DriveFile(ws / "drives" / "drive_d.h5") as drive:
         assert layer.depth.shape == drive.shape
-    assert not (ws / "predictions" / "ip-basic" / "drive_a.h5").exists()
+    assert not (ws / "predictions" / "ip-basic-fast" / "drive_a.h5").exists()
+    assert not (ws / "predictions" / "ip-basic").exists()
+    from dcslam.report.tables import IP_BASIC
+    from dcslam.workspace import Workspace, find_layer
+
+    assert [name for name in IP_BASIC if find_layer(Workspace(ws), name)] == ["ip-basic-fast"]
     again = _run("predict", "-w", str(ws), "--model", "ip-basic")
     assert again.exit_code == 1 and "--force" in again.output
     assert _run("predict", "-w", str(ws), "--model", "ip-basic", "--force").exit_code == 0
@@ -53,6 +60,6 @@ def test_predict_errors(ws):
     assert _run("predict", "-w", str(ws)).exit_code == 1
     result = _run("predict", "-w", str(ws), "--run", "missing")
     assert result.exit_code == 1 and "dcslam train" in result.output
-    assert _run("predict", "-w", str(ws), "--model", "unet").exit_code == 1
-    assert _run("predict", "-w", str(ws), "--model", "ip-basic", "--split", "nope").exit_code == 1
-    assert not (ws / "predictions" / "ip-basic").exists()
+    assert _run("predict", "-w", str(ws), "--model", "unet").exit_code == 2  # unknown choices are usage errors
+    assert _run("predict", "-w", str(ws), "--model", "ip-basic", "--split", "nope").exit_code == 2
+    assert not (ws / "predictions").exists()

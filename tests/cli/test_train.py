@@ -47,6 +47,6 @@ def test_train_chamfer_and_sparse_names(ws):
 def test_train_errors(ws, tmp_path):
     assert _run("train", "-w", str(tmp_path / "empty")).exit_code == 1
     result = _run("train", "-w", str(ws), "--loss", "l1")
-    assert result.exit_code == 1 and "unknown loss" in result.output
+    assert result.exit_code == 2 and "l1" in result.output  # an unknown choice is a usage error
     assert _run("train", "-w", str(ws), "--scale", "0.3").exit_code == 1
     assert not (ws / "runs" / "mse-dense" / "model.pt").exists()

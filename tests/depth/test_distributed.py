@@ -4,7 +4,8 @@ from pathlib import Path
 import torch
 import torch.multiprocessing as mp
 
-from dcslam.depth.train import TrainConfig, train
+from dcslam.depth.train import TrainConfig
+from dcslam.stages.train import train
 from tests.fixtures import depth as depth_fixtures
 
 

@@ -3,7 +3,8 @@ import pytest
 import torch
 
 from dcslam.depth.models import build_model, save_model
-from dcslam.depth.predict import NetworkCompleter, ip_basic_predictor, predict_drive, run_predictor
+from dcslam.depth.predict import NetworkCompleter, ip_basic_predictor
+from dcslam.stages.predict import predict_drive, run_predictor
 from dcslam.errors import DcslamError
 from dcslam.io.drive import DriveFile, read_layer
 

@@ -5,7 +5,8 @@ import torch
 
 from dcslam.depth.maps import stacked_points_map
 from dcslam.depth.models import load_model
-from dcslam.depth.train import TrainConfig, resolve_device, train
+from dcslam.depth.train import TrainConfig, resolve_device
+from dcslam.stages.train import train
 from dcslam.errors import DcslamError
 
 

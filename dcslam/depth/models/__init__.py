@@ -1,4 +1,8 @@
-"""Model registry: build a network by architecture name, save it with its hyperparameters, rebuild it from the file.
+"""Completer registry: learned networks and classical completers by name; model files save and rebuild networks.
+
+:data:`ARCHITECTURES` maps a trainable architecture's name to its class, :data:`CLASSICAL` a classical completer's
+name (IP-Basic's variants) to its factory; both as ``"module:attribute"`` strings, imported only when built, so
+the names are known without importing torch. Adding a completer is one module plus one line here.
 
 A model file is a plain ``torch.save`` of ``{"format": "dcslam.model/1", "arch": str, "hparams": dict,
 "state_dict": dict, "meta": dict}`` holding only tensors, numbers, strings, lists and dicts, so it loads with
@@ -12,19 +16,46 @@ from dcslam.errors import DcslamError
 from dcslam.io.atomic import atomic_output
 
 MODEL_FORMAT = "dcslam.model/1"
-IP_BASIC_NAMES = ("ip-basic-fast", "ip-basic-multiscale")
+ARCHITECTURES = {  # trainable network name → "module:class" (the class takes its hyperparameters as keywords)
+    "sparse-conv": "dcslam.depth.models.sparse_conv:SparseConvNet",
+    "dncnn": "dcslam.depth.models.dncnn:DnCNN",
+}
+CLASSICAL = {  # completer that needs no training → "module:factory" (called with no argument)
+    "ip-basic-fast": "dcslam.depth.models.ip_basic:fast",
+    "ip-basic-multiscale": "dcslam.depth.models.ip_basic:multiscale",
+}
+ALIASES = {"ip-basic": "ip-basic-fast"}  # other names of registered completers
+IP_BASIC_NAMES = tuple(name for name in CLASSICAL if name.startswith("ip-basic"))
+
+
+def _load(target: str):
+    import importlib
+
+    module, _, attribute = target.partition(":")
+    return getattr(importlib.import_module(module), attribute)
 
 
 def _registry() -> dict:
-    from dcslam.depth.models.dncnn import DnCNN
-    from dcslam.depth.models.sparse_conv import SparseConvNet
-
-    return {SparseConvNet.ARCH: SparseConvNet, DnCNN.ARCH: DnCNN}
+    return {name: _load(target) for name, target in ARCHITECTURES.items()}
 
 
 def architectures() -> tuple[str, ...]:
     """Names of the trainable architectures."""
-    return tuple(_registry())
+    return tuple(ARCHITECTURES)
+
+
+def classical_name(name: str) -> str | None:
+    """The registered name of classical completer ``name`` (aliases resolved), or None if it is not one."""
+    name = ALIASES.get(name, name)
+    return name if name in CLASSICAL else None
+
+
+def build_classical(name: str):
+    """A classical completer by name (``ip-basic`` = ``ip-basic-fast``): ``(H, W)`` sparse metres → dense."""
+    registered = classical_name(name)
+    if registered is None:
+        raise DcslamError(f"unknown completer {name!r}; expected one of {', '.join([*CLASSICAL, *ALIASES])}")
+    return _load(CLASSICAL[registered])()
 
 
 def build_model(arch: str, **hparams):

@@ -197,3 +197,13 @@ class IPBasic:
         if self.variant == "fast":
             return complete_fast(sparse_m, self.max_depth, self.extrapolate, self.blur or "bilateral")
         return complete_multiscale(sparse_m, self.max_depth, self.extrapolate, self.blur or "gaussian")
+
+
+def fast() -> IPBasic:
+    """The ``ip-basic-fast`` completer of the registry (:data:`dcslam.depth.models.CLASSICAL`)."""
+    return IPBasic("fast")
+
+
+def multiscale() -> IPBasic:
+    """The ``ip-basic-multiscale`` completer of the registry (:data:`dcslam.depth.models.CLASSICAL`)."""
+    return IPBasic("multiscale")

@@ -21,14 +21,17 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from dcslam.depth.models import IP_BASIC_NAMES
+from dcslam.depth.recipes import recipe_label as recipe_of
+from dcslam.depth.recipes import selection_key
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import DepthErrors, mean_errors
-from dcslam.eval.layers import TrajectoryPair, find_layer, score_layer_depth, score_layer_trajectories
+from dcslam.report.layers import TrajectoryPair, find_layer, score_layer_depth, score_layer_trajectories
 from dcslam.workspace import Workspace
 
 THESIS_FIGURES = Path(__file__).with_name("thesis_tables.json")
 RECIPES = ("chamfer single-frame", "chamfer multi-frame", "MSE sparse mask", "MSE dense mask")
-IP_BASIC = ("ip-basic-fast", "ip-basic-multiscale")
+IP_BASIC = IP_BASIC_NAMES  # the classical completers that make the IP-Basic row
 
 
 @dataclass(frozen=True)
@@ -91,16 +94,6 @@ class RunSummary:
     validations: int
 
 
-def recipe_of(settings: dict) -> str:
-    """The thesis's name of a training recipe from a run's settings (``loss``, ``mask``, ``map_frames``)."""
-    loss = settings.get("loss")
-    if loss == "chamfer":
-        return "chamfer single-frame" if int(settings.get("map_frames", 1)) <= 1 else "chamfer multi-frame"
-    if loss == "mse":
-        return f"MSE {settings.get('mask', 'dense')} mask"
-    return f"{loss} (unknown recipe)"
-
-
 def read_run(run_dir: Path) -> RunSummary:
     """Summarise one run folder. Fails when it has no config, no metrics or no validation record."""
     config_path, metrics_path = run_dir / "config.json", run_dir / "metrics.jsonl"
@@ -124,7 +117,7 @@ def read_run(run_dir: Path) -> RunSummary:
     if not validations:
         raise DcslamError(f"{metrics_path}: no validation metrics (no \"kind\": \"val\" line); train with "
                           "validation drives, for at least one epoch")
-    key = "chamfer" if settings.get("loss") == "chamfer" else "mse"
+    key = selection_key(settings.get("loss"))
     usable = [r for r in validations if isinstance(r.get(key), (int, float))]
     if not usable:
         raise DcslamError(f"{metrics_path}: validation records have no {key!r} value")
@@ -284,5 +277,5 @@ def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str]) -> Ta
         "per image, averaged over all test images",
         "ATE: evo APE translation after SE(3) Umeyama alignment; RPE: evo, consecutive frames; RMSE averaged over "
         "the test drives",
-        "thesis columns: the thesis's own figures (dcslam/eval/thesis_tables.json; — where not filled in)"]
+        "thesis columns: the thesis's own figures (dcslam/report/thesis_tables.json; — where not filled in)"]
     return table

@@ -9,7 +9,7 @@ import pytest
 from dcslam.errors import DcslamError
 from dcslam.io import kitti
 from dcslam.io.drive import DriveFile, read_splits
-from dcslam.prepare import THESIS_SPLITS, prepare_kitti, proportional_splits
+from dcslam.stages.prepare import THESIS_SPLITS, prepare_kitti, proportional_splits
 from tests.fixtures import kitti as fx
 
 
@@ -193,3 +193,16 @@ class TestPrepareFailures:
     def test_max_frames_checked(self, tiny_root, tmp_path):
         with pytest.raises(DcslamError, match="at least 1"):
             prepare_kitti(tiny_root, tmp_path / "drives", max_frames=0)
+
+
+def test_stage_run_uses_the_workspace_folders(tiny_root, tmp_path):
+    from dcslam.stages.prepare import PrepareConfig, run
+    from dcslam.workspace import Workspace
+
+    ws = Workspace(tmp_path / "ws")
+    result = run(ws, PrepareConfig(kitti=tiny_root, all_drives=True, max_frames=2))
+    assert result.splits_path == ws.splits and [d.frames for d in result.drives] == [2]
+    record = json.loads((ws.drives / "prepare-kitti.json").read_text())
+    assert record["settings"]["max_frames"] == 2 and record["settings"]["include_unsplit"] is True
+    with pytest.raises(DcslamError, match="--max-frames"):
+        PrepareConfig(max_frames=0)

@@ -19,7 +19,9 @@ from dcslam.errors import DcslamError
 from dcslam.io.drive import DriveWriter, read_splits
 from dcslam.io.kitti import DriveIndex, RawDrive, find_drives, index_drive, read_drive
 from dcslam.progress import track
-from dcslam.workspace import stage_config, write_json_atomic
+from dcslam.stages.config import option
+from dcslam.io.atomic import write_json_atomic
+from dcslam.workspace import Workspace, stage_config
 
 SPLIT_NAMES = ("train", "val", "test")
 
@@ -182,3 +184,36 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
         "max_frames": max_frames, "include_unsplit": include_unsplit,
         "drives": {d.name: {"split": d.split, "frames": d.frames} for d in written}}), force=True)
     return PrepareResult(source, tuple(written), out_splits, splits_path, config_path, tuple(notes))
+
+
+HELP = ("Convert KITTI raw + depth-completion drives (real, or from `dcslam synth`) into one HDF5 drive file each, "
+        "with only the frames that have depth, camera-2 poses from OXTS, and splits.json.")
+
+
+@dataclass(frozen=True)
+class PrepareConfig:
+    """Options of ``dcslam prepare-kitti``."""
+
+    kitti: Path | None = option(None, flags=("--kitti",), show_default="<workspace>/kitti",
+                                help="KITTI root holding raw/ and depth_completion/.")
+    out: Path | None = option(None, flags=("--out", "-o"), show_default="<workspace>/drives",
+                              help="Folder for drive files and splits.json.")
+    splits: Path | None = option(None, flags=("--splits",),
+                                 show_default="thesis split (real KITTI) or 15/4/5 proportion (generated)",
+                                 help='A {"train": [...], "val": [...], "test": [...]} JSON file of drive names.')
+    max_frames: int | None = option(None, min=1, help="Keep at most this many frames (the first with depth) per "
+                                                      "drive.")
+    all_drives: bool = option(False, flags=("--all-drives",), help="Also convert drives that are in no split.")
+
+    def __post_init__(self) -> None:
+        if self.max_frames is not None and self.max_frames < 1:
+            raise DcslamError(f"--max-frames is {self.max_frames}, expected at least 1")
+
+
+def run(ws: Workspace, config: PrepareConfig, *, force: bool = False) -> PrepareResult:
+    """:func:`prepare_kitti` with the workspace's default folders (its record: ``<out>/prepare-kitti.json``)."""
+    return prepare_kitti(config.kitti or ws.kitti, config.out or ws.drives, splits_file=config.splits,
+                         max_frames=config.max_frames, include_unsplit=config.all_drives, force=force)
+
+
+CONFIG = PrepareConfig

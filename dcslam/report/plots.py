@@ -4,6 +4,7 @@ Matplotlib is imported lazily with the Agg backend (no display needed). Files ar
 """
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -80,6 +81,42 @@ def plot_depth_examples(path: Path | str, rows: list[tuple[str, np.ndarray, np.n
         fig.colorbar(im, ax=axes[i, 3], fraction=0.03)
     fig.tight_layout()
     with atomic_output(path, force=force) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_training_curves(path: Path | str, metrics_path: Path | str) -> Path:
+    """A training run's curves from its ``metrics.jsonl``: the training loss per step, and the validation RMSE, MAE
+    (mm) and chamfer (m²) per validation."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [json.loads(line) for line in Path(metrics_path).read_text().splitlines() if line.strip()]
+    train = [(r["step"], r["loss"]) for r in rows if r["kind"] == "train"]
+    val = [r for r in rows if r["kind"] == "val"]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    if train:
+        axes[0].plot(*zip(*train), lw=0.8, label="training loss")
+    axes[0].set_xlabel("step")
+    axes[0].set_ylabel("loss")
+    axes[0].set_yscale("log")
+    axes[0].legend()
+    if val:
+        steps = [r["step"] for r in val]
+        axes[1].plot(steps, [r["rmse_mm"] for r in val], "o-", label="val RMSE (mm)")
+        axes[1].plot(steps, [r["mae_mm"] for r in val], "s-", label="val MAE (mm)")
+        twin = axes[1].twinx()
+        twin.plot(steps, [r["chamfer"] for r in val], "^--", color="tab:green", label="val chamfer (m²)")
+        twin.set_ylabel("chamfer (m²)")
+        twin.legend(loc="upper center")
+    axes[1].set_xlabel("step")
+    axes[1].set_ylabel("mm")
+    axes[1].legend(loc="upper right")
+    fig.tight_layout()
+    with atomic_output(path, force=True) as tmp:
         fig.savefig(tmp, dpi=100, format="png")
     plt.close(fig)
     return Path(path)

@@ -1,4 +1,5 @@
-"""The reproduction pipeline: stage skipping (unit) and the whole experiment at the smoke profile (end to end)."""
+"""The reproduction pipeline: stage skipping (unit) and the whole experiment at the smoke profile (end to end),
+every stage run in this process."""
 import json
 import os
 
@@ -7,37 +8,41 @@ from typer.testing import CliRunner
 
 from dcslam.cli import app
 from dcslam.errors import DcslamError
-from dcslam.reproduce import PROFILES, Pipeline, Stage, reproduce
+from dcslam import __version__
+from dcslam.stages.config import code_version
+from dcslam.stages.reproduce import PROFILES, Pipeline, Stage, reproduce
+from dcslam.stages.slam import SlamStageConfig
 from dcslam.workspace import Workspace
 
 runner = CliRunner()
 
 
-def _fake_dcslam(calls, outputs):
-    """Stand-in for running `dcslam ...` in a child process: records the call and writes the stage's outputs."""
-    def call(command):
-        calls.append(command)
+def _fake_stage(calls, outputs):
+    """Stand-in for a stage's run(): records the call and writes the stage's outputs."""
+    def run(ws, config, *, force=False):
+        calls.append((config, force))
         for path in outputs:
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text("made")
-        return 0
-    return call
+        return "result"
+    return run
 
 
-def test_stage_runs_once_then_is_skipped_until_its_inputs_or_arguments_change(tmp_path, monkeypatch):
+def test_stage_runs_once_then_is_skipped_until_its_inputs_config_or_code_change(tmp_path, monkeypatch):
     ws = Workspace(tmp_path)
     source, made = tmp_path / "in.txt", tmp_path / "out" / "made.txt"
     source.write_text("input")
     os.utime(source, (1_000_000, 1_000_000))
     calls = []
-    monkeypatch.setattr("dcslam.reproduce.subprocess.call", _fake_dcslam(calls, [made]))
     pipe = Pipeline(ws, log=lambda line: None)
-    stage = Stage("demo", ["slam", "--frames", "3"], outputs=lambda: [made], inputs=lambda: [source])
+    fake = _fake_stage(calls, [made])
+    stage = Stage("demo", fake, SlamStageConfig(frames=3), outputs=lambda: [made], inputs=lambda: [source])
 
-    pipe.run(stage)
-    assert len(calls) == 1 and calls[0][-3:] == ["--workspace", str(tmp_path), "--force"]
-    assert json.loads((tmp_path / ".reproduce" / "demo.json").read_text())["args"] == ["slam", "--frames", "3"]
-    pipe.run(stage)
+    assert pipe.run(stage) == "result"
+    assert calls == [(SlamStageConfig(frames=3), True)]  # in this process, with force
+    stamp = json.loads((tmp_path / ".reproduce" / "demo.json").read_text())
+    assert stamp["config"]["frames"] == 3 and stamp["dcslam"] == code_version()
+    assert pipe.run(stage) is None
     assert len(calls) == 1  # up to date: skipped
 
     os.utime(source, None)  # the input changed after the output was made
@@ -45,26 +50,48 @@ def test_stage_runs_once_then_is_skipped_until_its_inputs_or_arguments_change(tm
     pipe.run(stage)
     assert len(calls) == 2
 
-    pipe.run(Stage("demo", ["slam", "--frames", "4"], outputs=lambda: [made], inputs=lambda: [source]))
-    assert len(calls) == 3  # other arguments: rerun
+    pipe.run(Stage("demo", fake, SlamStageConfig(frames=4), outputs=lambda: [made], inputs=lambda: [source]))
+    assert len(calls) == 3  # another configuration: rerun
+
+    monkeypatch.setattr("dcslam.stages.reproduce.code_version", lambda: "0.0.0+other")
+    pipe.run(Stage("demo", fake, SlamStageConfig(frames=4), outputs=lambda: [made], inputs=lambda: [source]))
+    assert len(calls) == 4  # other dcslam code: rerun
+    monkeypatch.undo()
 
     made.unlink()
     pipe.run(stage)
-    assert len(calls) == 4  # output missing: rerun
+    assert len(calls) == 5  # output missing: rerun
+
+
+def test_code_version_changes_with_the_sources(tmp_path, monkeypatch):
+    import dcslam.stages.config as config
+
+    before = code_version()
+    assert before.startswith(__version__ + "+")
+    fake_root = tmp_path / "dcslam"
+    (fake_root / "stages").mkdir(parents=True)
+    (fake_root / "a.py").write_text("x = 1\n")
+    monkeypatch.setattr(config, "__file__", str(fake_root / "stages" / "config.py"))
+    first = code_version()
+    (fake_root / "a.py").write_text("x = 2\n")
+    assert code_version() != first != before
 
 
 def test_failed_stage_stops_the_pipeline_with_one_line(tmp_path, monkeypatch):
-    monkeypatch.setattr("dcslam.reproduce.subprocess.call", lambda command: 1)
-    with pytest.raises(DcslamError, match="stage synth failed"):
+    def fail(ws, config, *, force=False):
+        raise DcslamError("no luck")
+
+    monkeypatch.setattr("dcslam.stages.synth.run", fail)
+    with pytest.raises(DcslamError, match="stage synth failed \\(no luck\\)"):
         reproduce(Workspace(tmp_path), PROFILES["smoke"], log=lambda line: None)
     assert not (tmp_path / ".reproduce" / "synth.json").exists()
 
 
 def test_unknown_profile_and_table_fail_with_exit_code(tmp_path):
     result = runner.invoke(app, ["reproduce", "--profile", "huge", "--workspace", str(tmp_path)])
-    assert result.exit_code == 1 and "unknown profile" in result.stderr
+    assert result.exit_code == 2 and "huge" in result.stderr  # a usage error, like every unknown choice
     result = runner.invoke(app, ["reproduce", "--table", "9.9", "--workspace", str(tmp_path)])
-    assert result.exit_code == 1 and "unknown table" in result.stderr
+    assert result.exit_code == 2 and "9.9" in result.stderr
     result = runner.invoke(app, ["reproduce", "--kitti", str(tmp_path / "nowhere"), "--workspace", str(tmp_path)])
     assert result.exit_code == 1 and "not found" in result.stderr
 

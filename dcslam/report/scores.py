@@ -12,11 +12,12 @@ from pathlib import Path
 
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import METRICS, mean_errors
-from dcslam.eval.layers import (TrajectoryPair, drive_file, resolve_layer, score_layer_depth)
+from dcslam.report.layers import (TrajectoryPair, drive_file, resolve_layer, score_layer_depth)
 from dcslam.eval.maps import MapScores
-from dcslam.eval.tables import (Column, LayerResult, Table, list_runs, table_5_1, table_5_2, table_5_2_results,
+from dcslam.report.tables import (Column, LayerResult, Table, list_runs, table_5_1, table_5_2, table_5_2_results,
                                 thesis_figures)
-from dcslam.workspace import Workspace, write_text_atomic
+from dcslam.io.atomic import write_text_atomic
+from dcslam.workspace import Workspace
 
 
 def check_outputs(paths: list[Path], force: bool) -> None:
@@ -100,7 +101,7 @@ def _depth_example_rows(ws: Workspace, results: list[LayerResult], drive: str):
 
 def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, force: bool = False) -> Report:
     """Compute Tables 5.1 and 5.2 over ``drives`` and write them (Markdown + CSV) with the figures."""
-    from dcslam.eval.plots import plot_depth_examples, plot_trajectories
+    from dcslam.report.plots import plot_depth_examples, plot_trajectories
     from dcslam.io.drive import DriveFile
 
     out_dir = Path(out_dir) if out_dir else ws.results

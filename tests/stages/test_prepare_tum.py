@@ -9,7 +9,7 @@ from dcslam.errors import DcslamError
 from dcslam.io import tum_rgbd as tr
 from dcslam.io.drive import DriveFile, read_splits
 from dcslam.io.tum import read_tum, write_tum
-from dcslam.prepare_tum import prepare_tum, sparse_subsample
+from dcslam.stages.prepare_tum import prepare_tum, sparse_subsample
 from dcslam.synth.indoor import generate_indoor
 
 SCALE = 0.1  # 64 x 48 images
@@ -138,3 +138,16 @@ def test_bad_sequence_writes_nothing(tum_root, tmp_path):
     empty.mkdir()
     with pytest.raises(DcslamError, match="no TUM RGB-D or ICL-NUIM sequence"):
         prepare_tum(empty, tmp_path)
+
+
+def test_stage_run_reads_the_workspace_tum_folder(tum_root, tmp_path):
+    import shutil
+
+    from dcslam.stages.prepare_tum import PrepareTumConfig, run
+    from dcslam.workspace import Workspace
+
+    ws = Workspace(tmp_path / "ws")
+    shutil.copytree(tum_root, ws.root / "tum")
+    result = run(ws, PrepareTumConfig(max_frames=2, sparse_stride=2))
+    assert result.splits_path == ws.splits and sorted(d.frames for d in result.drives) == [2, 2]
+    assert json.loads((ws.drives / "prepare-tum.json").read_text())["settings"]["sparse_stride"] == 2

@@ -1,8 +1,7 @@
-"""Finding depth layers, trajectories and maps in a workspace, and scoring them over drives.
+"""Scoring depth layers and SLAM trajectories of a workspace over drives.
 
-A *layer name* is ``sparse`` or ``dense`` (depth stored in the drive files), the name of a run
-(``predictions/<run>/``), of a filter output (``filtered/<name>/``), or a folder of ``<drive>.h5`` layer files.
-The SLAM outputs of a layer are ``slam/<layer>/<drive>.txt`` (TUM) and ``<drive>.ply``.
+Layers are named as everywhere in dcslam (see :func:`dcslam.workspace.find_layer`, the one resolver). The SLAM
+outputs of a layer are ``slam/<layer>/<drive>.txt`` (TUM) and ``<drive>.ply``.
 """
 from __future__ import annotations
 
@@ -14,59 +13,10 @@ import numpy as np
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import DepthErrors
 from dcslam.eval.trajectory import TrajectoryScores, pair_by_timestamps, score_trajectory
-from dcslam.workspace import Workspace
+from dcslam.workspace import LayerRef, Workspace, drive_file, find_layer, resolve_layer, select_drives
 
-DRIVE_DEPTH = ("sparse", "dense")
-
-
-@dataclass(frozen=True)
-class LayerRef:
-    """A depth layer over many drives: ``folder`` holds ``<drive>.h5`` files (``None``: the drive files' own
-    ``sparse`` / ``dense`` depth)."""
-
-    name: str
-    folder: Path | None
-
-    def source(self, drive: str) -> str | Path:
-        """What :func:`dcslam.io.drive.load_depth` takes for one drive."""
-        return self.name if self.folder is None else self.folder / f"{drive}.h5"
-
-
-def find_layer(ws: Workspace, name: str) -> LayerRef | None:
-    """The layer called ``name`` (see the module docstring), or ``None`` if there is none."""
-    if name in DRIVE_DEPTH:
-        return LayerRef(name, None)
-    for folder in (ws.predictions / name, ws.filtered / name, Path(name)):
-        if folder.is_dir():
-            return LayerRef(folder.name, folder)
-    return None
-
-
-def resolve_layer(ws: Workspace, name: str) -> LayerRef:
-    """Like :func:`find_layer`, but fails with a message naming the commands that make layers."""
-    layer = find_layer(ws, name)
-    if layer is None:
-        raise DcslamError(f"no depth layer {name!r}: not sparse or dense, and neither {ws.predictions / name} nor "
-                          f"{ws.filtered / name} exists; run `dcslam predict` or `dcslam filter` first")
-    return layer
-
-
-def select_drives(ws: Workspace, drives: list[str] | None = None, split: str = "test") -> list[str]:
-    """``drives`` if given, else the drives of ``split`` in ``splits.json``."""
-    from dcslam.io.drive import read_splits
-
-    drives = list(drives) if drives else list(read_splits(ws.splits)[split])
-    if not drives:
-        raise DcslamError(f"{ws.splits}: no {split} drives; pass --drive or rerun `dcslam prepare-kitti`")
-    return drives
-
-
-def drive_file(ws: Workspace, drive: str) -> Path:
-    path = ws.drives / f"{drive}.h5"
-    if not path.exists():
-        raise DcslamError(f"drive file {path} not found; run `dcslam prepare-kitti` first")
-    return path
-
+__all__ = ["LayerRef", "TrajectoryPair", "drive_file", "find_layer", "load_pair", "resolve_layer",
+           "score_layer_depth", "score_layer_trajectories", "select_drives", "slam_trajectory"]
 
 def score_layer_depth(ws: Workspace, layer: LayerRef, drives: list[str],
                       interpolate: bool = True) -> dict[str, list[DepthErrors | None]]:

@@ -18,11 +18,13 @@ drive file ``prepare-kitti`` writes (:mod:`dcslam.io.drive`, ``source = "tum"``)
 
 Root attributes add ``format`` (``tum-rgbd`` or ``icl-nuim``), ``sparse_stride``, ``frame_stride`` and
 ``sparse_depth`` (a sentence saying what ``depth/sparse`` is). ``<out>/splits.json`` divides the sequences in the
-thesis's proportion (:func:`dcslam.prepare.proportional_splits`: one sequence goes to test) unless a splits file is
+thesis's proportion (:func:`dcslam.stages.prepare.proportional_splits`: one sequence goes to test) unless a splits file
+is
 given; ``<out>/prepare-tum.json`` records the settings.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -31,9 +33,11 @@ from dcslam.errors import DcslamError
 from dcslam.io.drive import DriveFrame, DriveWriter, read_splits
 from dcslam.io.tum_rgbd import read_depth_png
 from dcslam.io.tum_sequence import Sequence, check_image_size, find_sequences, index_sequence
-from dcslam.prepare import SPLIT_NAMES, PreparedDrive, PrepareResult, proportional_splits
+from dcslam.stages.prepare import SPLIT_NAMES, PreparedDrive, PrepareResult, proportional_splits
 from dcslam.progress import track
-from dcslam.workspace import stage_config, write_json_atomic
+from dcslam.stages.config import option
+from dcslam.io.atomic import write_json_atomic
+from dcslam.workspace import Workspace, stage_config
 
 DEFAULT_SPARSE_STRIDE = 5
 
@@ -92,7 +96,7 @@ def prepare_tum(src: Path | str, out_dir: Path | str, *, intrinsics: np.ndarray 
 
     Every sequence is indexed and checked (association, files present, ground truth) before anything is written;
     outputs that exist without ``force`` fail before anything is written; each drive file is written atomically.
-    Returns a :class:`dcslam.prepare.PrepareResult` with ``source = "tum"``.
+    Returns a :class:`dcslam.stages.prepare.PrepareResult` with ``source = "tum"``.
     """
     out_dir = Path(out_dir)
     if max_frames is not None and max_frames < 1:
@@ -148,3 +152,62 @@ def prepare_tum(src: Path | str, out_dir: Path | str, *, intrinsics: np.ndarray 
         "drives": {d.name: {"split": d.split, "frames": d.frames, "format": s.format, "K": s.K.tolist()}
                    for d, s in zip(written, sequences)}}), force=True)
     return PrepareResult("tum", tuple(written), out_splits, splits_path, config_path, tuple(notes))
+
+
+HELP = (
+    "Convert TUM RGB-D or ICL-NUIM sequences (real, or from `dcslam synth --indoor`) into one HDF5 drive file each "
+    "plus splits.json, the format `dcslam slam`, `train` and `score` read.\n\n"
+    "A sequence folder holds associations.txt (ICL-NUIM: 't depth/N.png t rgb/N.png') or rgb.txt and depth.txt "
+    "(TUM: associated by nearest timestamp, at most 0.02 s apart), 16-bit depth PNGs (5000 = 1 m) and a TUM "
+    "trajectory (groundtruth.txt or *.gt.freiburg, also looked for in the parent folder). Poses are interpolated "
+    "at each depth timestamp; frames without one are dropped.\n\n"
+    "Intrinsics: --intrinsics, else the folder's intrinsics.txt, else TUM's ROS default (525, 525, 319.5, 239.5) or "
+    "ICL-NUIM's (481.2, -480, 319.5, 239.5): its negative fy is real (the camera's y axis points up) and is kept.\n\n"
+    "depth/dense is the sensor depth; depth/sparse keeps every --sparse-stride-th row and column of it "
+    "(LiDAR-like, 4 % of pixels at 5)."
+)
+
+
+@dataclass(frozen=True)
+class PrepareTumConfig:
+    """Options of ``dcslam prepare-tum``."""
+
+    tum: Path | None = option(None, flags=("--tum",), show_default="<workspace>/tum",
+                              help="A sequence folder, or a folder of sequence folders.")
+    out: Path | None = option(None, flags=("--out", "-o"), show_default="<workspace>/drives",
+                              help="Folder for drive files and splits.json.")
+    intrinsics: str | None = option(None, show_default="intrinsics.txt, else the format's default",
+                                    help="fx,fy,cx,cy in pixels for every sequence (fy may be negative).")
+    sparse_stride: int = option(DEFAULT_SPARSE_STRIDE, min=1, help="depth/sparse keeps every k-th row and column "
+                                                                   "of the depth (1/k² of the pixels).")
+    max_frames: int | None = option(None, min=1, help="Keep at most this many frames (after --stride) per "
+                                                      "sequence.")
+    stride: int = option(1, min=1, help="Keep every k-th frame.")
+    splits: Path | None = option(None, flags=("--splits",),
+                                 show_default="15/4/5 proportion by name; one sequence goes to test",
+                                 help='A {"train": [...], "val": [...], "test": [...]} JSON file of sequence names.')
+
+    def __post_init__(self) -> None:
+        for name in ("sparse_stride", "stride", "max_frames"):
+            if getattr(self, name) is not None and getattr(self, name) < 1:
+                raise DcslamError(f"--{name.replace('_', '-')} is {getattr(self, name)}, expected at least 1")
+        if self.intrinsics is not None:
+            self.K()
+
+    def K(self) -> np.ndarray | None:
+        """``intrinsics`` as a (3, 3) matrix, or None."""
+        if self.intrinsics is None:
+            return None
+        from dcslam.io.tum_rgbd import parse_intrinsics
+
+        return parse_intrinsics(self.intrinsics, "--intrinsics")
+
+
+def run(ws: Workspace, config: PrepareTumConfig, *, force: bool = False) -> PrepareResult:
+    """:func:`prepare_tum` with the workspace's default folders (its record: ``<out>/prepare-tum.json``)."""
+    return prepare_tum(config.tum or ws.root / "tum", config.out or ws.drives, intrinsics=config.K(),
+                       sparse_stride=config.sparse_stride, max_frames=config.max_frames, stride=config.stride,
+                       splits_file=config.splits, force=force)
+
+
+CONFIG = PrepareTumConfig

@@ -1,5 +1,6 @@
-"""Depth denoising through the map (dcslam.denoise): the noise model, PSNR, the denoiser wrapper, the frame split,
-and a short chamfer-only training that must beat the noisy input on frames of another room."""
+"""Depth denoising through the map (dcslam.depth.denoise, run by dcslam.stages.demo_icl): the noise model, the
+denoiser wrapper, the frame split, and a short chamfer-only training that must beat the noisy input on frames of
+another room."""
 import json
 import math
 
@@ -7,8 +8,8 @@ import numpy as np
 import pytest
 import torch
 
-from dcslam.denoise import (MIN_NOISY_DEPTH_M, DenoiseConfig, DepthDenoiser, add_depth_noise, demo_drives,
-                            depth_psnr_db, drives_of, run_denoising, split_frames)
+from dcslam.depth.denoise import MIN_NOISY_DEPTH_M, DenoiseConfig, DepthDenoiser, add_depth_noise, split_frames
+from dcslam.stages.demo_icl import DemoIclConfig, demo_drives, drives_of, run, run_denoising
 from dcslam.depth.models import build_model, load_model
 from dcslam.errors import DcslamError
 from dcslam.io.drive import DriveFrame, DriveWriter
@@ -93,22 +94,6 @@ class TestAddDepthNoise:
             add_depth_noise(torch.ones(1, 1, 8, 8), -0.1)
 
 
-class TestDepthPsnr:
-    def test_known_value(self):
-        clean = torch.tensor([[1.0, 2.0], [0.0, 4.0]])[None, None]
-        pred = torch.tensor([[1.1, 2.0], [5.0, 3.8]])[None, None]  # the pixel without clean depth is ignored
-        mse = (0.1 ** 2 + 0 + 0.2 ** 2) / 3
-        assert float(depth_psnr_db(pred, clean)[0]) == pytest.approx(10 * math.log10(4.0 ** 2 / mse), abs=1e-4)
-        assert float(depth_psnr_db(pred, clean)[0]) == pytest.approx(29.8227, abs=1e-4)
-
-    def test_per_image_perfect_and_empty(self):
-        clean = torch.stack([torch.full((1, 3, 3), 2.0), torch.zeros(1, 3, 3)])
-        psnr = depth_psnr_db(clean.clone(), clean)
-        assert math.isinf(float(psnr[0])) and math.isnan(float(psnr[1]))
-        with pytest.raises(DcslamError):
-            depth_psnr_db(clean, clean[:1])
-
-
 class TestDepthDenoiser:
     def test_only_pixels_with_depth_and_positive(self):
         model = DepthDenoiser(build_model("dncnn", features=8, depth=3), depth_scale_m=4.0).eval()
@@ -183,3 +168,18 @@ def test_demo_drives_refuses_other_settings_without_force(tmp_path):
         demo_drives(tmp_path, sequences=2, frames=4, seed=0)
     with pytest.raises(DcslamError, match="at least 2 sequences"):
         demo_drives(tmp_path, sequences=1, frames=4, seed=0, force=True)
+
+
+def test_stage_config_maps_to_the_experiment_and_runs_on_given_drives(rooms, tmp_path):
+    from dcslam.workspace import Workspace
+
+    config = DemoIclConfig(sigma=0.02, steps=2, batch_size=2, patch=16, features=4, layers=3, scale=1.0,
+                           drives=rooms, device="cpu")
+    experiment = config.denoise_config()
+    assert (experiment.sigma_m, experiment.steps, experiment.features, experiment.layers) == (0.02, 2, 4, 3)
+    with pytest.raises(DcslamError, match="sigma"):
+        DemoIclConfig(sigma=0)
+    result = run(Workspace(tmp_path / "ws"), config)
+    assert result.out_dir == tmp_path / "ws" / "results" / "demo-icl"
+    settings = json.loads((result.out_dir / "results.json").read_text())["settings"]
+    assert settings["sigma_m"] == 0.02 and settings["test_drives"] == [str(rooms / "room_c.h5")]

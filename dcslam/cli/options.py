@@ -1,0 +1,128 @@
+"""Command-line options generated from a stage's configuration dataclass, so that each option is declared once.
+
+:func:`stage_command` registers a Typer command whose options are the configuration's fields (name, type, default,
+help, choices, bounds from the field's ``metadata``) plus what every command shares: ``--workspace``, ``--config
+FILE`` (TOML, or YAML with PyYAML; options given on the command line override it), ``--print-config`` (print the
+configuration the command would run, as TOML, and exit 0) and, where the stage writes files, ``--force``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import enum
+import inspect
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from dcslam.cli.app import ForceOption, WorkspaceOption, known_errors, summary
+
+ConfigOption = Annotated[Optional[Path], typer.Option(
+    "--config", help="Read the options from this TOML (or YAML) file; options given here override it.")]
+PrintConfigOption = Annotated[bool, typer.Option(
+    "--print-config", help="Print the configuration this command would run, as TOML, and exit.")]
+
+
+def _choice_enum(name: str, choices) -> type[enum.Enum]:
+    return enum.Enum(name, [(c, c) for c in choices], type=str)
+
+
+def _parameter(cls, field) -> inspect.Parameter:
+    from dcslam.stages.config import field_type, split_type
+
+    meta = field.metadata
+    base, optional, is_list = split_type(field_type(cls, field.name))
+    if "choices" in meta:
+        base = _choice_enum(f"{cls.__name__}_{field.name}", meta["choices"])
+    annotation = list[base] if is_list else base
+    if optional or is_list:
+        annotation = Optional[annotation]
+    flags = meta.get("flags", (f"--{field.name.replace('_', '-')}",))
+    extra = {k: meta[k] for k in ("min", "max", "show_default", "metavar") if k in meta}
+    if is_list and "choices" not in meta and "metavar" not in meta:
+        extra["metavar"] = "PATH" if base is Path else base.__name__.upper()
+    if "validate" in meta:
+        extra["callback"] = _usage_check(meta["validate"], flags[0])
+    default = None if field.default is dataclasses.MISSING else field.default
+    if "choices" in meta and default is not None:
+        default = base(default)
+    return inspect.Parameter(field.name, inspect.Parameter.KEYWORD_ONLY, default=default,
+                             annotation=Annotated[annotation, typer.Option(*flags, help=meta.get("help"), **extra)])
+
+
+def _usage_check(validate: Callable, hint: str) -> Callable:
+    """A Typer callback that runs ``validate`` on each value and turns its DcslamError into a usage error (exit 2)."""
+    def callback(value):
+        from dcslam.errors import DcslamError
+
+        for item in (value if isinstance(value, list) else [value]) if value is not None else []:
+            try:
+                validate(item)
+            except DcslamError as exc:
+                raise typer.BadParameter(str(exc), param_hint=hint) from None
+        return value
+
+    return callback
+
+
+def _plain(value):
+    if isinstance(value, enum.Enum):
+        return value.value
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    return value
+
+
+def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, report: Callable[[object], None],
+                  *, help: str, force: bool = True, prepare: Callable | None = None) -> Callable:
+    """Register ``name`` on ``parent``: options → ``config_cls`` → ``run(workspace, config, force=)`` → ``report``.
+
+    ``prepare(config, workspace)`` (optional) may return a changed configuration before it is printed or run.
+    """
+    from dcslam.stages.config import options_of
+
+    fields = options_of(config_cls)
+
+    def command(ctx: typer.Context, **kwargs):
+        from dcslam.stages.config import from_mapping, read_config_file, to_toml
+        from dcslam.workspace import Workspace
+
+        values = {}
+        source = "the command line"
+        if kwargs.get("config_file") is not None:
+            source = str(kwargs["config_file"])
+            values.update(read_config_file(kwargs["config_file"]))
+        for field in fields:
+            given = ctx.get_parameter_source(field.name)
+            if given is not None and given.name != "DEFAULT":
+                values[field.name] = _plain(kwargs[field.name])
+        config = from_mapping(config_cls, values, source)
+        ws = Workspace.resolve(kwargs.get("workspace"))
+        if prepare is not None:
+            config = prepare(config, ws)
+        if kwargs.get("print_config"):
+            summary(to_toml(config, f"dcslam {name} configuration"))
+            return None
+        result = run(ws, config, force=kwargs.get("force", False)) if force else run(ws, config)
+        report(result)
+        return result
+
+    parameters = [inspect.Parameter("ctx", inspect.Parameter.POSITIONAL_OR_KEYWORD, annotation=typer.Context)]
+    parameters += [_parameter(config_cls, f) for f in fields]
+    parameters += [inspect.Parameter("workspace", inspect.Parameter.KEYWORD_ONLY, default=None,
+                                     annotation=WorkspaceOption),
+                   inspect.Parameter("config_file", inspect.Parameter.KEYWORD_ONLY, default=None,
+                                     annotation=ConfigOption),
+                   inspect.Parameter("print_config", inspect.Parameter.KEYWORD_ONLY, default=False,
+                                     annotation=PrintConfigOption)]
+    if force:
+        parameters.append(inspect.Parameter("force", inspect.Parameter.KEYWORD_ONLY, default=False,
+                                            annotation=ForceOption))
+    wrapped = known_errors(command)
+    wrapped.__signature__ = inspect.Signature(parameters)
+    wrapped.__annotations__ = {p.name: p.annotation for p in parameters}
+    del wrapped.__wrapped__
+    wrapped.__name__ = f"{name.replace('-', '_')}_command"
+    parent.command(name, help=help)(wrapped)
+    return wrapped

@@ -1,0 +1,79 @@
+"""Filters applied in order (a chain), over the frames of a layer and over drives, writing new layers."""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dcslam.errors import DcslamError
+from dcslam.filters.base import check_depth
+
+
+@dataclass(frozen=True)
+class FilterChain:
+    """Filters applied in order."""
+
+    filters: tuple
+
+    def __post_init__(self):
+        if not self.filters:
+            raise DcslamError("a filter chain needs at least one filter")
+
+    @property
+    def name(self) -> str:
+        """e.g. ``range+bilateral``."""
+        return "+".join(f.name for f in self.filters)
+
+    def apply(self, depth_m: np.ndarray, K: np.ndarray) -> np.ndarray:
+        """(H, W), K (3, 3) → (H, W) float32; the input is not modified."""
+        out = check_depth(depth_m)
+        for f in self.filters:
+            out = f.apply(out, K)
+        return out
+
+    def describe(self) -> list[dict]:
+        return [f.describe() for f in self.filters]
+
+
+def filter_frames(depth_m: np.ndarray, K: np.ndarray, chain: FilterChain, description: str = "filter") -> np.ndarray:
+    """Filter every frame of a layer. Shapes: depth_m (N, H, W), K (3, 3) → (N, H, W) float32."""
+    from dcslam.progress import track
+
+    depth_m = np.asarray(depth_m)
+    if depth_m.ndim != 3:
+        raise DcslamError(f"depth has shape {depth_m.shape}, expected (N, H, W)")
+    return np.stack([chain.apply(frame, K) for frame in track(depth_m, description)])
+
+
+def filter_drives(jobs: Sequence[tuple[Path, str | Path, Path]], chain: FilterChain, made_by: str,
+                  settings: dict, force: bool = False) -> list[Path]:
+    """Filter depth layers and write them as new layers.
+
+    ``jobs``: (drive file, depth source — ``sparse``, ``dense`` or a layer file —, output layer file). All outputs
+    are checked before anything is written, so an existing output (without ``force``) or a missing input fails
+    the whole call with nothing overwritten. Each layer's ``config`` records the source, the chain
+    (``describe()`` of each filter) and ``settings``.
+    """
+    from dcslam.io.drive import DriveFile, Layer, load_depth, write_layer
+
+    jobs = [(Path(d), s, Path(o)) for d, s, o in jobs]
+    if not jobs:
+        raise DcslamError("no drives to filter")
+    for drive_path, source, out_path in jobs:
+        if out_path.exists() and not force:
+            raise DcslamError(f"{out_path} exists; pass --force to overwrite it")
+        if not drive_path.exists():
+            raise DcslamError(f"drive file {drive_path} not found; run `dcslam prepare-kitti` first")
+        if str(source) not in ("sparse", "dense") and not Path(source).exists():
+            raise DcslamError(f"layer file {source} not found; run `dcslam predict` or `dcslam filter` first")
+    written = []
+    for drive_path, source, out_path in jobs:
+        with DriveFile(drive_path) as drive:
+            depth = load_depth(drive, source)
+            filtered = filter_frames(depth, drive.K, chain, f"{made_by} {drive.name}")
+            config = {"source": str(source), "drive_file": str(drive_path), "filters": chain.describe(), **settings}
+            write_layer(out_path, Layer(depth=filtered, drive=drive.name, made_by=made_by, config=config), force=force)
+        written.append(out_path)
+    return written

@@ -1,0 +1,72 @@
+"""``dcslam filter``: filter a depth layer (sparse, dense, predicted or filtered) into ``filtered/<name>/``."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from dcslam.errors import DcslamError
+from dcslam.filters import filter_help, parse_filter
+from dcslam.stages.config import option
+from dcslam.workspace import Workspace
+
+DEPTHS = ("sparse", "dense", "predicted", "filtered")
+
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """Options of ``dcslam filter``."""
+
+    filters: list[str] = option(default_factory=list, flags=("--filter", "-f"), metavar="SPEC", help=filter_help(),
+                                validate=parse_filter)
+    depth: str = option("predicted", choices=DEPTHS, help="Input: sparse, dense (from the drive files), predicted "
+                                                          "(predictions/<run>/) or filtered (filtered/<run>/).")
+    run: str | None = option(None, help="Run name (or folder of layer files) for --depth predicted or filtered.")
+    name: str | None = option(None, help="Output name (default: <input>+<filters>, e.g. mse-dense+range).")
+    drive: list[str] = option(default_factory=list, help="Drive name (repeatable); default: the test split.")
+    out_dir: Path | None = option(None, help="Output folder (default: <workspace>/filtered/<name>).")
+
+    def __post_init__(self) -> None:
+        if not self.filters:
+            raise DcslamError("give at least one --filter (or a filters list in the configuration file)")
+        self.chain()
+        if self.depth not in DEPTHS:
+            raise DcslamError(f"{self.depth!r} is not one of {', '.join(DEPTHS)}")
+        if self.depth in ("predicted", "filtered") and not self.run:
+            raise DcslamError(f"--depth {self.depth} needs --run NAME (a run or filter name, or a folder of layer "
+                              "files)")
+
+    def chain(self):
+        from dcslam.filters import FilterChain
+
+        return FilterChain(tuple(parse_filter(spec) for spec in self.filters))
+
+
+@dataclass
+class FilterResult:
+    source_layer: str
+    chain_name: str
+    out_dir: Path
+    layers: list[Path]
+
+
+def run(ws: Workspace, config: FilterConfig, *, force: bool = False) -> FilterResult:
+    """Filter the input layer of every selected drive; writes ``<out>/<drive>.h5`` and ``<out>/config.json``."""
+    from dcslam.filters import filter_drives
+    from dcslam.stages.config import to_dict
+    from dcslam.io.atomic import write_json_atomic
+    from dcslam.workspace import layer_reference, resolve_layer, select_drives, stage_config
+
+    chain = config.chain()
+    layer = resolve_layer(ws, layer_reference(config.depth, config.run))
+    name = config.name or f"{layer.name}+{chain.name}"
+    out_dir = config.out_dir or ws.filtered / name
+    drives = select_drives(ws, config.drive)
+    jobs = [(ws.drives / f"{d}.h5", layer.source(d), out_dir / f"{d}.h5") for d in drives]
+    settings = {"name": name, "source_layer": layer.name, "depth": config.depth, "drives": drives,
+                "filters": chain.describe(), "options": to_dict(config)}
+    config_path = out_dir / "config.json"
+    if config_path.exists() and not force:
+        raise DcslamError(f"{config_path} exists; pass --force to overwrite it")
+    written = filter_drives(jobs, chain, made_by=name, settings={"source_layer": layer.name}, force=force)
+    write_json_atomic(config_path, stage_config("filter", settings), force=True)
+    return FilterResult(layer.name, chain.name, out_dir, written)

@@ -1,0 +1,226 @@
+"""``dcslam reproduce``: the thesis's Tables 5.1 and 5.2 in one command (``make reproduce-table-5-2``).
+
+The experiment composes the other stages' configurations and runs them in this process::
+
+    synth (unless a KITTI root is given) → prepare-kitti → train × 4 recipes → predict (4 runs + IP-Basic)
+    → filter (each model's predictions) → slam (sparse, dense, every prediction and filtered layer)
+    → score tables
+
+A stage is skipped when its outputs exist, are newer than its inputs, and were made with the same configuration by
+the same dcslam (version and a hash of its sources, recorded in ``<workspace>/.reproduce/<stage>.json``), so a rerun
+after a change redoes only what changed. Training with several processes (``nproc``) still launches through torchrun.
+A profile chooses the scale: ``quick`` (the default, about half an hour on 2 CPU cores), ``smoke`` (a check that
+every stage runs) or ``thesis`` (the thesis's 15 / 4 / 5 drives of 200 frames, for a GPU).
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from dcslam.errors import DcslamError
+from dcslam.stages import filter as filter_stage
+from dcslam.stages import predict, prepare, score, slam, synth, train
+from dcslam.stages.config import changed, code_version, option, to_dict
+from dcslam.io.atomic import write_json_atomic
+from dcslam.workspace import Workspace
+
+RECIPES = {  # run name → `dcslam train` options (Table 5.1 / 5.2 rows of the thesis)
+    "chamfer-1": {"loss": "chamfer", "map_frames": 1},
+    "chamfer-8": {"loss": "chamfer", "map_frames": 8},
+    "mse-sparse": {"loss": "mse", "mask": "sparse"},
+    "mse-dense": {"loss": "mse", "mask": "dense"},
+}
+IP_BASIC = "ip-basic-fast"
+
+
+@dataclass(frozen=True)
+class Profile:
+    """The scale of one reproduction."""
+
+    name: str
+    drives: int                 # generated drives (split 62.5 / 16.7 / 20.8 % like the thesis's 15 / 4 / 5)
+    frames: int                 # raw frames per generated drive (depth exists for frames 5 … N−6)
+    train: dict                 # options common to every training run (fields of TrainStageConfig)
+    slam_frames: int            # frames of each test drive fed to SLAM (the thesis scored 30)
+    filters: dict[str, list[str]] = field(default_factory=dict)  # filter name → filter specs of `dcslam filter`
+    description: str = ""
+
+
+PROFILES = {
+    "quick": Profile(
+        name="quick", drives=5, frames=42, train={"epochs": 2, "max_frames": 31, "scale": 0.5, "lr": 3e-3},
+        slam_frames=30, filters={"edges": ["edges"]},
+        description="5 generated drives of 42 frames (3 train / 1 val / 1 test), models trained 2 epochs at half "
+                    "resolution, SLAM on the first 30 frames, one outlier filter"),
+    "smoke": Profile(
+        name="smoke", drives=3, frames=14, train={"epochs": 1, "max_frames": 2, "scale": 0.25},
+        slam_frames=3, filters={"edges": ["edges"]},
+        description="a check that every stage runs (3 drives of 14 frames, tiny training): numbers mean nothing"),
+    "thesis": Profile(
+        name="thesis", drives=24, frames=211, train={"epochs": 5, "max_frames": 200},
+        slam_frames=30,
+        filters={"thesis-range": ["thesis-range"], "thesis-bilateral": ["thesis-bilateral"], "edges": ["edges"],
+                 "outlier": ["outlier"], "hidden": ["hidden"]},
+        description="the thesis's scale: 15 / 4 / 5 drives, 200 frames per drive, full resolution (use a GPU)"),
+}
+TABLES = ("5.2", "5.1")
+
+
+@dataclass(frozen=True)
+class ReproduceConfig:
+    """Options of ``dcslam reproduce``."""
+
+    table: str = option("5.2", choices=TABLES, help="Table to print: 5.2 or 5.1 (5.1 stops after training).")
+    profile: str = option("quick", choices=tuple(PROFILES), help="quick (about 30 min on 2 CPU cores), smoke (a "
+                          "few minutes; checks the stages, its numbers mean nothing) or thesis (15/4/5 drives of 200 "
+                          "frames; for a GPU).")
+    kitti: Path | None = option(None, help="Real KITTI root (raw/ and depth_completion/); default: generate "
+                                           "KITTI-format drives with `dcslam synth`.")
+    seed: int = option(0, help="Seed of the generated drives and of training.")
+
+    def __post_init__(self) -> None:
+        if self.table not in TABLES:
+            raise DcslamError(f"unknown table {self.table!r}; expected 5.1 or 5.2")
+        if self.profile not in PROFILES:
+            raise DcslamError(f"unknown profile {self.profile!r}; expected one of {', '.join(PROFILES)}")
+
+
+@dataclass
+class Stage:
+    """One stage of the pipeline: a stage function, its configuration, and the files it reads and writes."""
+
+    name: str
+    run: Callable               # run(workspace, config, force=True) of a dcslam.stages module
+    config: object              # that stage's configuration dataclass
+    outputs: Callable[[], list[Path]]
+    inputs: Callable[[], list[Path]] = lambda: []
+
+    def record(self) -> dict:
+        """What the stamp compares: the stage function, its configuration and the code that runs it."""
+        return {"stage": f"{self.run.__module__}.{self.run.__name__}", "config": to_dict(self.config),
+                "dcslam": code_version()}
+
+
+def _mtime(paths: list[Path]) -> tuple[float, float]:
+    times = [p.stat().st_mtime for p in paths if p.exists()]
+    return (min(times), max(times)) if times else (0.0, 0.0)
+
+
+class Pipeline:
+    """Runs stages in order in this process, skipping those whose outputs are up to date."""
+
+    def __init__(self, workspace: Workspace, log: Callable[[str], None] = lambda line: None):
+        self.ws = workspace
+        self.state = workspace.root / ".reproduce"
+        self.log = log
+        self.timings: dict[str, float] = {}
+
+    def _stamp(self, stage: Stage) -> Path:
+        return self.state / f"{stage.name}.json"
+
+    def up_to_date(self, stage: Stage) -> bool:
+        import json
+
+        stamp = self._stamp(stage)
+        if not stamp.exists():
+            return False
+        try:
+            made = json.loads(stamp.read_text())
+        except json.JSONDecodeError:
+            return False
+        if {k: made.get(k) for k in ("stage", "config", "dcslam")} != stage.record():
+            return False
+        outputs, inputs = stage.outputs(), stage.inputs()
+        if not outputs or not all(p.exists() for p in outputs):
+            return False
+        return _mtime(outputs)[0] >= _mtime(inputs)[1]
+
+    def run(self, stage: Stage):
+        """Run ``stage`` unless it is up to date; returns its result (None when skipped)."""
+        if self.up_to_date(stage):
+            self.log(f"[skip] {stage.name}: up to date")
+            return None
+        options = " ".join(f"{k}={v}" for k, v in changed(stage.config).items())
+        self.log(f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} {options}".rstrip())
+        start = time.perf_counter()
+        try:
+            result = stage.run(self.ws, stage.config, force=True)
+        except DcslamError as error:
+            raise DcslamError(f"stage {stage.name} failed ({error}); fix it and rerun: finished stages will be "
+                              "skipped") from None
+        self.timings[stage.name] = time.perf_counter() - start
+        write_json_atomic(self._stamp(stage), {**stage.record(), "seconds": self.timings[stage.name]})
+        return result
+
+
+def run(ws: Workspace, config: ReproduceConfig, *, log: Callable[[str], None] = lambda line: None) -> Path:
+    """Run the experiment at the profile's scale; return the Markdown file of the requested table."""
+    return reproduce(ws, PROFILES[config.profile], table=config.table, kitti_root=config.kitti, seed=config.seed,
+                     log=log)
+
+
+def reproduce(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_root: Path | None = None,
+              seed: int = 0, log: Callable[[str], None] = lambda line: None) -> Path:
+    """Run the experiment at ``profile``'s scale; return the Markdown file of the requested table."""
+    if table not in TABLES:
+        raise DcslamError(f"unknown table {table!r}; expected 5.1 or 5.2")
+    ws = workspace
+    pipe = Pipeline(ws, log)
+    kitti = Path(kitti_root) if kitti_root else ws.kitti
+    drives = lambda: sorted(ws.drives.glob("*.h5"))  # noqa: E731
+    if kitti_root is None:
+        pipe.run(Stage("synth", synth.run, synth.SynthConfig(drives=profile.drives, frames=profile.frames, seed=seed),
+                       outputs=lambda: [ws.kitti / "SYNTHETIC"]))
+    elif not kitti.exists():
+        raise DcslamError(f"KITTI root {kitti} not found")
+    pipe.run(Stage("prepare-kitti", prepare.run, prepare.PrepareConfig(kitti=kitti),
+                   outputs=lambda: [ws.splits, *drives()],
+                   inputs=lambda: [p for p in (kitti / "SYNTHETIC",) if p.exists()]))
+    from dcslam.io.drive import read_splits
+
+    splits = read_splits(ws.splits)
+    test = [ws.drives / f"{name}.h5" for name in splits["test"]]
+    learn = [ws.drives / f"{name}.h5" for name in splits["train"] + splits["val"]]
+
+    for run_name, options in RECIPES.items():
+        config = train.TrainStageConfig(**options, **profile.train, name=run_name, seed=seed)
+        pipe.run(Stage(f"train-{run_name}", train.run, config,
+                       outputs=lambda r=run_name: [ws.runs / r / "model.pt", ws.runs / r / "metrics.jsonl"],
+                       inputs=lambda: learn))
+    if table == "5.1":
+        return _tables(pipe, ws, "5.1", inputs=[ws.runs / r / "metrics.jsonl" for r in RECIPES])
+
+    layers = {}  # layer name → (files it is made of, the layer's reference)
+    for kind in ("sparse", "dense"):
+        layers[kind] = (test, kind)
+    for run_name in [*RECIPES, IP_BASIC]:
+        made = [ws.predictions / run_name / p.name for p in test]
+        config = predict.PredictConfig(run=run_name) if run_name in RECIPES else predict.PredictConfig(model=run_name)
+        pipe.run(Stage(f"predict-{run_name}", predict.run, config, outputs=lambda made=made: made,
+                       inputs=lambda r=run_name: [ws.runs / r / "model.pt", *test] if r in RECIPES else test))
+        layers[run_name] = (made, f"predicted/{run_name}")
+    for run_name in RECIPES:
+        for fname, specs in profile.filters.items():
+            name = f"{run_name}+{fname}"
+            made = [ws.filtered / name / p.name for p in test]
+            config = filter_stage.FilterConfig(filters=list(specs), depth="predicted", run=run_name, name=name)
+            pipe.run(Stage(f"filter-{name}", filter_stage.run, config,
+                           outputs=lambda made=made: made, inputs=lambda m=layers[run_name][0]: m))
+            layers[name] = (made, f"filtered/{name}")
+    slam_outputs = []
+    for layer, (files, reference) in layers.items():
+        made = [ws.slam / layer / f"{p.stem}.json" for p in test]
+        slam_outputs += made
+        config = slam.SlamStageConfig(depth=reference, odometry="icp", frames=profile.slam_frames)
+        pipe.run(Stage(f"slam-{layer}", slam.run, config, outputs=lambda made=made: made,
+                       inputs=lambda files=files: files))
+    return _tables(pipe, ws, "5.2", inputs=slam_outputs + [ws.runs / r / "metrics.jsonl" for r in RECIPES])
+
+
+def _tables(pipe: Pipeline, ws: Workspace, table: str, inputs: list[Path]) -> Path:
+    name = f"table_{table.replace('.', '_')}.md"
+    pipe.run(Stage("score-tables", score.run_tables, score.ScoreTablesConfig(), outputs=lambda: [ws.results / name],
+                   inputs=lambda: inputs))
+    return ws.results / name

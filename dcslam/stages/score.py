@@ -1,0 +1,163 @@
+"""``dcslam score``: depth errors, trajectory errors, map chamfer of layers, and the thesis's Tables 5.1 / 5.2.
+
+Four stages, one per ``dcslam score`` subcommand; each returns the table(s) it wrote (a CSV file, or the report).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from dcslam.errors import DcslamError
+from dcslam.stages.config import option
+from dcslam.workspace import Workspace
+
+DRIVE_HELP = "Drive name (repeatable); default: the test split of splits.json."
+OUT_HELP = "CSV file to write (default under results/)."
+
+
+def _slug(text: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_+." else "_" for c in text)
+
+
+@dataclass
+class ScoreResult:
+    """A scored table and the CSV it was written to (its configuration beside it: the same name, ``.json``);
+    ``shown`` is the part worth printing."""
+
+    table: object
+    out: Path
+    shown: object = None
+
+
+def _write(stage: str, config, table, out: Path, shown=None) -> ScoreResult:
+    from dcslam.report.scores import write_table_csv
+    from dcslam.stages.config import to_dict
+    from dcslam.io.atomic import write_json_atomic
+    from dcslam.workspace import stage_config
+
+    write_table_csv(table, out, force=True)
+    write_json_atomic(out.with_suffix(".json"), stage_config(stage, to_dict(config)), force=True)
+    return ScoreResult(table, out, table if shown is None else shown)
+
+
+def _file_or_layer_output(ws: Workspace, kind: str, path: Path | None, gt: Path | None, layer: str | None,
+                          out: Path | None, force: bool, usage: str) -> tuple[str, Path]:
+    """The preamble of the stages that score either ``--<file> FILE --gt REFERENCE`` or ``--layer NAME``.
+
+    Fails with ``usage`` unless exactly one of the two forms is given; returns the name the scores go by (the
+    layer's, or the file's stem) and the CSV to write (``out``, or ``results/<kind>_<name>.csv``), checked not to
+    exist unless ``force``.
+    """
+    from dcslam.report.scores import check_outputs
+
+    if (path is None) == (layer is None) or (path is not None and gt is None):
+        raise DcslamError(usage)
+    name = _slug(layer) if layer else _slug(path.stem)
+    out = out or ws.results / f"{kind}_{name}.csv"
+    check_outputs([out], force)
+    return name, out
+
+
+@dataclass(frozen=True)
+class ScoreDepthConfig:
+    """Options of ``dcslam score depth``."""
+
+    layer: str | None = option(None, help="sparse, dense, a run or filter name (or predicted/<run>, "
+                                          "filtered/<name>), or a folder of layer files. Required.")
+    drive: list[str] = option(default_factory=list, help=DRIVE_HELP)
+    out: Path | None = option(None, help=OUT_HELP)
+    raw: bool = option(False, flags=("--raw",), help="No devkit interpolation: score only the pixels where the "
+                                                     "layer has depth.")
+
+    def __post_init__(self) -> None:
+        if not self.layer:
+            raise DcslamError("give --layer NAME (sparse, dense, a run or filter name, or a folder of layer files)")
+
+
+def run_depth(ws: Workspace, config: ScoreDepthConfig, *, force: bool = False) -> ScoreResult:
+    from dcslam.report.scores import check_outputs, depth_table
+    from dcslam.workspace import select_drives
+
+    out = config.out or ws.results / f"depth_{_slug(Path(config.layer).name)}.csv"
+    check_outputs([out], force)
+    table = depth_table(ws, config.layer, select_drives(ws, config.drive), interpolate=not config.raw)
+    return _write("score-depth", config, table, out)
+
+
+@dataclass(frozen=True)
+class ScoreTrajectoryConfig:
+    """Options of ``dcslam score trajectory``."""
+
+    est: Path | None = option(None, help="Estimated trajectory (TUM).")
+    gt: Path | None = option(None, help="Reference: a drive file (.h5) or a TUM file.")
+    layer: str | None = option(None, help="Score slam/<layer>/<drive>.txt against the drive files.")
+    drive: list[str] = option(default_factory=list, help=DRIVE_HELP)
+    out: Path | None = option(None, help=OUT_HELP)
+
+
+def run_trajectory(ws: Workspace, config: ScoreTrajectoryConfig, *, force: bool = False) -> ScoreResult:
+    from dcslam.report.layers import load_pair, score_layer_trajectories
+    from dcslam.report.scores import TRAJECTORY_SHOWN, trajectory_table
+    from dcslam.report.tables import Table
+    from dcslam.workspace import select_drives
+
+    name, out = _file_or_layer_output(ws, "trajectory", config.est, config.gt, config.layer, config.out, force,
+                                      "give either --est X.txt --gt REFERENCE, or --layer NAME")
+    if config.layer:
+        pairs = score_layer_trajectories(ws, config.layer, select_drives(ws, config.drive))
+    else:
+        pairs = {config.est.stem: load_pair(config.est, config.gt)}
+    table = trajectory_table(pairs, f"trajectory errors of {name}")
+    brief = Table(table.title, [c for c in table.columns if c.key in ("trajectory", *TRAJECTORY_SHOWN)],
+                  table.rows, table.notes)
+    return _write("score-trajectory", config, table, out, brief)
+
+
+@dataclass(frozen=True)
+class ScoreMapConfig:
+    """Options of ``dcslam score map``."""
+
+    map_path: Path | None = option(None, flags=("--map",), help="Map (PLY).")
+    gt: Path | None = option(None, help="Ground-truth map (PLY).")
+    layer: str | None = option(None, help="Score slam/<layer>/<drive>.ply.")
+    gt_layer: str = option("dense", help="Layer whose slam maps are the ground truth.")
+    drive: list[str] = option(default_factory=list, help=DRIVE_HELP)
+    out: Path | None = option(None, help=OUT_HELP)
+
+
+def run_map(ws: Workspace, config: ScoreMapConfig, *, force: bool = False) -> ScoreResult:
+    from dcslam.eval.maps import score_map
+    from dcslam.report.scores import map_table
+    from dcslam.workspace import select_drives
+
+    name, out = _file_or_layer_output(ws, "map", config.map_path, config.gt, config.layer, config.out, force,
+                                      "give either --map X.ply --gt Y.ply, or --layer NAME")
+    if config.layer:
+        scores = {d: score_map(ws.slam / config.layer / f"{d}.ply", ws.slam / config.gt_layer / f"{d}.ply")
+                  for d in select_drives(ws, config.drive)}
+    else:
+        scores = {config.map_path.stem: score_map(config.map_path, config.gt)}
+    table = map_table(scores, f"map of {name} against {config.gt_layer if config.layer else config.gt.name}")
+    return _write("score-map", config, table, out)
+
+
+@dataclass(frozen=True)
+class ScoreTablesConfig:
+    """Options of ``dcslam score tables``."""
+
+    drive: list[str] = option(default_factory=list, help=DRIVE_HELP)
+    out_dir: Path | None = option(None, help="Output folder (default: <workspace>/results).")
+
+
+def run_tables(ws: Workspace, config: ScoreTablesConfig, *, force: bool = False):
+    """Tables 5.1 and 5.2 with their plots; returns the :class:`dcslam.report.scores.Report` and writes the
+    configuration beside them (``score-tables.json``)."""
+    from dcslam.report.scores import build_report
+    from dcslam.stages.config import to_dict
+    from dcslam.io.atomic import write_json_atomic
+    from dcslam.workspace import select_drives, stage_config
+
+    report = build_report(ws, select_drives(ws, config.drive), out_dir=config.out_dir, force=force)
+    write_json_atomic(report.written[0].parent / "score-tables.json", stage_config("score-tables", to_dict(config)),
+                      force=True)
+    return report

@@ -1,0 +1,174 @@
+"""``dcslam slam``: dense SLAM over drive files, writing per drive ``<out>/<drive>.txt`` (TUM trajectory, readable
+by evo), ``<out>/<drive>.ply`` (the map with normals and colours) and ``<out>/<drive>.json`` (frames, points, seconds
+per frame, rejected steps, drift against the drive's ground truth, and the configuration that ran), ``<out>`` being
+``slam/<layer>/`` by default.
+
+The configuration extends :class:`dcslam.slam.config.SlamSettings`, so a field added there is an option of
+``dcslam slam`` and a configuration-file key with no other edit.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+
+from dcslam.errors import DcslamError
+from dcslam.slam.config import SlamSettings
+from dcslam.stages.config import option
+from dcslam.workspace import Workspace
+
+
+@dataclass(frozen=True)
+class SlamStageConfig(SlamSettings):
+    """Options of ``dcslam slam``: the SLAM's settings plus its input, frames, output and device."""
+
+    depth: str = option("dense", help="Depth input: sparse, dense, predicted (a `dcslam predict` layer), filtered "
+                                      "(a `dcslam filter` layer), predicted/<run>, filtered/<name>, or a layer "
+                                      "folder or file path.")
+    drive: list[str] = option(default_factory=list, help="Drive name (in drives/) or .h5 path; repeatable. "
+                                                          "Default: the test drives of splits.json.")
+    frames: int = option(0, min=0, help="First N frames of each drive (0 = all; the thesis scored 30).")
+    run: str | None = option(None, help="Prediction run (or filter name) for --depth predicted (filtered); "
+                                        "default: the most recent.")
+    out: Path | None = option(None, help="Output folder (default: slam/<layer>/).")
+    device: str = option("cpu", help="torch device, e.g. cpu or cuda.")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.frames < 0:
+            raise DcslamError(f"--frames must be >= 0, got {self.frames}")
+
+    def settings(self) -> SlamSettings:
+        """The SLAM algorithm's own settings (what :func:`dcslam.slam.config.build_slam` takes)."""
+        return SlamSettings(**{f.name: getattr(self, f.name) for f in fields(SlamSettings)})
+
+
+@dataclass
+class SlamDriveResult:
+    """One drive: its summary (:meth:`dcslam.slam.run.DriveRun.summary`) and the files written."""
+
+    drive: str
+    summary: dict
+    written: dict[str, Path]
+
+
+def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[SlamDriveResult]:
+    """SLAM over every selected drive; all outputs are checked not to exist (without ``force``) before any work."""
+    from dcslam.io.drive import read_splits
+    from dcslam.slam.config import build_slam
+    from dcslam.stages.config import to_dict
+    from dcslam.workspace import drive_file, layer_reference, resolve_layer
+
+    names = config.drive or read_splits(ws.splits)["test"]
+    paths = [drive_file(ws, name) for name in names]
+    layer = resolve_layer(ws, layer_reference(config.depth, config.run))
+    out_dir = config.out if config.out is not None else ws.slam / layer.name
+    jobs = []
+    for path in paths:
+        source = layer.require(path.stem)
+        check_outputs(out_dir, path.stem, force)
+        jobs.append((path, source))
+    results = []
+    for path, source in jobs:
+        slam = build_slam(config.settings())
+        drive_run = run_drive(path, source, slam, config.frames or None, config.device,
+                              settings={**to_dict(config), "source": str(source)})
+        drive_run.name = path.stem
+        written = write_outputs(drive_run, out_dir, force)
+        results.append(SlamDriveResult(path.stem, drive_run.summary(), written))
+    return results
+
+
+@dataclass
+class DriveRun:
+    """Outputs of one drive. Shape: T_world_cam (N, 4, 4) float64, timestamps (N,), T_gt (N, 4, 4)."""
+
+    name: str
+    T_world_cam: np.ndarray
+    timestamps: np.ndarray
+    T_gt: np.ndarray
+    map: object                 # dcslam.slam.pointmap.PointMap
+    reports: list               # dcslam.slam.pipeline.StepReport per frame
+    seconds: float
+    settings: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        import torch
+
+        from dcslam.geometry.se3 import pose_error
+
+        dt, dr = pose_error(torch.from_numpy(self.T_gt), torch.from_numpy(self.T_world_cam))
+        n = len(self.reports)
+        return {
+            "drive": self.name, "frames": n, "points": len(self.map),
+            "seconds": round(self.seconds, 3), "seconds_per_frame": round(self.seconds / max(n, 1), 4),
+            "map_megabytes": round(self.map.nbytes() / 2 ** 20, 2),
+            "rejected_steps": [{"frame": r.index, "reason": r.reason} for r in self.reports if not r.accepted],
+            "translation_error_m": {"final": float(dt[-1]), "max": float(dt.max()), "mean": float(dt.mean())},
+            "rotation_error_deg": {"final": float(dr[-1]) * 180 / np.pi, "max": float(dr.max()) * 180 / np.pi},
+            "settings": self.settings,
+        }
+
+
+def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | None = None,
+              device: str = "cpu", description: str | None = None, settings: dict | None = None) -> DriveRun:
+    """SLAM (a :class:`dcslam.slam.pipeline.SLAM`) over the first ``frames`` frames (all if None) of a drive, with
+    depth from ``sparse``, ``dense`` or a layer file."""
+    import torch
+
+    from dcslam.io.drive import DriveFile, load_depth
+    from dcslam.progress import Bar
+
+    with DriveFile(drive_path) as drive:
+        n = len(drive) if not frames else min(frames, len(drive))
+        if n < 1:
+            raise DcslamError(f"{drive_path}: no frames")
+        depth_all = load_depth(drive, depth_source)[:n]
+        K = torch.from_numpy(drive.K).float().to(device)
+        T_gt = drive.poses[:n]
+        slam.T_world_cam0 = torch.from_numpy(T_gt[0]).float()
+        slam.reset()
+        start = time.perf_counter()
+        with Bar(description or drive.name, total=n) as bar:
+            for i in range(n):
+                depth = torch.from_numpy(np.ascontiguousarray(depth_all[i])).to(device)[None, None]
+                rgb = torch.from_numpy(drive.rgb(i)).to(device).permute(2, 0, 1)[None].float() / 255
+                report = slam.step(depth, K, rgb, torch.from_numpy(T_gt[i]).float().to(device))
+                bar.advance(status=f"{report.points} points" + ("" if report.accepted else " (step rejected)"))
+        seconds = time.perf_counter() - start
+        poses = slam.trajectory().detach().cpu().double().numpy()
+        return DriveRun(drive.name, poses, drive.timestamps[:n].copy(), T_gt.copy(), slam.map.detach().to("cpu"),
+                        list(slam.reports), seconds, dict(settings or {}))
+
+
+def output_paths(out_dir: Path, name: str) -> dict[str, Path]:
+    return {"trajectory": out_dir / f"{name}.txt", "map": out_dir / f"{name}.ply", "summary": out_dir / f"{name}.json"}
+
+
+def check_outputs(out_dir: Path, name: str, force: bool) -> None:
+    """Fail before any work if an output exists and ``force`` is false."""
+    for path in output_paths(out_dir, name).values():
+        if path.exists() and not force:
+            raise DcslamError(f"{path} exists; pass --force to overwrite it")
+
+
+def write_outputs(run: DriveRun, out_dir: Path, force: bool = False) -> dict[str, Path]:
+    from dcslam.io.ply import write_ply
+    from dcslam.io.tum import write_tum
+    from dcslam.io.atomic import write_json_atomic
+    from dcslam.workspace import stage_config
+
+    paths = output_paths(out_dir, run.name)
+    check_outputs(out_dir, run.name, force)
+    timestamps = run.timestamps.astype(np.float64)
+    if len(timestamps) > 1 and np.any(np.diff(timestamps) <= 0):
+        timestamps = np.arange(len(timestamps), dtype=np.float64) * 0.1
+    write_tum(paths["trajectory"], timestamps, run.T_world_cam, force=force)
+    pm = run.map
+    write_ply(paths["map"], pm.points.numpy(), pm.normals.numpy(), pm.colors.clamp(0, 1).numpy(), force=force)
+    record = stage_config("slam", run.settings)
+    record.update(run.summary())
+    write_json_atomic(paths["summary"], record, force=force)
+    return paths

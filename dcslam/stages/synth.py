@@ -1,0 +1,78 @@
+"""``dcslam synth``: generate KITTI-format drives (or ICL-NUIM-layout indoor sequences) from procedural scenes."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from dcslam.errors import DcslamError
+from dcslam.stages.config import option
+from dcslam.workspace import Workspace
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """Options of ``dcslam synth``."""
+
+    out: Path | None = option(None, flags=("--out", "-o"), show_default="<workspace>/kitti, with --indoor "
+                              "<workspace>/tum", help="KITTI root to write into (raw/ and depth_completion/); with "
+                              "--indoor, the folder of the sequences.")
+    drives: int = option(6, flags=("--drives", "-n"), min=1,
+                         help="Number of drives (with --indoor: sequences) to generate.")
+    frames: int = option(60, flags=("--frames", "-f"), min=1,
+                         help="Raw frames per drive (10 Hz). Like KITTI, only frames 5 … N−6 get depth maps, so "
+                              "N ≥ 11.")
+    seed: int = option(0, flags=("--seed", "-s"),
+                       help="Random seed; each drive's scene and path follow from (seed, drive index).")
+    azimuth_step: float = option(0.08, flags=("--lidar-azimuth-step",),
+                                 help="LiDAR azimuth step in degrees across the 64 beams (each laser fires every "
+                                      "second step, as the HDL-64E).")
+    indoor: bool = option(False, flags=("--indoor",),
+                          help="Write indoor sequences in the ICL-NUIM layout instead of KITTI drives.")
+    scale: float = option(1.0, min=0.05, max=4.0, help="With --indoor: image size as a fraction of 640 × 480 "
+                                                        "(intrinsics scaled to match).")
+
+    def __post_init__(self) -> None:
+        if self.drives < 1 or self.frames < 1:
+            raise DcslamError(f"synth needs at least 1 drive of 1 frame, got {self.drives} of {self.frames}")
+        if not 0.05 <= self.scale <= 4.0:
+            raise DcslamError(f"--scale must be in [0.05, 4], got {self.scale}")
+        if not self.azimuth_step > 0:
+            raise DcslamError(f"--lidar-azimuth-step must be > 0 degrees, got {self.azimuth_step}")
+
+
+@dataclass
+class SynthResult:
+    """What was written: ``root``, the per-drive (or per-sequence) reports, and ``notes`` for the user."""
+
+    root: Path
+    indoor: bool
+    reports: list
+    notes: list[str]
+
+
+def out_root(ws: Workspace, config: SynthConfig) -> Path:
+    if config.out is not None:
+        return config.out
+    return ws.root / "tum" if config.indoor else ws.kitti
+
+
+def run(ws: Workspace, config: SynthConfig, *, force: bool = False) -> SynthResult:
+    """Generate the drives (or sequences) of ``config`` under :func:`out_root`."""
+    from dcslam.progress import Bar
+
+    root = out_root(ws, config)
+    if config.indoor:
+        from dcslam.synth.indoor import generate_indoor
+
+        with Bar("synth --indoor", total=config.drives * config.frames) as bar:
+            result = generate_indoor(root, sequences=config.drives, frames=config.frames, seed=config.seed,
+                                     force=force, on_frame=bar.advance, scale=config.scale)
+        return SynthResult(root, True, list(result.sequences), [])
+    from dcslam.synth import generate
+
+    notes = [f"with --frames {config.frames} < 11 no frame gets depth maps (KITTI skips 5 at each end)"] \
+        if config.frames < 11 else []
+    with Bar("synth", total=config.drives * config.frames) as bar:
+        reports = generate(root, drives=config.drives, frames=config.frames, seed=config.seed, force=force,
+                           lidar_azimuth_step_deg=config.azimuth_step, on_frame=bar.advance)
+    return SynthResult(root, False, reports, notes)

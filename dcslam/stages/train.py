@@ -1,0 +1,228 @@
+"""``dcslam train``: train a depth-completion network on the training drives of a workspace into ``runs/<name>/``
+(:func:`train` keeps the run folder; the training itself is :func:`dcslam.depth.train.train_loop`).
+
+With ``nproc`` > 1 the run is launched on that many local processes through torchrun (DistributedDataParallel),
+each of which runs this module's :func:`main` on the same configuration file.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from dcslam.depth.models import ARCHITECTURES
+from dcslam.depth.recipes import LOSSES, MASKS, run_name, selection_key
+from dcslam.errors import DcslamError
+from dcslam.stages.config import option
+from dcslam.io.atomic import write_json_atomic
+from dcslam.workspace import Workspace, stage_config
+
+MODELS = tuple(ARCHITECTURES)
+
+
+@dataclass(frozen=True)
+class TrainStageConfig:
+    """Options of ``dcslam train`` (the training's own settings are passed on as a
+    :class:`dcslam.depth.train.TrainConfig`)."""
+
+    loss: str = option("mse", choices=LOSSES, help="mse or chamfer.")
+    mask: str = option("dense", choices=MASKS, help="MSE mask: dense (pixels with ground truth) or sparse (pixels "
+                                                    "with sparse input and ground truth).")
+    map_frames: int = option(1, help="Frames per chamfer map: 1, or windows of up to N frames (the thesis: 8; its "
+                                     "code: 7).")
+    model: str = option("sparse-conv", choices=MODELS, help=f"Network: {' or '.join(MODELS)}.")
+    epochs: int = option(1, help="Passes over the training drives.")
+    lr: float = option(1e-3, help="AdamW learning rate.")
+    weight_decay: float = option(0.01, help="AdamW weight decay.")
+    max_frames: int = option(200, help="At most this many frames per drive.")
+    stride: int = option(1, help="Use every N-th frame.")
+    scale: float = option(1.0, help="Image scale, 1/integer (1, 0.5, 0.25).")
+    crop: int = option(0, help="Keep only the bottom N rows (0 = whole image).")
+    batch_size: int = option(1, help="Frames per step (MSE and 1-frame chamfer).")
+    seed: int = option(0, help="Random seed.")
+    device: str = option("auto", help="auto (a GPU if there is one), cpu or cuda.")
+    name: str | None = option(None, help="Run name (default: mse-dense, mse-sparse, chamfer-1, ...).")
+    resume: bool = option(False, flags=("--resume",), help="Continue an interrupted run from last.pt.")
+    nproc: int = option(1, help="Processes for distributed data-parallel training (launches torchrun).")
+
+    def __post_init__(self) -> None:
+        for name, choices in (("loss", LOSSES), ("mask", MASKS), ("model", MODELS)):
+            if getattr(self, name) not in choices:
+                raise DcslamError(f"unknown {name} {getattr(self, name)!r}; expected one of {', '.join(choices)}")
+        for name in ("map_frames", "epochs", "max_frames", "stride", "batch_size", "nproc"):
+            if getattr(self, name) < 1:
+                raise DcslamError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+        from dcslam.depth.data import check_view
+
+        check_view(self.scale, self.crop)
+
+    @property
+    def run_name(self) -> str:
+        return self.name or run_name(self.loss, self.mask, self.map_frames)
+
+    def train_config(self, train_drives: list[Path], val_drives: list[Path]):
+        """The :class:`dcslam.depth.train.TrainConfig` of this run."""
+        from dcslam.depth.train import TrainConfig
+
+        return TrainConfig(loss=self.loss, mask=self.mask, map_frames=self.map_frames, model=self.model,
+                           epochs=self.epochs, lr=self.lr, weight_decay=self.weight_decay,
+                           max_frames=self.max_frames, stride=self.stride, scale=self.scale, crop=self.crop,
+                           batch_size=self.batch_size, seed=self.seed, device=self.device,
+                           train_drives=train_drives, val_drives=val_drives)
+
+
+RUN_FILES = ("model.pt", "last.pt", "metrics.jsonl", "config.json", "curves.png")
+
+
+def _prepare_run_dir(run_dir: Path, force: bool, resume: bool) -> None:
+    existing = [name for name in RUN_FILES if (run_dir / name).exists()]
+    if resume:
+        if not (run_dir / "last.pt").exists():
+            raise DcslamError(f"{run_dir / 'last.pt'} not found; nothing to resume (start the run without --resume)")
+        return
+    if existing and not force:
+        raise DcslamError(f"run {run_dir} exists; pass --force to overwrite it or --resume to continue it")
+    for name in existing:
+        (run_dir / name).unlink()
+    run_dir.mkdir(parents=True, exist_ok=True)
+
+
+def _saved_config(run_dir: Path, config):
+    """On resume: the run's own configuration, with only the number of epochs (and the device) taken from
+    ``config``."""
+    from dcslam.depth.train import TrainConfig
+
+    try:
+        settings = json.loads((run_dir / "config.json").read_text())["settings"]
+    except (OSError, KeyError, json.JSONDecodeError) as exc:
+        raise DcslamError(f"{run_dir / 'config.json'}: cannot resume from it ({exc})") from None
+    known = {k: v for k, v in settings.items() if k in TrainConfig.__dataclass_fields__}
+    known["epochs"] = config.epochs
+    known["device"] = config.device
+    return TrainConfig(**known)
+
+
+def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = False, map_builder=None):
+    """Train one run (a :class:`dcslam.depth.train.TrainConfig`) into ``run_dir`` and return its
+    :class:`dcslam.depth.train.TrainResult`.
+
+    The folder gets ``config.json`` (the settings, resolved device and world size), ``curves.png`` (after every
+    epoch) and what :func:`dcslam.depth.train.train_loop` writes. An existing run fails without ``force`` (which
+    removes its files first); ``resume`` continues it from ``last.pt`` with its own settings (only the number of
+    epochs and the device are taken from ``config``).
+    """
+    import torch
+
+    from dcslam.depth.data import DriveFrames
+    from dcslam.depth.train import barrier, rank_and_world, resolve_device, seed_all, train_loop
+    from dcslam.report.plots import plot_training_curves
+
+    run_dir = Path(run_dir)
+    rank, world = rank_and_world()
+    if rank == 0:
+        _prepare_run_dir(run_dir, force, resume)
+    barrier()
+    if resume:
+        config = _saved_config(run_dir, config)
+    config.check()
+    device = resolve_device(config.device)
+    if world > 1 and device.type == "cuda":
+        device = torch.device("cuda", rank % torch.cuda.device_count())
+    seed_all(config.seed)
+
+    open_drives = []
+    try:
+        train_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop)
+                        for p in config.train_drives]
+        open_drives += train_frames
+        val_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop)
+                      for p in config.val_drives]
+        open_drives += val_frames
+        if rank == 0 and not resume:
+            settings = asdict(config)
+            settings["train_drives"] = [str(p) for p in config.train_drives]
+            settings["val_drives"] = [str(p) for p in config.val_drives]
+            settings["resolved_device"] = str(device)
+            settings["world_size"] = world
+            write_json_atomic(run_dir / "config.json", stage_config("train", settings))
+        return train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world,
+                          on_epoch=lambda: plot_training_curves(run_dir / "curves.png", run_dir / "metrics.jsonl"))
+    finally:
+        for frames in open_drives:
+            frames.close()
+
+
+def _drive_paths(ws: Workspace, names: list[str]) -> list[Path]:
+    from dcslam.workspace import require
+
+    return [require(ws.drives / f"{name}.h5", "dcslam prepare-kitti") for name in names]
+
+
+def read_result(run_dir: Path):
+    """A :class:`dcslam.depth.train.TrainResult` read back from a finished run's ``metrics.jsonl``."""
+    from dcslam.depth.train import TrainResult
+
+    metrics = run_dir / "metrics.jsonl"
+    if not metrics.exists():
+        raise DcslamError(f"{metrics} not found; the distributed run wrote no metrics")
+    rows = [json.loads(line) for line in metrics.read_text().splitlines() if line.strip()]
+    settings = json.loads((run_dir / "config.json").read_text()).get("settings", {})
+    key = selection_key(settings.get("loss"))
+    val = [r for r in rows if r["kind"] == "val"]
+    best = min(val, key=lambda r: r[key]) if val else None
+    return TrainResult(run_dir=run_dir, steps=sum(r["kind"] == "train" for r in rows),
+                       epochs=1 + max((r["epoch"] for r in rows), default=-1), best=best,
+                       last_val=val[-1] if val else None)
+
+
+def run(ws: Workspace, config: TrainStageConfig, *, force: bool = False):
+    """Train ``config``'s run into ``runs/<name>/``; returns a :class:`dcslam.depth.train.TrainResult` (on every
+    rank of a distributed run; only rank 0 writes files)."""
+    from dcslam.depth import distributed
+
+    run_dir = ws.runs / config.run_name
+    if config.nproc > 1 and not distributed.in_torchrun():
+        import tempfile
+
+        from dcslam.stages.config import to_toml
+
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "train.toml"
+            path.write_text(to_toml(config))
+            args = ["--workspace", str(ws.root), "--config", str(path)] + (["--force"] if force else [])
+            code = distributed.launch(config.nproc, "dcslam.stages.train", args)
+        if code != 0:
+            raise DcslamError(f"distributed training of {run_dir} failed (torchrun exit code {code})")
+        return read_result(run_dir)
+
+    from dcslam.depth.train import resolve_device
+    from dcslam.io.drive import read_splits
+
+    splits = read_splits(ws.splits)
+    train_config = config.train_config(_drive_paths(ws, splits["train"]), _drive_paths(ws, splits["val"]))
+    if distributed.in_torchrun():
+        distributed.init_from_env(resolve_device(config.device).type)
+    try:
+        return train(run_dir, train_config, force=force, resume=config.resume)
+    finally:
+        distributed.shutdown()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """One process of a distributed run (what torchrun starts): ``--workspace DIR --config FILE [--force]``."""
+    import argparse
+
+    from dcslam.stages.config import from_mapping, read_config_file
+
+    parser = argparse.ArgumentParser(prog="python -m dcslam.stages.train")
+    parser.add_argument("--workspace", required=True)
+    parser.add_argument("--config", required=True)
+    parser.add_argument("--force", action="store_true")
+    args = parser.parse_args(argv)
+    config = from_mapping(TrainStageConfig, read_config_file(args.config), args.config)
+    run(Workspace(Path(args.workspace)), config, force=args.force)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

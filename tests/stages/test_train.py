@@ -1,0 +1,37 @@
+"""The train stage: a run from a configuration, in process or through the distributed launcher."""
+import dataclasses
+import json
+
+from dcslam.stages.config import from_mapping, read_config_file
+from dcslam.stages.train import TrainStageConfig, run, run_name
+
+
+def test_default_run_names():
+    assert [run_name("mse", "dense", 1), run_name("mse", "sparse", 8), run_name("chamfer", "dense", 8)] == \
+        ["mse-dense", "mse-sparse", "chamfer-8"]
+    assert TrainStageConfig(name="mine").run_name == "mine"
+
+
+def test_train_writes_the_run_with_its_config(ws):
+    config = TrainStageConfig(max_frames=2, scale=0.5, device="cpu", batch_size=2)
+    result = run(ws, config)
+    assert result.run_dir == ws.runs / "mse-dense" and result.steps == 2 and result.best is not None
+    settings = json.loads((result.run_dir / "config.json").read_text())["settings"]
+    assert (settings["max_frames"], settings["scale"], settings["batch_size"]) == (2, 0.5, 2)
+
+
+def test_several_processes_go_through_the_launcher_with_the_same_config(ws, monkeypatch):
+    config = TrainStageConfig(max_frames=2, scale=0.5, device="cpu", batch_size=2, nproc=2, name="ddp")
+    launched = []
+
+    def fake_launch(nproc, module, args):  # stands in for torchrun: one process, same configuration file
+        file = args[args.index("--config") + 1]
+        launched.append((nproc, module, from_mapping(TrainStageConfig, read_config_file(file))))
+        run(ws, dataclasses.replace(launched[-1][2], nproc=1), force="--force" in args)
+        return 0
+
+    monkeypatch.setattr("dcslam.depth.distributed.launch", fake_launch)
+    result = run(ws, config)
+    assert launched == [(2, "dcslam.stages.train", config)]
+    assert result.run_dir == ws.runs / "ddp" and result.steps == 2 and result.epochs == 1
+    assert result.best["step"] == 2
