@@ -47,7 +47,7 @@ class SlamStageConfig(SlamSettings):
 
 @dataclass
 class SlamDriveResult:
-    """One drive: its summary (:meth:`dcslam.slam.run.DriveRun.summary`) and the files written."""
+    """One drive: its summary (:meth:`DriveRun.summary`) and the files written."""
 
     drive: str
     summary: dict

@@ -1,7 +1,7 @@
-"""The thesis's own figures (dcslam/eval/thesis_tables.json), as its readers see them."""
+"""The thesis's own figures (dcslam/report/thesis_tables.json), as its readers see them."""
 import math
 
-from dcslam.eval.tables import THESIS_FIGURES, thesis_figures
+from dcslam.report.tables import THESIS_FIGURES, thesis_figures
 
 
 def test_structure_every_row_has_every_unit():
