@@ -41,37 +41,14 @@ class Workspace:
             root = os.environ.get(ENV_VAR) or "workspace"
         return cls(Path(root))
 
-    @property
-    def kitti(self) -> Path:
-        return self.root / "kitti"
-
-    @property
-    def drives(self) -> Path:
-        return self.root / "drives"
-
-    @property
-    def splits(self) -> Path:
-        return self.drives / "splits.json"
-
-    @property
-    def runs(self) -> Path:
-        return self.root / "runs"
-
-    @property
-    def predictions(self) -> Path:
-        return self.root / "predictions"
-
-    @property
-    def filtered(self) -> Path:
-        return self.root / "filtered"
-
-    @property
-    def slam(self) -> Path:
-        return self.root / "slam"
-
-    @property
-    def results(self) -> Path:
-        return self.root / "results"
+    kitti = property(lambda self: self.root / "kitti", doc="KITTI-format raw + depth folders (real or generated).")
+    drives = property(lambda self: self.root / "drives", doc="Drive files and splits.json.")
+    splits = property(lambda self: self.drives / "splits.json", doc="The train / val / test drive lists.")
+    runs = property(lambda self: self.root / "runs", doc="One folder per training run.")
+    predictions = property(lambda self: self.root / "predictions", doc="Prediction layers, one folder per run.")
+    filtered = property(lambda self: self.root / "filtered", doc="Filtered layers, one folder per filter chain.")
+    slam = property(lambda self: self.root / "slam", doc="SLAM outputs, one folder per layer.")
+    results = property(lambda self: self.root / "results", doc="Scores, tables and plots.")
 
 
 def stage_config(stage: str, settings: dict) -> dict:

@@ -13,6 +13,7 @@ import numpy as np
 
 from dcslam.errors import DcslamError
 from dcslam.io.atomic import atomic_output
+from dcslam.io.text_rows import read_number_rows
 
 FORMAT = "12 numbers per line, the 3x4 matrix [R | t] row-major"
 #: Largest accepted ``max |RᵀR − I|`` and ``|det R − 1|``: the benchmark's files print 6 significant digits, which
@@ -59,26 +60,7 @@ def read_kitti_poses(path: Path | str) -> np.ndarray:
     numbers, non-finite values, or a rotation part that is not orthonormal with determinant 1 (within
     :data:`ROTATION_TOLERANCE`).
     """
-    path = Path(path)
-    if not path.is_file():
-        raise DcslamError(f"pose file {path} not found")
-    rows = []
-    for number, line in enumerate(path.read_text().splitlines(), 1):
-        fields = line.split()
-        if not fields:
-            continue
-        if len(fields) != 12:
-            raise DcslamError(f"{path}:{number}: {len(fields)} numbers, expected {FORMAT}")
-        try:
-            rows.append([float(f) for f in fields])
-        except ValueError:
-            raise DcslamError(f"{path}:{number}: not a number ({FORMAT})") from None
-    if not rows:
-        raise DcslamError(f"{path}: no poses ({FORMAT})")
-    data = np.array(rows)
-    if not np.all(np.isfinite(data)):
-        line = int(np.flatnonzero(~np.isfinite(data).all(axis=1))[0])
-        raise DcslamError(f"{path}: pose {line} has non-finite values (NaN or inf)")
+    data = read_number_rows(path, 12, FORMAT)
     T = np.tile(np.eye(4), (len(data), 1, 1))
     T[:, :3, :] = data.reshape(-1, 3, 4)
     _check_rotations(T, str(path))

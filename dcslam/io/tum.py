@@ -12,6 +12,7 @@ import numpy as np
 from dcslam.errors import DcslamError
 from dcslam.geometry.rotations import quaternion_to_rotation, rotation_to_quaternion
 from dcslam.io.atomic import atomic_output
+from dcslam.io.text_rows import read_number_rows
 
 FORMAT = "'timestamp tx ty tz qx qy qz qw' per line"
 
@@ -37,26 +38,7 @@ def write_tum(path: Path | str, timestamps: np.ndarray, T_world_cam: np.ndarray,
 def read_tum(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
     """Read a TUM file → (timestamps (N,), T_world_cam (N, 4, 4)). Fails on malformed lines, non-unit
     quaternions or timestamps that are not strictly increasing."""
-    path = Path(path)
-    if not path.exists():
-        raise DcslamError(f"trajectory file {path} not found")
-    rows = []
-    for number, line in enumerate(path.read_text().splitlines(), 1):
-        line = line.strip()
-        if not line or line.startswith("#"):
-            continue
-        fields = line.replace(",", " ").split()
-        if len(fields) != 8:
-            raise DcslamError(f"{path}:{number}: {len(fields)} fields, expected 8 ({FORMAT})")
-        try:
-            rows.append([float(f) for f in fields])
-        except ValueError:
-            raise DcslamError(f"{path}:{number}: not a number ({FORMAT})") from None
-    if not rows:
-        raise DcslamError(f"{path}: no poses ({FORMAT})")
-    data = np.array(rows)
-    if not np.all(np.isfinite(data)):
-        raise DcslamError(f"{path}: non-finite values")
+    data = read_number_rows(path, 8, FORMAT, what="trajectory file", comments=True, unit="fields")
     norms = np.linalg.norm(data[:, 4:], axis=1)
     if np.any(np.abs(norms - 1) > 1e-3):
         bad = int(np.argmax(np.abs(norms - 1)))
