@@ -15,13 +15,15 @@ from dcslam.geometry.se3 import se3_exp
 
 @dataclass
 class Linearization:
-    """Normal equations at a pose. Shape: H (6, 6) = J^T J, g (6,) = J^T r over inliers, cost () the problem's
-    objective there (comparable between poses); count the inliers."""
+    """Normal equations at a pose. Shape: H (6, 6) = J^T W J, g (6,) = J^T W r over inliers (W: robust weights,
+    1 without a kernel), cost () the problem's objective there; count the inliers, weight their summed weights
+    (None: all 1)."""
 
     H: torch.Tensor
     g: torch.Tensor
     cost: torch.Tensor
     count: int
+    weight: float | None = None
 
 
 @dataclass
@@ -130,6 +132,11 @@ class DifferentiableLM:
             accept = torch.sigmoid(self.sharpness * (rel + self.margin))
             T = _retract(T, accept * delta)
             lam = (lam * self.factor ** (1 - 2 * accept)).clamp(self.min_damping, self.max_damping)
-            if float((accept * delta).detach().abs().max()) < self.tolerance:
+            # Converged only when a kept step is tiny: a rejected step (accept ~ 0) is also tiny but must be
+            # retried with more damping (stopping there left every pose at its initial guess).
+            kept = float(accept.detach()) > 0.5
+            if kept and float((accept * delta).detach().abs().max()) < self.tolerance:
+                return SolveResult(T, k + 1, lin)
+            if not kept and float(lam.detach()) >= self.max_damping:
                 return SolveResult(T, k + 1, lin)
         return SolveResult(T, iterations, lin)
