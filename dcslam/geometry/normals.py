@@ -13,32 +13,31 @@ import torch
 from dcslam.errors import DcslamError
 
 
-def _shift(x: torch.Tensor, dy: int, dx: int) -> torch.Tensor:
-    """out[..., i, j] = x[..., i + dy, j + dx], zero outside the image."""
-    H, W = x.shape[-2:]
-    out = torch.zeros_like(x)
-    ys, yd = (slice(dy, H), slice(0, H - dy)) if dy >= 0 else (slice(0, H + dy), slice(-dy, H))
-    xs, xd = (slice(dx, W), slice(0, W - dx)) if dx >= 0 else (slice(0, W + dx), slice(-dx, W))
-    if H - abs(dy) > 0 and W - abs(dx) > 0:
-        out[..., yd, xd] = x[..., ys, xs]
-    return out
-
-
 def _nearest(vertex: torch.Tensor, valid: torch.Tensor, dy: int, dx: int, search: int,
              max_relative_gap: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """Nearest valid neighbour along (dy, dx) within ``search`` steps, and whether it lies on the same surface."""
+    """Nearest valid neighbour along the unit direction (dy, dx) within ``search`` steps, and whether it lies on the
+    same surface. One running minimum / maximum over the row or column, so the cost does not grow with ``search``
+    (LiDAR rows are a few pixels apart near the car and tens of pixels far away)."""
+    dim = 3 if dx else 2
+    forward = (dx or dy) > 0
+    n = valid.shape[dim]
+    shape = [1, 1, 1, 1]
+    shape[dim] = n
+    position = torch.arange(n, device=valid.device).view(shape)
+    if forward:        # nearest valid index > j: running minimum from the far end, shifted by one
+        idx = torch.where(valid, position, torch.full_like(position, n))
+        idx = torch.flip(torch.flip(idx, [dim]).cummin(dim).values, [dim])
+        idx = torch.cat([idx.narrow(dim, 1, n - 1), torch.full_like(idx.narrow(dim, 0, 1), n)], dim)
+    else:              # nearest valid index < j: running maximum from the near end, shifted by one
+        idx = torch.where(valid, position, torch.full_like(position, -1))
+        idx = idx.cummax(dim).values
+        idx = torch.cat([torch.full_like(idx.narrow(dim, 0, 1), -1), idx.narrow(dim, 0, n - 1)], dim)
+    steps = (idx - position).abs()
+    found = (idx >= 0) & (idx < n) & (steps <= search)
+    gather = idx.clamp(0, n - 1)
+    neighbour = torch.gather(vertex, dim, gather.expand(-1, 3, -1, -1))
     z = vertex[:, 2:3]
-    found = torch.zeros_like(valid)
-    neighbour = torch.zeros_like(vertex)
-    steps = torch.zeros_like(z)
-    for k in range(1, search + 1):
-        cand_valid = _shift(valid, k * dy, k * dx) & ~found
-        if not bool(cand_valid.any()):
-            continue
-        neighbour = torch.where(cand_valid, _shift(vertex, k * dy, k * dx), neighbour)
-        steps = torch.where(cand_valid, torch.full_like(steps, k), steps)
-        found = found | cand_valid
-    same_surface = found & ((neighbour[:, 2:3] - z).abs() <= max_relative_gap * steps * z)
+    same_surface = found & ((neighbour[:, 2:3] - z).abs() <= max_relative_gap * steps.to(z.dtype) * z)
     return neighbour, same_surface
 
 

@@ -13,6 +13,7 @@ ODOMETRIES = ("gt", "icp", "gradicp")
 MAPPERS = ("pointfusion", "icpslam")
 SOLVERS = ("gn", "lm")
 ASSOCIATIONS = ("projective", "nn")
+KERNELS = ("none", "gm")
 
 
 @dataclass(frozen=True)
@@ -32,12 +33,20 @@ class SlamSettings:
     max_normal_angle: float = field(default=30.0, metadata={"help": "ICP normal-angle gate, degrees.", "min": 0.0})
     iterations: int = field(default=20, metadata={"help": "ICP iterations per gate stage.", "min": 1})
     voxel_size: float = field(default=0.05, metadata={"help": "Map voxel size, metres.", "min": 0.0})
+    kernel: str = field(default="none", metadata={
+        "help": "ICP robust kernel: none (hard gates only) or gm (Geman-McClure, scale gate/9 as KISS-ICP).",
+        "choices": KERNELS})
+    adaptive_threshold: bool = field(default=False, metadata={
+        "help": "KISS-ICP's adaptive gate (3 sigma of past prediction errors) instead of --max-distance."})
+    normal_search: int = field(default=0, metadata={
+        "help": "Pixels searched along rows and columns for normal neighbours; 0 = from the depth's density.",
+        "min": 0})
 
     def __post_init__(self) -> None:
         from dcslam.errors import DcslamError
 
         for name, choices in (("odometry", ODOMETRIES), ("mapper", MAPPERS), ("solver", SOLVERS),
-                              ("association", ASSOCIATIONS)):
+                              ("association", ASSOCIATIONS), ("kernel", KERNELS)):
             if getattr(self, name) not in choices:
                 raise DcslamError(f"unknown {name} {getattr(self, name)!r} (choose from {', '.join(choices)})")
         for name in ("max_distance", "max_normal_angle", "voxel_size"):
@@ -45,6 +54,8 @@ class SlamSettings:
                 raise DcslamError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.iterations < 1:
             raise DcslamError(f"iterations must be >= 1, got {self.iterations}")
+        if self.normal_search < 0:
+            raise DcslamError(f"normal_search must be >= 0, got {self.normal_search}")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -53,10 +64,12 @@ class SlamSettings:
 def build_slam(settings: SlamSettings = SlamSettings()):
     """The one place where setting names become SLAM objects -> :class:`~dcslam.slam.pipeline.SLAM`."""
     from dcslam.slam.association import NearestNeighbourAssociation, ProjectiveAssociation
+    from dcslam.slam.frame import FrameSettings
     from dcslam.slam.fusion import PointFusion
     from dcslam.slam.icpslam import ICPSLAM
     from dcslam.slam.odometry import GroundTruthOdometry, ICPOdometry
     from dcslam.slam.pipeline import SLAM
+    from dcslam.slam.robust import AdaptiveThreshold, GemanMcClure
     from dcslam.slam.solvers import DifferentiableLM, GaussNewton, LevenbergMarquardt
 
     s = settings
@@ -67,6 +80,8 @@ def build_slam(settings: SlamSettings = SlamSettings()):
         solver = DifferentiableLM() if s.odometry == "gradicp" else {"gn": GaussNewton,
                                                                       "lm": LevenbergMarquardt}[s.solver]()
         odo = ICPOdometry(solver=solver, association=assoc, max_distance=s.max_distance,
-                          max_normal_angle_deg=s.max_normal_angle, iterations=s.iterations)
+                          max_normal_angle_deg=s.max_normal_angle, iterations=s.iterations,
+                          kernel=GemanMcClure() if s.kernel == "gm" else None,
+                          adaptive=AdaptiveThreshold() if s.adaptive_threshold else None)
     mapper = PointFusion(voxel_size=s.voxel_size) if s.mapper == "pointfusion" else ICPSLAM(voxel_size=s.voxel_size)
-    return SLAM(odo, mapper)
+    return SLAM(odo, mapper, FrameSettings(normal_search=s.normal_search))

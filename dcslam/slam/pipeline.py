@@ -2,6 +2,7 @@
 with given poses)."""
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -11,6 +12,7 @@ from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_depth
 from dcslam.slam.fusion import PointFusion
 from dcslam.slam.frame import FrameSettings, prepare_frame
+from dcslam.slam.health import HealthRules, assess, summarise
 from dcslam.slam.odometry import GroundTruthOdometry, OdometryResult
 from dcslam.slam.pointmap import PointMap
 
@@ -42,7 +44,12 @@ def build_map(depth: torch.Tensor, K: torch.Tensor, T_world_cam: torch.Tensor, r
 
 @dataclass
 class StepReport:
-    """What one SLAM step did. Shape: T_world_cam (4, 4)."""
+    """What one SLAM step did and how far to trust it (:mod:`dcslam.slam.health`). Shape: T_world_cam (4, 4).
+
+    verdict: accepted, degraded or rejected; health: the reasons. sources: valid points of the frame; inliers: of
+    them, paired within the gates; conditioning: see ``ICPOdometry._conditioning``; gap_m / gap_deg: distance of
+    the estimate from the constant-velocity prediction.
+    """
 
     index: int
     T_world_cam: torch.Tensor
@@ -53,6 +60,12 @@ class StepReport:
     rmse: float
     points: int
     seconds: float
+    verdict: str = "accepted"
+    health: tuple[str, ...] = ()
+    sources: int = 0
+    conditioning: float = math.nan
+    gap_m: float = 0.0
+    gap_deg: float = 0.0
 
 
 class SLAM:
@@ -69,13 +82,15 @@ class SLAM:
     """
 
     def __init__(self, odometry, mapper, frame_settings: FrameSettings = FrameSettings(),
-                 T_world_cam0: torch.Tensor | None = None):
+                 T_world_cam0: torch.Tensor | None = None, health: HealthRules = HealthRules()):
         self.odometry, self.mapper, self.frame_settings = odometry, mapper, frame_settings
-        self.T_world_cam0 = T_world_cam0
+        self.T_world_cam0, self.health = T_world_cam0, health
         self.reset()
 
     def reset(self) -> None:
         self.mapper.reset()
+        if hasattr(self.odometry, "reset"):
+            self.odometry.reset()
         self.poses: list[torch.Tensor] = []
         self.reports: list[StepReport] = []
 
@@ -86,6 +101,10 @@ class SLAM:
     @property
     def rejected(self) -> list[dict]:
         return [{"frame": r.index, "reason": r.reason} for r in self.reports if not r.accepted]
+
+    def health_summary(self) -> dict:
+        """Verdict counts and the suspect flag of the run so far (:func:`dcslam.slam.health.summarise`)."""
+        return summarise(self.reports, self.health)
 
     def trajectory(self) -> torch.Tensor:
         """Estimated poses so far. Shape: (N, 4, 4)."""
@@ -115,11 +134,19 @@ class SLAM:
         else:
             H, W = frame.shape
             model = self.mapper.model(T_init, frame.K, H, W)
-            result = self.odometry.estimate(frame, model, T_init, T_gt)
+            if isinstance(self.odometry, GroundTruthOdometry):
+                result = self.odometry.estimate(frame, model, T_init, T_gt)
+            else:
+                result = self.odometry.estimate(frame, model, T_init, T_gt, T_last=self.poses[-1].detach())
         self.mapper.integrate(frame, result.T_world_cam)
         self.poses.append(result.T_world_cam)
+        gap_m, gap_deg = _distance(T_init, result.T_world_cam)
+        verdict, why = ("accepted", []) if index == 0 or isinstance(self.odometry, GroundTruthOdometry) else assess(
+            result.accepted, result.reason, result.inliers, result.sources, result.conditioning, gap_m, gap_deg,
+            has_velocity=index >= 2, rules=self.health)
         report = StepReport(index, result.T_world_cam, result.accepted, result.reason, result.iterations,
-                            result.inliers, result.rmse, len(self.mapper.map), time.perf_counter() - start)
+                            result.inliers, result.rmse, len(self.mapper.map), time.perf_counter() - start,
+                            verdict, tuple(why), result.sources, result.conditioning, gap_m, gap_deg)
         self.reports.append(report)
         return report
 
@@ -131,3 +158,10 @@ class SLAM:
         for i in range(N):
             self.step(depth[i:i + 1], K, None if rgb is None else rgb[i:i + 1], None if T_gt is None else T_gt[i])
         return self.trajectory()
+
+
+def _distance(T_a: torch.Tensor, T_b: torch.Tensor) -> tuple[float, float]:
+    """Translation (m) and rotation (deg) of T_a^-1 T_b. Shape: (4, 4), (4, 4)."""
+    X = torch.linalg.solve(T_a.detach().double(), T_b.detach().double())
+    angle = math.acos(max(-1.0, min(1.0, (float(torch.trace(X[:3, :3])) - 1) / 2)))
+    return float(X[:3, 3].norm()), math.degrees(angle)

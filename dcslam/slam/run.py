@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from dcslam.errors import DcslamError
+from dcslam.slam.health import summarise
 from dcslam.slam.pipeline import SLAM, StepReport
 from dcslam.slam.pointmap import PointMap
 
@@ -41,6 +42,7 @@ class DriveRun:
             "seconds": round(self.seconds, 3), "seconds_per_frame": round(self.seconds / max(n, 1), 4),
             "map_megabytes": round(self.map.nbytes() / 2 ** 20, 2),
             "rejected_steps": [{"frame": r.index, "reason": r.reason} for r in self.reports if not r.accepted],
+            "health": summarise(self.reports),
             "translation_error_m": {"final": float(dt[-1]), "max": float(dt.max()), "mean": float(dt.mean())},
             "rotation_error_deg": {"final": float(dr[-1]) * 180 / np.pi, "max": float(dr.max()) * 180 / np.pi},
             "settings": self.settings,
