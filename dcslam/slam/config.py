@@ -38,6 +38,8 @@ class SlamSettings:
         "choices": KERNELS})
     adaptive_threshold: bool = field(default=False, metadata={
         "help": "KISS-ICP's adaptive gate (3 sigma of past prediction errors) instead of --max-distance."})
+    source_voxel: float = field(default=0.0, metadata={
+        "help": "Odometry aligns one frame point per voxel of this size, metres (0 = every point).", "min": 0.0})
     normal_search: int = field(default=0, metadata={
         "help": "Pixels searched along rows and columns for normal neighbours; 0 = from the depth's density.",
         "min": 0})
@@ -49,7 +51,7 @@ class SlamSettings:
                               ("association", ASSOCIATIONS), ("kernel", KERNELS)):
             if getattr(self, name) not in choices:
                 raise DcslamError(f"unknown {name} {getattr(self, name)!r} (choose from {', '.join(choices)})")
-        for name in ("max_distance", "max_normal_angle", "voxel_size"):
+        for name in ("max_distance", "max_normal_angle", "voxel_size", "source_voxel"):
             if not getattr(self, name) >= 0:
                 raise DcslamError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.iterations < 1:
@@ -82,6 +84,7 @@ def build_slam(settings: SlamSettings = SlamSettings()):
         odo = ICPOdometry(solver=solver, association=assoc, max_distance=s.max_distance,
                           max_normal_angle_deg=s.max_normal_angle, iterations=s.iterations,
                           kernel=GemanMcClure() if s.kernel == "gm" else None,
-                          adaptive=AdaptiveThreshold() if s.adaptive_threshold else None)
+                          adaptive=AdaptiveThreshold() if s.adaptive_threshold else None,
+                          source_voxel=s.source_voxel)
     mapper = PointFusion(voxel_size=s.voxel_size) if s.mapper == "pointfusion" else ICPSLAM(voxel_size=s.voxel_size)
     return SLAM(odo, mapper, FrameSettings(normal_search=s.normal_search))

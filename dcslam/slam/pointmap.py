@@ -77,6 +77,15 @@ def voxel_keys(points: torch.Tensor, voxel_size: float) -> torch.Tensor:
     return (ijk[:, 0] << (2 * _KEY_BITS)) | (ijk[:, 1] << _KEY_BITS) | ijk[:, 2]
 
 
+def voxel_representatives(points: torch.Tensor, voxel_size: float) -> torch.Tensor:
+    """Indices of one point per occupied voxel (the first in input order), sorted. Shape: (P, 3) -> (Q,) int64."""
+    keys = voxel_keys(points, voxel_size)
+    unique, inverse = torch.unique(keys, return_inverse=True)
+    first = torch.full((unique.shape[0],), points.shape[0], dtype=torch.int64, device=points.device)
+    first.scatter_reduce_(0, inverse, torch.arange(points.shape[0], device=points.device), reduce="amin")
+    return torch.sort(first).values
+
+
 @dataclass
 class ModelView:
     """A point map rendered into a camera: per pixel the map point nearest to the camera.
