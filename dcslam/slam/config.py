@@ -40,6 +40,9 @@ class SlamSettings:
         "help": "KISS-ICP's adaptive gate (3 sigma of past prediction errors) instead of --max-distance."})
     source_voxel: float = field(default=0.0, metadata={
         "help": "Odometry aligns one frame point per voxel of this size, metres (0 = every point).", "min": 0.0})
+    local_map_frames: int = field(default=0, metadata={
+        "help": "Odometry and fusion use the points seen in the last N frames (0 = the whole map); older points "
+                "are archived for the map file, so time and memory per frame stay flat.", "min": 0})
     normal_search: int = field(default=0, metadata={
         "help": "Pixels searched along rows and columns for normal neighbours; 0 = from the depth's density.",
         "min": 0})
@@ -56,6 +59,8 @@ class SlamSettings:
                 raise DcslamError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.iterations < 1:
             raise DcslamError(f"iterations must be >= 1, got {self.iterations}")
+        if self.local_map_frames < 0:
+            raise DcslamError(f"local_map_frames must be >= 0, got {self.local_map_frames}")
         if self.normal_search < 0:
             raise DcslamError(f"normal_search must be >= 0, got {self.normal_search}")
 
@@ -86,5 +91,6 @@ def build_slam(settings: SlamSettings = SlamSettings()):
                           kernel=GemanMcClure() if s.kernel == "gm" else None,
                           adaptive=AdaptiveThreshold() if s.adaptive_threshold else None,
                           source_voxel=s.source_voxel)
-    mapper = PointFusion(voxel_size=s.voxel_size) if s.mapper == "pointfusion" else ICPSLAM(voxel_size=s.voxel_size)
+    mapper = (PointFusion if s.mapper == "pointfusion" else ICPSLAM)(voxel_size=s.voxel_size,
+                                                                      window=s.local_map_frames)
     return SLAM(odo, mapper, FrameSettings(normal_search=s.normal_search))

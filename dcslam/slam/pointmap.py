@@ -216,13 +216,42 @@ def merge(pm: PointMap, target: torch.Tensor, new_keys: torch.Tensor, points: to
 class Mapper:
     """What PointFusion and ICP-SLAM share: the current :attr:`map` (None until the first frame), the frame count,
     and the map rendered into a camera for frame-to-model odometry. Subclasses set ``splat`` and implement
-    ``integrate(frame, T_world_cam) -> PointMap``."""
+    ``integrate(frame, T_world_cam) -> PointMap``, ending with ``self.map = self._slide(pm)``.
+
+    A local map (``window`` > 0 frames) keeps only points updated in the last ``window`` frames for odometry and
+    fusion, so that memory and time per frame stay flat however far the car drives; older points move, detached,
+    to an archive on the CPU (``archive=True``, so :meth:`global_map` can still be written at the end) or are
+    dropped (``archive=False``: memory bounded by the window alone).
+    """
 
     splat: int = 1
+    window: int = 0
+    archive: bool = True
 
     def reset(self) -> None:
         self.map: PointMap | None = None
         self.frames = 0
+        self.archived: list[PointMap] = []
+
+    def _slide(self, pm: PointMap) -> PointMap:
+        if self.window <= 0:
+            return pm
+        old = pm.last_seen < self.frames - self.window
+        if not bool(old.any()):
+            return pm
+        if self.archive:
+            self.archived.append(pm.select(old).detach().to("cpu"))
+        return pm.select(~old)
+
+    def global_map(self) -> PointMap | None:
+        """The local map and everything archived from it (detached, on the CPU); the map itself without a
+        window."""
+        if self.map is None or not self.archived:
+            return self.map
+        pm = self.map.detach().to("cpu")
+        for part in self.archived:
+            pm = part.cat(pm)
+        return pm
 
     def model(self, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> ModelView | None:
         """The map rendered into a camera (what frame-to-model odometry aligns to); None while the map is empty."""

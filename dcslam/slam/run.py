@@ -74,7 +74,8 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam: SLAM, frames: in
                 bar.advance(status=f"{report.points} points" + ("" if report.accepted else " (step rejected)"))
         seconds = time.perf_counter() - start
         poses = slam.trajectory().detach().cpu().double().numpy()
-        return DriveRun(drive.name, poses, drive.timestamps[:n].copy(), T_gt.copy(), slam.map.detach().to("cpu"),
+        global_map = slam.mapper.global_map().detach().to("cpu")
+        return DriveRun(drive.name, poses, drive.timestamps[:n].copy(), T_gt.copy(), global_map,
                         list(slam.reports), seconds, dict(settings or {}))
 
 
