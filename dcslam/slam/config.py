@@ -40,6 +40,10 @@ class SlamSettings:
         "help": "KISS-ICP's adaptive gate (3 sigma of past prediction errors) instead of --max-distance."})
     source_voxel: float = field(default=0.0, metadata={
         "help": "Odometry aligns one frame point per voxel of this size, metres (0 = every point).", "min": 0.0})
+    gate_schedule: str = field(default="4,2,1", metadata={
+        "help": "Gate multipliers, one solver run each, wide to narrow (e.g. 4,2,1; 1 = a single gate)."})
+    tolerance: float = field(default=1e-5, metadata={
+        "help": "Solver stops when a step moves less than this (metres / radians).", "min": 0.0})
     local_map_frames: int = field(default=0, metadata={
         "help": "Odometry and fusion use the points seen in the last N frames (0 = the whole map); older points "
                 "are archived for the map file, so time and memory per frame stay flat.", "min": 0})
@@ -59,6 +63,12 @@ class SlamSettings:
                 raise DcslamError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.iterations < 1:
             raise DcslamError(f"iterations must be >= 1, got {self.iterations}")
+        try:
+            stages = tuple(float(x) for x in self.gate_schedule.split(","))
+        except ValueError:
+            stages = ()
+        if not stages or any(not m > 0 for m in stages):
+            raise DcslamError(f"gate_schedule must be positive numbers separated by commas, got {self.gate_schedule!r}")
         if self.local_map_frames < 0:
             raise DcslamError(f"local_map_frames must be >= 0, got {self.local_map_frames}")
         if self.normal_search < 0:
@@ -84,13 +94,14 @@ def build_slam(settings: SlamSettings = SlamSettings()):
     if s.odometry == "gt":
         odo = GroundTruthOdometry()
     else:
-        solver = DifferentiableLM() if s.odometry == "gradicp" else {"gn": GaussNewton,
-                                                                      "lm": LevenbergMarquardt}[s.solver]()
+        solver = DifferentiableLM(tolerance=s.tolerance) if s.odometry == "gradicp" else {
+            "gn": GaussNewton, "lm": LevenbergMarquardt}[s.solver](tolerance=s.tolerance)
         odo = ICPOdometry(solver=solver, association=assoc, max_distance=s.max_distance,
                           max_normal_angle_deg=s.max_normal_angle, iterations=s.iterations,
                           kernel=GemanMcClure() if s.kernel == "gm" else None,
                           adaptive=AdaptiveThreshold() if s.adaptive_threshold else None,
-                          source_voxel=s.source_voxel)
+                          source_voxel=s.source_voxel,
+                          coarse_to_fine=tuple(float(x) for x in s.gate_schedule.split(",")))
     mapper = (PointFusion if s.mapper == "pointfusion" else ICPSLAM)(voxel_size=s.voxel_size,
                                                                       window=s.local_map_frames)
     return SLAM(odo, mapper, FrameSettings(normal_search=s.normal_search))
