@@ -115,9 +115,11 @@ def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int
     index = torch.full((height * width,), -1, dtype=torch.int64, device=device)
     if len(pm):
         p_cam = transform_points(inverse(T_world_cam.to(dtype)), pm.points.detach())
-        uv, z = project(p_cam, K.to(dtype))
-        ids = torch.arange(len(pm), device=device)
+        ids = torch.nonzero(p_cam[:, 2] > 0).squeeze(1)        # only points in front of the camera ...
+        uv, z = project(p_cam[ids], K.to(dtype))
         px = torch.round(uv).to(torch.int64)
+        seen = (px[:, 0] >= -splat) & (px[:, 0] < width + splat) & (px[:, 1] >= -splat) & (px[:, 1] < height + splat)
+        ids, px, z = ids[seen], px[seen], z[seen]                # ... and within reach of the image
         zbuf = torch.full((height * width,), float("inf"), dtype=dtype, device=device)
         cand_pix, cand_z, cand_id = [], [], []
         for dy in range(-splat, splat + 1):
@@ -133,12 +135,14 @@ def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int
         index.scatter_(0, pix[win], idc[win])
     index = index.view(height, width)
     valid = index >= 0
-    if len(pm):
-        safe = index.clamp_min(0)
-        vertex = torch.where(valid[..., None], pm.points[safe], torch.zeros((), dtype=dtype, device=device))
-        normal = torch.where(valid[..., None], pm.normals[safe], torch.zeros((), dtype=dtype, device=device))
-    else:
-        vertex = normal = torch.zeros(height, width, 3, dtype=dtype, device=device)
+    vertex = torch.zeros(height * width, 3, dtype=dtype, device=device)
+    normal = torch.zeros(height * width, 3, dtype=dtype, device=device)
+    if len(pm):                                   # gather at the covered pixels only (few for a sparse map)
+        pix = torch.nonzero(valid.reshape(-1)).squeeze(1)
+        hit = index.reshape(-1)[pix]
+        vertex = vertex.index_put((pix,), pm.points[hit])
+        normal = normal.index_put((pix,), pm.normals[hit])
+    vertex, normal = vertex.view(height, width, 3), normal.view(height, width, 3)
     return ModelView(index, vertex, normal, valid, T_world_cam.to(dtype), K.to(dtype))
 
 
