@@ -10,7 +10,8 @@ Each odometry step gets one verdict:
 - ``accepted``: none of that.
 
 :func:`summarise` turns a run's reports into counts and a ``suspect`` flag with its reasons: a run is suspect when
-any step was rejected or when more than a small fraction of its steps were degraded. The defaults of
+any step was rejected, when more than a small fraction of its steps were degraded, or when several consecutive
+steps were. The defaults of
 :class:`HealthRules` come from runs on generated drives (see ``benchmarks/bench_slam_sweep.py``).
 """
 from __future__ import annotations
@@ -31,6 +32,8 @@ class HealthRules:
     max_prediction_gap_m, max_prediction_gap_deg: distance of the estimate from the constant-velocity prediction
         above which a step is degraded (only once a velocity is known, from the third frame on).
     max_degraded_fraction: a run with more degraded steps than this fraction is suspect.
+    max_degraded_run: a run with more consecutive degraded steps than this is suspect (isolated weak steps happen;
+        a streak means the tracker has lost the scene).
     max_rejected: a run with more rejected steps than this is suspect.
     """
 
@@ -39,6 +42,7 @@ class HealthRules:
     max_prediction_gap_m: float = 0.5
     max_prediction_gap_deg: float = 3.0
     max_degraded_fraction: float = 0.1
+    max_degraded_run: int = 2
     max_rejected: int = 0
 
 
@@ -72,6 +76,12 @@ def summarise(reports, rules: HealthRules = HealthRules()) -> dict:
     if steps and counts["degraded"] > rules.max_degraded_fraction * len(steps):
         reasons.append(f"{counts['degraded']} of {len(steps)} steps degraded "
                        f"(more than {rules.max_degraded_fraction:.0%})")
+    run = longest = 0
+    for r in steps:
+        run = run + 1 if r.verdict == "degraded" else 0
+        longest = max(longest, run)
+    if longest > rules.max_degraded_run:
+        reasons.append(f"{longest} consecutive steps degraded")
     flagged = [{"frame": r.index, "verdict": r.verdict, "why": list(r.health)} for r in steps
                if r.verdict != "accepted"]
     return {**counts, "suspect": bool(reasons), "reasons": reasons, "flagged_steps": flagged}

@@ -103,5 +103,11 @@ class TestSummarise:
         assert not summarise(reports)["suspect"]
         assert summarise(reports, HealthRules(max_degraded_fraction=0.05))["suspect"]
 
+    def test_a_streak_of_degraded_steps(self):
+        streak = [_report(i, "degraded" if i in (20, 21, 22) else "accepted") for i in range(41)]
+        apart = [_report(i, "degraded" if i in (5, 20, 35) else "accepted") for i in range(41)]
+        assert summarise(streak)["suspect"] and "consecutive" in summarise(streak)["reasons"][0]
+        assert not summarise(apart)["suspect"]
+
     def test_empty(self):
         assert summarise([])["suspect"] is False
