@@ -55,8 +55,9 @@ def thin_beams(depth: np.ndarray, keep_every: int) -> np.ndarray:
 
 
 def run_dcslam(drive_path: Path, depth: str, settings, frames: int | None = None, beams_keep: int = 1,
-               device: str = "cpu") -> DriveScore:
-    """dcslam's SLAM (settings: a SlamSettings) over one drive file -> its scores."""
+               device: str = "cpu", steps: list | None = None) -> DriveScore:
+    """dcslam's SLAM (settings: a SlamSettings) over one drive file -> its scores; per-step evidence is appended to
+    ``steps`` when given."""
     import torch
 
     from dcslam.io.drive import DriveFile, load_depth
@@ -81,17 +82,25 @@ def run_dcslam(drive_path: Path, depth: str, settings, frames: int | None = None
         seconds = time.perf_counter() - start
         health = slam.health_summary()
         T_est = slam.trajectory().detach().cpu().double().numpy()
+        if steps is not None:                   # per-step evidence and the error each step added
+            for r in slam.reports[1:]:
+                X_gt = np.linalg.solve(T_gt[r.index - 1], T_gt[r.index])
+                X_est = np.linalg.solve(T_est[r.index - 1], T_est[r.index])
+                steps.append({"drive": drive_path.stem, "depth": depth, "frame": r.index, "verdict": r.verdict,
+                              "sources": r.sources, "inliers": r.inliers, "conditioning": r.conditioning,
+                              "gap_m": r.gap_m, "gap_deg": r.gap_deg, "rmse": r.rmse,
+                              "step_error_m": float(np.linalg.norm(X_est[:3, 3] - X_gt[:3, 3]))})
     label = depth if beams_keep <= 1 else f"{depth}/{64 // beams_keep} beams"
     return score(drive_path.stem, label, T_gt, T_est, seconds, health["degraded"], health["rejected"],
                  health["suspect"])
 
 
 def parse_settings(text: str):
-    """``key=value,key=value`` -> SlamSettings (types from the dataclass fields)."""
+    """``key=value;key=value`` -> SlamSettings (types from the dataclass fields)."""
     from dcslam.slam.config import SlamSettings
 
     kwargs = {}
-    for item in filter(None, text.split(",")):
+    for item in filter(None, text.split(";")):
         key, value = item.split("=")
         kind = SlamSettings.__dataclass_fields__[key].type
         kwargs[key] = {"int": int, "float": float, "str": str, "bool": lambda v: v in ("1", "true", "True")}[kind](

@@ -7,14 +7,15 @@ Generate drives of a seed no test uses, then sweep::
     python -m dcslam synth --drives 8 --frames 110 --seed 2026 -w /tmp/slamsweep
     python -m dcslam prepare-kitti -w /tmp/slamsweep --all-drives
     python benchmarks/slam_sweep.py /tmp/slamsweep/drives --depth sparse --frames 60 \\
-        --variant "" --variant "association=nn" --variant "voxel_size=0.2"
+        --variant "" --variant "association=nn" --variant "voxel_size=0.2;gate_schedule=2,1"
 
-A variant is ``key=value,...`` over :class:`dcslam.slam.config.SlamSettings` fields ("" = the defaults).
+A variant is ``key=value;...`` over :class:`dcslam.slam.config.SlamSettings` fields ("" = the defaults).
 Not run by ``make bench`` (minutes per variant); ``bench_slam.py`` runs the references on the chosen defaults.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -32,7 +33,8 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=0, help="frames per drive (0 = all)")
     parser.add_argument("--max-drives", type=int, default=0)
     parser.add_argument("--beams-keep", type=int, default=1, help="keep every k-th LiDAR line (sparse only)")
-    parser.add_argument("--variant", action="append", default=None, help="key=value,... (repeatable)")
+    parser.add_argument("--variant", action="append", default=None, help="key=value;... (repeatable)")
+    parser.add_argument("--steps", type=Path, help="write every step's evidence (JSON lines) to this file")
     parser.add_argument("--markdown", type=Path, help="append per-drive tables to this file")
     args = parser.parse_args()
     import torch
@@ -45,7 +47,12 @@ def main() -> None:
           + (f", every {args.beams_keep}th LiDAR line" if args.beams_keep > 1 else ""), flush=True)
     for variant in args.variant or [""]:
         settings = parse_settings(variant)
-        rows = [run_dcslam(p, args.depth, settings, args.frames, args.beams_keep) for p in paths]
+        steps = [] if args.steps else None
+        rows = [run_dcslam(p, args.depth, settings, args.frames, args.beams_keep, steps=steps) for p in paths]
+        if args.steps:
+            with open(args.steps, "a") as f:
+                for step in steps:
+                    f.write(json.dumps({"variant": variant, **step}) + "\n")
         ate = np.array([r.ate_m for r in rows])
         bad = [r for r in rows if r.final_m > 0.5]
         print(f"{variant or 'defaults':55s} ATE mean {ate.mean():6.3f} max {ate.max():6.3f}  "
