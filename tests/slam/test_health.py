@@ -60,9 +60,10 @@ def test_good_drive_is_not_flagged(street_drive):
 def street_drive():
     from dcslam.slam.scene import StreetScene, street_trajectory
 
-    scene, K = StreetScene(0), kitti_K(H, W)
-    T = street_trajectory(6, step=1.0)
-    depth = torch.stack([scene.render(T[i], K, H, W) for i in range(6)]).float()[:, None]
+    h, w = 188, 621          # half KITTI size: at 64 x 208 the street's conditioning is ~3x lower than at full size
+    scene, K = StreetScene(0), kitti_K(h, w)
+    T = street_trajectory(5, step=1.0)
+    depth = torch.stack([scene.render(T[i], K, h, w) for i in range(5)]).float()[:, None]
     return depth, K, T
 
 
@@ -73,7 +74,7 @@ class TestAssess:
     def test_accepted(self):
         assert assess(True, "", 900, 1000, 0.1, 0.05, 0.2, True) == ("accepted", [])
 
-    @pytest.mark.parametrize("args,word", [((100, 1000, 0.1, 0.0, 0.0, True), "paired"),
+    @pytest.mark.parametrize("args,word", [((50, 1000, 0.1, 0.0, 0.0, True), "paired"),
                                            ((900, 1000, 1e-4, 0.0, 0.0, True), "conditioning"),
                                            ((900, 1000, 0.1, 0.9, 0.0, True), "prediction"),
                                            ((900, 1000, 0.1, 0.0, 5.0, True), "prediction")])
