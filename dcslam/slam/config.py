@@ -32,21 +32,28 @@ class SlamSettings:
     max_distance: float = field(default=0.5, metadata={"help": "ICP outlier gate, metres.", "min": 0.0})
     max_normal_angle: float = field(default=30.0, metadata={"help": "ICP normal-angle gate, degrees.", "min": 0.0})
     iterations: int = field(default=20, metadata={"help": "ICP iterations per gate stage.", "min": 1})
-    voxel_size: float = field(default=0.05, metadata={"help": "Map voxel size, metres.", "min": 0.0})
+    voxel_size: float = field(default=0.2, metadata={
+        "help": "Map voxel size, metres (for a street; see reference_depth).", "min": 0.0})
     kernel: str = field(default="none", metadata={
         "help": "ICP robust kernel: none (hard gates only) or gm (Geman-McClure, scale gate/9 as KISS-ICP).",
         "choices": KERNELS})
     adaptive_threshold: bool = field(default=False, metadata={
         "help": "KISS-ICP's adaptive gate (3 sigma of past prediction errors) instead of --max-distance."})
-    source_voxel: float = field(default=0.0, metadata={
+    source_voxel: float = field(default=0.2, metadata={
         "help": "Odometry aligns one frame point per voxel of this size, metres (0 = every point).", "min": 0.0})
     gate_schedule: str = field(default="4,2,1", metadata={
         "help": "Gate multipliers, one solver run each, wide to narrow (e.g. 4,2,1; 1 = a single gate)."})
-    tolerance: float = field(default=1e-5, metadata={
+    tolerance: float = field(default=1e-4, metadata={
         "help": "Solver stops when a step moves less than this (metres / radians).", "min": 0.0})
-    local_map_frames: int = field(default=0, metadata={
+    reference_depth: float = field(default=12.0, metadata={
+        "help": "Voxel sizes and the ICP gate are for scenes of this median depth, metres (streets); a sequence "
+                "whose first frame is nearer (a room) scales them down in proportion (0 = never).", "min": 0.0})
+    local_map_frames: int = field(default=50, metadata={
         "help": "Odometry and fusion use the points seen in the last N frames (0 = the whole map); older points "
                 "are archived for the map file, so time and memory per frame stay flat.", "min": 0})
+    keep_global_map: bool = field(default=True, metadata={
+        "help": "Keep the points that leave the local map (on the CPU) so the whole map can be written; off: memory "
+                "stays flat however long the drive."})
     normal_search: int = field(default=0, metadata={
         "help": "Pixels searched along rows and columns for normal neighbours; 0 = from the depth's density.",
         "min": 0})
@@ -58,7 +65,7 @@ class SlamSettings:
                               ("association", ASSOCIATIONS), ("kernel", KERNELS)):
             if getattr(self, name) not in choices:
                 raise DcslamError(f"unknown {name} {getattr(self, name)!r} (choose from {', '.join(choices)})")
-        for name in ("max_distance", "max_normal_angle", "voxel_size", "source_voxel"):
+        for name in ("max_distance", "max_normal_angle", "voxel_size", "source_voxel", "reference_depth"):
             if not getattr(self, name) >= 0:
                 raise DcslamError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.iterations < 1:
@@ -103,5 +110,6 @@ def build_slam(settings: SlamSettings = SlamSettings()):
                           source_voxel=s.source_voxel,
                           coarse_to_fine=tuple(float(x) for x in s.gate_schedule.split(",")))
     mapper = (PointFusion if s.mapper == "pointfusion" else ICPSLAM)(voxel_size=s.voxel_size,
-                                                                      window=s.local_map_frames)
-    return SLAM(odo, mapper, FrameSettings(normal_search=s.normal_search))
+                                                                      window=s.local_map_frames,
+                                                                      archive=s.keep_global_map)
+    return SLAM(odo, mapper, FrameSettings(normal_search=s.normal_search), reference_depth_m=s.reference_depth)

@@ -81,13 +81,29 @@ class SLAM:
     :attr:`rejected`. With ``keep_graph`` (set on the mapper) poses and map stay connected to the inputs.
     """
 
+    #: metric settings scaled by :attr:`reference_depth_m` (object, attribute)
+    _METRIC = (("mapper", "voxel_size"), ("odometry", "source_voxel"), ("odometry", "max_distance"))
+
     def __init__(self, odometry, mapper, frame_settings: FrameSettings = FrameSettings(),
-                 T_world_cam0: torch.Tensor | None = None, health: HealthRules = HealthRules()):
+                 T_world_cam0: torch.Tensor | None = None, health: HealthRules = HealthRules(),
+                 reference_depth_m: float = 0.0):
         self.odometry, self.mapper, self.frame_settings = odometry, mapper, frame_settings
         self.T_world_cam0, self.health = T_world_cam0, health
+        self.reference_depth_m = reference_depth_m
+        self._metric = {(o, a): getattr(getattr(self, o), a) for o, a in self._METRIC
+                        if hasattr(getattr(self, o), a)}
+        self.scale = 1.0
         self.reset()
 
+    def _set_scale(self, scale: float) -> None:
+        """Voxel sizes and the ICP gate are for scenes of median depth ``reference_depth_m`` (a street); a smaller
+        scene (a room) scales them down in proportion, so one set of defaults serves both."""
+        self.scale = scale
+        for (o, a), value in self._metric.items():
+            setattr(getattr(self, o), a, value * scale)
+
     def reset(self) -> None:
+        self._set_scale(1.0)
         self.mapper.reset()
         if hasattr(self.odometry, "reset"):
             self.odometry.reset()
@@ -127,6 +143,9 @@ class SLAM:
         frame = prepare_frame(depth, K, rgb, self.frame_settings)
         T_init = self._prediction(frame.vertex.dtype, frame.vertex.device)
         index = len(self.poses)
+        if index == 0 and self.reference_depth_m > 0 and bool(frame.valid.any()):
+            median = float(frame.vertex[..., 2][frame.valid].median())
+            self._set_scale(min(1.0, median / self.reference_depth_m))
         if index == 0:
             T = T_gt.to(T_init.dtype) if (T_gt is not None and isinstance(self.odometry, GroundTruthOdometry)) \
                 else T_init
