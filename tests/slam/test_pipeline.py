@@ -26,3 +26,19 @@ def test_gradicp_follows_a_moving_car_on_sparse_depth():
     travelled = float(poses[-1, :3, 3].norm())
     assert travelled > 0.8 * float(T[-1, :3, 3].norm())
     assert float(dt.max()) < 0.25
+
+
+def test_metric_settings_follow_the_scene_depth():
+    """Voxel sizes and the gate are for streets (median depth ~12 m); a room scales them down, a street not."""
+    K = kitti_K(H, W)
+    slam = build_slam(SlamSettings(voxel_size=0.2, source_voxel=0.2, max_distance=0.5, reference_depth=12.0))
+    slam.step(torch.full((1, 1, H, W), 2.4), K)
+    assert abs(slam.scale - 0.2) < 1e-6
+    assert abs(slam.mapper.voxel_size - 0.04) < 1e-6 and abs(slam.odometry.max_distance - 0.1) < 1e-6
+    slam.reset()
+    assert slam.mapper.voxel_size == 0.2 and slam.odometry.source_voxel == 0.2
+    slam.step(torch.full((1, 1, H, W), 30.0), K)
+    assert slam.scale == 1.0 and slam.mapper.voxel_size == 0.2
+    fixed = build_slam(SlamSettings(reference_depth=0))
+    fixed.step(torch.full((1, 1, H, W), 2.4), K)
+    assert fixed.scale == 1.0
