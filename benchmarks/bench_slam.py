@@ -93,8 +93,6 @@ def _rss_mb() -> float:
 
 
 def memory(args) -> None:
-    import torch
-
     from dcslam.slam.config import SlamSettings, build_slam
     from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
 

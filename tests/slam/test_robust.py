@@ -1,15 +1,18 @@
+import importlib.util
 import math
+from pathlib import Path
 
 import pytest
 import torch
 
 from dcslam.errors import DcslamError
 from dcslam.geometry.se3 import se3_exp
-from dcslam.slam.association import view_from_frame
-from dcslam.slam.frame import prepare_frame
-from dcslam.slam.odometry import ICPOdometry
 from dcslam.slam.robust import AdaptiveThreshold, GemanMcClure, Quadratic
-from dcslam.slam.solvers import DifferentiableLM
+
+
+_spec = importlib.util.spec_from_file_location("slam_fixtures", Path(__file__).with_name("slam_fixtures.py"))
+slam_fixtures = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(slam_fixtures)
 
 
 class TestGemanMcClure:
@@ -42,22 +45,7 @@ class TestGemanMcClure:
 
 def test_pose_gradcheck_through_the_robust_kernel():
     """ICP with the Geman-McClure kernel and the differentiable LM: the pose is a differentiable function of depth."""
-    h, w = 10, 14
-    K = torch.tensor([[12.0, 0, 6.5], [0, 12.0, 4.5], [0, 0, 1]], dtype=torch.float64)
-    v, u = torch.meshgrid(torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64), indexing="ij")
-    rays = torch.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], torch.ones_like(u)], -1)
-    normals = torch.tensor([[0.6, 0.1, -1.0], [-0.7, 0.2, -1.0], [0.1, -0.8, -1.0]], dtype=torch.float64)
-    depth0 = (3.0 / (rays @ (-normals).T)).min(-1).values[None, None]
-    target = view_from_frame(prepare_frame(depth0, K), torch.eye(4, dtype=torch.float64))
-    odometry = ICPOdometry(solver=DifferentiableLM(), iterations=3, min_inliers=10, min_conditioning=0,
-                           coarse_to_fine=(1.0,), kernel=GemanMcClure(scale=0.5), max_distance=0.3)
-    T_init = se3_exp(torch.tensor([0.01, -0.02, 0.01, 0.005, 0.0, -0.004], dtype=torch.float64))
-
-    def pose(depth):
-        return odometry.estimate(prepare_frame(depth, K), target, T_init).T_world_cam
-
-    depth = (depth0 * (1 + 0.001 * torch.sin(u + v))).requires_grad_()
-    assert torch.autograd.gradcheck(pose, (depth,), eps=1e-7, atol=1e-5)
+    slam_fixtures.pose_gradcheck(kernel=GemanMcClure(scale=0.5), max_distance=0.3)
 
 
 class TestAdaptiveThreshold:
