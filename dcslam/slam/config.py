@@ -45,6 +45,9 @@ class SlamSettings:
         "help": "Gate multipliers, one solver run each, wide to narrow (e.g. 4,2,1; 1 = a single gate)."})
     tolerance: float = field(default=1e-4, metadata={
         "help": "Solver stops when a step moves less than this (metres / radians).", "min": 0.0})
+    hold_below: float = field(default=2.5e-3, metadata={
+        "help": "Keep the constant-velocity prediction along directions the scene does not constrain (normalised "
+                "eigenvalue below this; 0 = never).", "min": 0.0})
     reference_depth: float = field(default=12.0, metadata={
         "help": "Voxel sizes and the ICP gate are for scenes of this median depth, metres (streets); a sequence "
                 "whose first frame is nearer (a room) scales them down in proportion (0 = never).", "min": 0.0})
@@ -65,7 +68,8 @@ class SlamSettings:
                               ("association", ASSOCIATIONS), ("kernel", KERNELS)):
             if getattr(self, name) not in choices:
                 raise DcslamError(f"unknown {name} {getattr(self, name)!r} (choose from {', '.join(choices)})")
-        for name in ("max_distance", "max_normal_angle", "voxel_size", "source_voxel", "reference_depth"):
+        for name in ("max_distance", "max_normal_angle", "voxel_size", "source_voxel", "reference_depth",
+                     "hold_below"):
             if not getattr(self, name) >= 0:
                 raise DcslamError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.iterations < 1:
@@ -107,7 +111,7 @@ def build_slam(settings: SlamSettings = SlamSettings()):
                           max_normal_angle_deg=s.max_normal_angle, iterations=s.iterations,
                           kernel=GemanMcClure() if s.kernel == "gm" else None,
                           adaptive=AdaptiveThreshold() if s.adaptive_threshold else None,
-                          source_voxel=s.source_voxel,
+                          source_voxel=s.source_voxel, hold_below=s.hold_below,
                           coarse_to_fine=tuple(float(x) for x in s.gate_schedule.split(",")))
     mapper = (PointFusion if s.mapper == "pointfusion" else ICPSLAM)(voxel_size=s.voxel_size,
                                                                       window=s.local_map_frames,

@@ -63,10 +63,12 @@ class PointToPlane:
     """
 
     def __init__(self, source: torch.Tensor, source_normals: torch.Tensor, associate, max_distance: float,
-                 cos_max_angle: float, kernel=None):
+                 cos_max_angle: float, kernel=None, hold_below: float = 0.0):
         self.source, self.source_normals = source, source_normals
         self.associate, self.max_distance, self.cos_max_angle = associate, max_distance, cos_max_angle
         self.kernel = kernel if kernel is not None else Quadratic()
+        self.hold_below = hold_below
+        self.scale = float(source.detach().norm(dim=1).mean()) if source.shape[0] else 1.0
         self.pairs = None
 
     def residuals(self, T: torch.Tensor):
@@ -99,8 +101,26 @@ class PointToPlane:
         J = torch.cat([m, torch.cross(self.source[src], m, dim=1)], 1).double()
         rd = r.double()
         w = self.kernel.weight(rd, self.max_distance)
-        return Linearization(J.T @ (w[:, None] * J), J.T @ (w * rd), self._mean_rho(rd), r.numel(),
-                             float(w.detach().sum()))
+        lin = Linearization(J.T @ (w[:, None] * J), J.T @ (w * rd), self._mean_rho(rd), r.numel(),
+                            float(w.detach().sum()))
+        if self.hold_below > 0 and r.numel() >= 6:
+            lin.H_step = self._hold(lin)
+        return lin
+
+    def _hold(self, lin: Linearization) -> torch.Tensor:
+        """H plus a stiff prior along the directions the pairs do not constrain (normalised eigenvalue below
+        ``hold_below``, as :meth:`ICPOdometry._conditioning` measures it), so the step leaves the pose at its
+        prediction there instead of sliding along a tunnel or an open road (Zhang et al., ICRA 2016: solution
+        remapping)."""
+        D = torch.tensor([1, 1, 1, self.scale, self.scale, self.scale], dtype=torch.float64, device=lin.H.device)
+        Hn = lin.H.detach() / (D[:, None] * D[None, :]) / max(lin.weight or lin.count, 1e-12)
+        values, vectors = torch.linalg.eigh(Hn)
+        weak = values < self.hold_below
+        if not bool(weak.any()):
+            return lin.H
+        V = vectors[:, weak] * D[:, None]                # back to the unnormalised coordinates
+        stiffness = 1e3 * float(torch.diagonal(lin.H.detach()).sum())
+        return lin.H + stiffness * (V @ V.T)
 
 
 class ICPOdometry:
@@ -125,6 +145,9 @@ class ICPOdometry:
         source_voxel: keep one source point per voxel of this size (metres) for the alignment, as KISS-ICP does
             (0: every valid pixel). Near points no longer outweigh far ones and dense frames align several times
             faster; the pose stays a differentiable function of the kept pixels' depths.
+        hold_below: directions of motion whose normalised eigenvalue (see :meth:`_conditioning`) is below this are
+            held at the prediction (0: never); a step with such a direction is still reported, and the health check
+            calls it degraded.
         kernel: robust kernel (:class:`~dcslam.slam.robust.GemanMcClure`) or None for plain least squares.
         adaptive: an :class:`~dcslam.slam.robust.AdaptiveThreshold` giving the gate from past prediction errors
             (KISS-ICP), or None for the fixed ``max_distance``. It is updated by :meth:`estimate` after each
@@ -135,7 +158,7 @@ class ICPOdometry:
                  iterations: int = 20, min_inliers: int = 100, min_conditioning: float = 1e-5,
                  max_step_m: float = 5.0, max_step_deg: float = 30.0,
                  coarse_to_fine: tuple[float, ...] = (4.0, 2.0, 1.0), kernel=None, adaptive=None,
-                 source_voxel: float = 0.0):
+                 source_voxel: float = 0.0, hold_below: float = 0.0):
         if not coarse_to_fine or any(m <= 0 for m in coarse_to_fine):
             raise DcslamError(f"coarse_to_fine must be positive gate multipliers, got {coarse_to_fine}")
         self.coarse_to_fine = tuple(coarse_to_fine)
@@ -146,6 +169,7 @@ class ICPOdometry:
         self.min_inliers, self.min_conditioning = min_inliers, min_conditioning
         self.max_step_m, self.max_step_rad = max_step_m, math.radians(max_step_deg)
         self.kernel, self.adaptive, self.source_voxel = kernel, adaptive, source_voxel
+        self.hold_below = hold_below
 
     def reset(self) -> None:
         """Forget what past steps taught (the adaptive threshold); call at the start of a sequence."""
@@ -171,7 +195,8 @@ class ICPOdometry:
         gate = self.adaptive.gate() if self.adaptive is not None else self.max_distance
         T, iterations = T_init, 0
         for multiplier in self.coarse_to_fine:
-            problem = PointToPlane(source, normals, associate, gate * multiplier, self.cos_max_angle, self.kernel)
+            problem = PointToPlane(source, normals, associate, gate * multiplier, self.cos_max_angle, self.kernel,
+                                   self.hold_below)
             result = self.solver.solve(problem, T, self.iterations)
             T, iterations = result.T, iterations + result.iterations
         lin = problem.linearize(T.detach())

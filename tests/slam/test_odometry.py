@@ -94,3 +94,16 @@ _spec.loader.exec_module(slam_fixtures)
 def test_differentiable_lm_pose_gradcheck():
     """The pose estimated by ICP with the differentiable LM is a differentiable function of the source depth."""
     slam_fixtures.pose_gradcheck()
+
+
+def test_unconstrained_directions_are_held_at_the_prediction():
+    """A plane facing the camera fixes depth and two tilts; sliding along it is unobservable. With ``hold_below``
+    the step corrects what the plane constrains and leaves the slide where the prediction put it."""
+    K = kitti_K(H, W)
+    plane = prepare_frame(torch.full((1, 1, H, W), 6.0), K)
+    target = view_from_frame(plane, torch.eye(4))
+    start = se3_exp(torch.tensor([0.3, -0.2, 0.15, 0.0, 0.0, 0.0]))
+    held = ICPOdometry(min_conditioning=-math.inf, hold_below=1e-2, coarse_to_fine=(1.0,)).estimate(plane, target, start)
+    T = held.T_world_cam
+    assert abs(float(T[2, 3])) < 1e-3                                     # depth corrected
+    assert torch.allclose(T[:2, 3], start[:2, 3], atol=1e-3)              # slide kept at the prediction
