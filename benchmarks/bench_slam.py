@@ -103,7 +103,7 @@ def memory(args) -> None:
     mask = lidar_mask(H, W, row_step=4, col_step=4)
     settings = SlamSettings(keep_global_map=args.keep_global_map)
     slam = build_slam(settings)
-    marks = sorted({min(200, n), n})
+    marks = sorted({min(200, n), n} | set(range(200, n, 200)))
     print(f"memory: analytic street drive, {n} frames of 1 m, {W} x {H} sparse depth, dcslam defaults with "
           f"keep_global_map={settings.keep_global_map} (local map {settings.local_map_frames} frames)", flush=True)
     print("  frame   local map points   map MB   archived points   RSS MB   peak MB   s/frame (last 50)  "
