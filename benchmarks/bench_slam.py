@@ -1,117 +1,145 @@
-"""SLAM speed, side by side (``make bench``):
+"""SLAM accuracy and speed beside the references, and memory on a long drive (``make bench``).
 
-1. Point-to-plane ICP at full KITTI size (1242 x 375, dense depth), ours (projective association, Gauss-Newton)
-   against Open3D's legacy ``registration_icp`` (KD-tree association) on the same frame pair, the same normals,
-   the same gate and the same iteration count; prints both times, the ratio and how far the two poses are apart.
-2. PointFusion with ICP odometry at full KITTI size: seconds per frame with LiDAR-like sparse and with dense depth,
-   and the map size and process memory along a longer drive (they must level off, not grow without bound).
+1. On the same generated drives (prepared drive files; ``--drives``, default ``$DCSLAM_WORKSPACE/drives``, else two
+   short drives generated into a temporary folder): dcslam with its default settings on sparse and on dense depth
+   at full KITTI size, Open3D's point-to-plane ICP on the same depth, and KISS-ICP on the 360 degree Velodyne scans
+   (skipped, with a line saying so, when ``kiss-icp`` is not installed: ``pip install -e .[bench]``). For each:
+   ATE, RPE, final drift %, frames/s, and dcslam's flagged steps.
+2. Peak memory (process RSS) and local-map size at frames 200 and 1,000 of a long analytic street drive
+   (``dcslam.slam.scene``) with LiDAR-like sparse depth: with the local map and without the archive for the map file
+   (``--keep-global-map`` keeps it) they must be flat within 10 %.
 
-Frames come from the analytic street scene (``dcslam.slam.scene``), so no dataset is needed. Figures depend on the
-machine and on its load: read them next to the machine line that ``benchmarks/run_all.py`` prints.
-On a shared machine run with ``OMP_NUM_THREADS=1`` (applies to torch and Open3D alike): with two threads on busy
-cores torch's small-tensor kernels thrash and every figure becomes several times slower.
-Usage: ``python benchmarks/bench_slam.py [--device cuda] [--frames 10] [--memory-frames 100]``.
+Figures depend on the machine and its load: read them next to the machine line that ``benchmarks/run_all.py``
+prints. Run with ``OMP_NUM_THREADS=1`` on a shared machine (the script sets torch to one thread unless
+``--threads`` says otherwise). Usage: ``python benchmarks/bench_slam.py [--drives DIR] [--frames 60]
+[--long-frames 1000] [--device cuda]``.
 """
 from __future__ import annotations
 
 import argparse
+import os
 import resource
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
-import torch
 
-from dcslam.geometry.se3 import pose_error
-from dcslam.slam.association import view_from_frame
-from dcslam.slam.frame import prepare_frame
-from dcslam.slam.fusion import PointFusion
-from dcslam.slam.odometry import ICPOdometry
-from dcslam.slam.pipeline import SLAM
-from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
-from dcslam.slam.solvers import GaussNewton
+sys.path.insert(0, str(Path(__file__).parent))
 
-H, W = 375, 1242
+from slam_drives import DriveScore, run_dcslam  # noqa: E402
+from slam_references import kiss_icp_available, run_kiss_icp, run_open3d  # noqa: E402
 
 
-def _sync(device: str) -> None:
-    if device.startswith("cuda"):
-        torch.cuda.synchronize()
+def _drives(args) -> tuple[list[Path], Path]:
+    """Drive files and the KITTI root they came from (generated when none are given or found)."""
+    folder = args.drives
+    if folder is None:
+        workspace = Path(os.environ.get("DCSLAM_WORKSPACE", "workspace"))
+        if (workspace / "drives").is_dir() and list((workspace / "drives").glob("*.h5")):
+            folder = workspace / "drives"
+    if folder is None:
+        tmp = Path(tempfile.mkdtemp(prefix="dcslam-bench-"))
+        print(f"no drives given: generating 2 drives x {args.frames + 10} frames (seed 2027) in {tmp}", flush=True)
+        env = dict(os.environ, DCSLAM_PROGRESS="0")
+        for cmd in (["synth", "--drives", "2", "--frames", str(args.frames + 10), "--seed", "2027"],
+                    ["prepare-kitti", "--all-drives"]):
+            subprocess.run([sys.executable, "-m", "dcslam", *cmd, "-w", str(tmp)], check=True, env=env,
+                           stdout=subprocess.DEVNULL)
+        folder = tmp / "drives"
+    paths = sorted(folder.glob("*.h5"))[:args.max_drives or None]
+    return paths, folder.parent / "kitti"
 
 
-def bench_icp(scene: StreetScene, K: torch.Tensor, device: str, iterations: int) -> None:
-    import open3d as o3d
-
-    T = street_trajectory(2, step=0.3)
-    frames = [prepare_frame(scene.render(T[i], K, H, W).float().to(device), K.to(device)) for i in range(2)]
-    target = view_from_frame(frames[0], T[0].float().to(device))
-    odometry = ICPOdometry(solver=GaussNewton(tolerance=0.0), iterations=iterations, coarse_to_fine=(1.0,),
-                           max_normal_angle_deg=180)
-    odometry.estimate(frames[1], target, T[0].float().to(device))           # warm-up
-    _sync(device)
-    start = time.perf_counter()
-    ours = odometry.estimate(frames[1], target, T[0].float().to(device))
-    _sync(device)
-    t_ours = time.perf_counter() - start
-
-    src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(frames[1].vertex[frames[1].valid].double().cpu().numpy()))
-    tgt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target.vertex[target.valid].double().cpu().numpy()))
-    tgt.normals = o3d.utility.Vector3dVector(target.normal[target.valid].double().cpu().numpy())
-    reg = o3d.pipelines.registration
-    start = time.perf_counter()
-    result = reg.registration_icp(src, tgt, 0.5, T[0].numpy(), reg.TransformationEstimationPointToPlane(),
-                                  reg.ICPConvergenceCriteria(0.0, 0.0, iterations))
-    t_o3d = time.perf_counter() - start
-    dt, dr = pose_error(ours.T_world_cam.double().cpu(), torch.from_numpy(np.array(result.transformation)))
-    et, er = pose_error(ours.T_world_cam.double().cpu(), T[1])
-    print(f"ICP point-to-plane, {W} x {H} dense ({len(src.points)} source points), {iterations} iterations, "
-          f"device {device}")
-    print(f"  ours (projective, Gauss-Newton): {t_ours:7.3f} s   error vs truth {float(et) * 100:.2f} cm")
-    print(f"  Open3D registration_icp        : {t_o3d:7.3f} s")
-    print(f"  ratio Open3D / ours            : {t_o3d / t_ours:7.1f} x   (poses differ by {float(dt) * 100:.2f} cm, "
-          f"{np.degrees(float(dr)):.3f} deg)")
+def _line(label: str, rows: list[DriveScore], flags: bool = True) -> str:
+    ate = np.array([r.ate_m for r in rows])
+    text = (f"  {label:<28} ATE {ate.mean():6.3f} m (max {ate.max():6.3f})  RPE {np.mean([r.rpe_m for r in rows]):.3f}"
+            f" m  drift {np.mean([r.drift_pct for r in rows]):6.2f} %  {np.median([r.fps for r in rows]):6.2f} "
+            f"frames/s")
+    if flags:
+        text += (f"  flagged steps {sum(r.degraded + r.rejected for r in rows)}, suspect drives "
+                 f"{sum(r.suspect for r in rows)}/{len(rows)}")
+    return text
 
 
-def bench_fusion(scene: StreetScene, K: torch.Tensor, device: str, frames: int, memory_frames: int) -> None:
+def side_by_side(args) -> None:
+    from dcslam.slam.config import SlamSettings
+
+    paths, kitti_root = _drives(args)
+    print(f"accuracy and speed: {len(paths)} drives x {args.frames} frames, full size, dcslam defaults "
+          f"{SlamSettings().to_dict()}", flush=True)
+    for depth in ("sparse", "dense"):
+        print(_line(f"dcslam {depth}", [run_dcslam(p, depth, SlamSettings(), args.frames, device=args.device)
+                                        for p in paths]), flush=True)
+        print(_line(f"Open3D point-to-plane {depth}", [run_open3d(p, depth, args.frames) for p in paths],
+                    flags=False), flush=True)
+    if not kiss_icp_available():
+        print("  KISS-ICP: skipped (not installed; pip install kiss-icp, or the dcslam[bench] extra)")
+    elif not (kitti_root / "raw").is_dir():
+        print(f"  KISS-ICP: skipped ({kitti_root / 'raw'} holds no Velodyne scans)")
+    else:
+        print(_line("KISS-ICP velodyne 360", [run_kiss_icp(kitti_root, p, args.frames) for p in paths],
+                    flags=False), flush=True)
+
+
+def _rss_mb() -> float:
+    """Resident memory now (Linux /proc; the peak also counts the analytic renderer's temporary buffers)."""
+    try:
+        return int(open("/proc/self/statm").read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
+    except OSError:
+        return float("nan")
+
+
+def memory(args) -> None:
+    from dcslam.slam.config import SlamSettings, build_slam
+    from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
+
+    H, W = 375, 1242
+    n = args.long_frames
+    scene, K = StreetScene(0, length=n + 60.0), kitti_K(H, W)
+    T = street_trajectory(n, step=1.0)
     mask = lidar_mask(H, W, row_step=4, col_step=4)
-    for kind in ("sparse", "dense"):
-        n = memory_frames if kind == "sparse" else frames
-        T = street_trajectory(n, step=1.0)
-        slam = SLAM(ICPOdometry(), PointFusion())
-        times, samples = [], []
-        for i in range(n):
-            depth = scene.render(T[i], K, H, W).float()
-            if kind == "sparse":
-                depth = depth * mask
-            depth = depth.to(device)[None, None]
-            _sync(device)
-            start = time.perf_counter()
-            slam.step(depth, K.to(device))
-            _sync(device)
-            times.append(time.perf_counter() - start)
-            if (i + 1) % max(1, n // 5) == 0 or i == n - 1:
-                rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-                samples.append((i + 1, len(slam.map), slam.map.nbytes() / 2 ** 20, rss))
-        dt, _ = pose_error(slam.trajectory().double().cpu(), T)
-        valid = float((depth > 0).float().mean()) * 100
-        print(f"PointFusion + ICP odometry, {W} x {H} {kind} depth ({valid:.1f} % pixels), {n} frames, {device}: "
-              f"{np.mean(times[1:]):.3f} s per frame (median {np.median(times[1:]):.3f}), "
-              f"final drift {float(dt[-1]):.3f} m over {n - 1} m, rejected {len(slam.rejected)}")
-        print("  frame   map points   map MB   peak RSS MB")
-        for frame, points, mb, rss in samples:
-            print(f"  {frame:5d}   {points:10d}   {mb:6.1f}   {rss:11.0f}")
+    settings = SlamSettings(keep_global_map=args.keep_global_map)
+    slam = build_slam(settings)
+    marks = sorted({min(200, n), n} | set(range(200, n, 200)))
+    print(f"memory: analytic street drive, {n} frames of 1 m, {W} x {H} sparse depth, dcslam defaults with "
+          f"keep_global_map={settings.keep_global_map} (local map {settings.local_map_frames} frames)", flush=True)
+    print("  frame   local map points   map MB   archived points   RSS MB   peak MB   s/frame (last 50)  "
+          "(peak includes the scene renderer's full-image buffers)", flush=True)
+    times = []
+    for i in range(n):
+        depth = (scene.render(T[i], K, H, W).float() * mask).to(args.device)[None, None]
+        start = time.perf_counter()
+        slam.step(depth, K.to(args.device))
+        times.append(time.perf_counter() - start)
+        if i + 1 in marks:
+            archived = sum(len(p) for p in slam.mapper.archived)
+            peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+            print(f"  {i + 1:5d}   {len(slam.map):16d}   {slam.map.nbytes() / 2 ** 20:8.1f}   {archived:15d}   "
+                  f"{_rss_mb():6.0f}   {peak:7.0f}   {np.mean(times[-50:]):.3f}", flush=True)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
-    parser.add_argument("--frames", type=int, default=10, help="frames timed with dense depth")
-    parser.add_argument("--memory-frames", type=int, default=100, help="frames of the sparse drive (memory curve)")
-    parser.add_argument("--iterations", type=int, default=20, help="ICP iterations for both ICPs")
-    args = parser.parse_args()
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {args.device}")
-    scene, K = StreetScene(0, length=max(args.memory_frames, args.frames) + 40.0), kitti_K(H, W)
-    bench_icp(scene, K, args.device, args.iterations)
-    bench_fusion(scene, K, args.device, args.frames, args.memory_frames)
+    parser.add_argument("--drives", type=Path, help="folder of prepared drive files")
+    parser.add_argument("--frames", type=int, default=60, help="frames per drive")
+    parser.add_argument("--max-drives", type=int, default=4)
+    parser.add_argument("--long-frames", type=int, default=1000, help="frames of the memory drive")
+    parser.add_argument("--keep-global-map", action="store_true",
+                        help="memory run keeps the archive for the map file (grows with the street seen)")
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--skip", choices=("accuracy", "memory"), action="append", default=[])
+    args, _ = parser.parse_known_args()
+    import torch
+
+    torch.set_num_threads(args.threads)
+    if "accuracy" not in args.skip:
+        side_by_side(args)
+    if "memory" not in args.skip:
+        memory(args)
 
 
 if __name__ == "__main__":

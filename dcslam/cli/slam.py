@@ -12,10 +12,11 @@ HELP = ("Dense SLAM over drive files (all test drives by default): writes per dr
 
 def report(results: list[slam.SlamDriveResult]) -> None:
     for r in results:
-        s = r.summary
+        s, h = r.summary, r.summary["health"]
+        verdict = f"SUSPECT ({'; '.join(h['reasons'])})" if h["suspect"] else "ok"
         summary(f"{r.drive}: {s['frames']} frames, {s['points']} points, {s['seconds_per_frame']:.2f} s/frame, "
-                f"final drift {s['translation_error_m']['final']:.3f} m, {len(s['rejected_steps'])} rejected "
-                f"-> {r.written['trajectory'].parent}")
+                f"final drift {s['translation_error_m']['final']:.3f} m, steps {h['accepted']} accepted / "
+                f"{h['degraded']} degraded / {h['rejected']} rejected, {verdict} -> {r.written['trajectory'].parent}")
 
 
 slam_command = stage_command(app, "slam", slam.SlamStageConfig, slam.run, report, help=HELP)

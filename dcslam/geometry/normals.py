@@ -13,44 +13,56 @@ import torch
 from dcslam.errors import DcslamError
 
 
-def _shift(x: torch.Tensor, dy: int, dx: int) -> torch.Tensor:
-    """out[..., i, j] = x[..., i + dy, j + dx], zero outside the image."""
-    H, W = x.shape[-2:]
-    out = torch.zeros_like(x)
-    ys, yd = (slice(dy, H), slice(0, H - dy)) if dy >= 0 else (slice(0, H + dy), slice(-dy, H))
-    xs, xd = (slice(dx, W), slice(0, W - dx)) if dx >= 0 else (slice(0, W + dx), slice(-dx, W))
-    if H - abs(dy) > 0 and W - abs(dx) > 0:
-        out[..., yd, xd] = x[..., ys, xs]
-    return out
+def _neighbours(key: torch.Tensor, line: torch.Tensor, step: torch.Tensor, search: int):
+    """For points sorted by ``key`` (their position along scan lines), the previous and next point on the same line
+    within ``search`` pixels. Shape: key, line, step (N,) -> (order (N,), prev (N,), next (N,), prev_steps (N,),
+    next_steps (N,)) where prev / next index into the sorted order, -1 = none."""
+    order = torch.argsort(key)
+    line_s, step_s = line[order], step[order]
+    n = key.shape[0]
+    same = (line_s[1:] == line_s[:-1]) & (step_s[1:] - step_s[:-1] <= search)
+    ar = torch.arange(n, device=key.device)
+    none = torch.full((1,), -1, dtype=torch.int64, device=key.device)
+    nxt = torch.cat([torch.where(same, ar[1:], -1), none])
+    prv = torch.cat([none, torch.where(same, ar[:-1], -1)])
+    gap = torch.cat([step_s[1:] - step_s[:-1], torch.zeros(1, dtype=step.dtype, device=step.device)])
+    return order, prv, nxt, torch.cat([gap[-1:] * 0, gap[:-1]]), gap
 
 
-def _nearest(vertex: torch.Tensor, valid: torch.Tensor, dy: int, dx: int, search: int,
+def _tangent(points: torch.Tensor, key: torch.Tensor, line: torch.Tensor, step: torch.Tensor, search: int,
              max_relative_gap: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """Nearest valid neighbour along (dy, dx) within ``search`` steps, and whether it lies on the same surface."""
-    z = vertex[:, 2:3]
-    found = torch.zeros_like(valid)
-    neighbour = torch.zeros_like(vertex)
-    steps = torch.zeros_like(z)
-    for k in range(1, search + 1):
-        cand_valid = _shift(valid, k * dy, k * dx) & ~found
-        if not bool(cand_valid.any()):
-            continue
-        neighbour = torch.where(cand_valid, _shift(vertex, k * dy, k * dx), neighbour)
-        steps = torch.where(cand_valid, torch.full_like(steps, k), steps)
-        found = found | cand_valid
-    same_surface = found & ((neighbour[:, 2:3] - z).abs() <= max_relative_gap * steps * z)
-    return neighbour, same_surface
+    """Central (or one-sided) difference along scan lines of valid points, skipping neighbours across a depth edge.
+    Shape: points (N, 3) -> (tangents (N, 3) in the input order, ok (N,) bool)."""
+    order, prv, nxt, prv_steps, nxt_steps = _neighbours(key, line, step, search)
+    p = points[order]
+    z = p[:, 2].detach()
+
+    def side(index, steps):
+        q = p[index.clamp_min(0)]
+        ok = (index >= 0) & ((q[:, 2].detach() - z).abs() <= max_relative_gap * steps.to(z.dtype) * z)
+        return q, ok
+
+    fwd, ok_f = side(nxt, nxt_steps)
+    bwd, ok_b = side(prv, prv_steps)
+    t = torch.where((ok_f & ok_b)[:, None], fwd - bwd,
+                    torch.where(ok_f[:, None], fwd - p, torch.where(ok_b[:, None], p - bwd, torch.zeros_like(p))))
+    out = torch.empty_like(t).index_copy(0, order, t)
+    ok = torch.empty_like(ok_f).index_copy(0, order, ok_f | ok_b)
+    return out, ok
 
 
 def vertex_normals(vertex: torch.Tensor, valid: torch.Tensor | None = None, search: int = 1,
                    max_relative_gap: float = 0.1) -> tuple[torch.Tensor, torch.Tensor]:
     """Unit normals of a vertex map (camera frame), facing the camera.
 
+    Neighbours are the nearest valid pixels along the row and along the column (scan lines), found by sorting the
+    valid pixels only: the cost follows the number of measurements, not the image size or ``search``.
+
     Args:
         vertex: camera-frame points per pixel (see :func:`dcslam.geometry.camera.backproject`).
         valid: pixels with a point; default ``vertex z > 0``.
         search: how far (pixels) to look for the nearest valid neighbour in each direction; 1 for dense depth,
-            about 8 for LiDAR-like sparse depth.
+            tens of pixels for LiDAR-like sparse depth (its rows are tens of pixels apart far from the car).
         max_relative_gap: neighbours whose depth differs by more than this fraction of the centre depth per pixel
             of distance are taken to lie across a depth edge and are not used.
 
@@ -66,19 +78,21 @@ def vertex_normals(vertex: torch.Tensor, valid: torch.Tensor | None = None, sear
                           f"{(vertex.shape[0], 1, *vertex.shape[2:])} bool")
     if search < 1:
         raise DcslamError(f"search must be >= 1, got {search}")
-    tangents = []
-    for (dy, dx) in ((0, 1), (1, 0)):
-        fwd, ok_f = _nearest(vertex, valid, dy, dx, search, max_relative_gap)
-        bwd, ok_b = _nearest(vertex, valid, -dy, -dx, search, max_relative_gap)
-        t = torch.where(ok_f & ok_b, fwd - bwd,
-                        torch.where(ok_f, fwd - vertex, torch.where(ok_b, vertex - bwd, torch.zeros_like(vertex))))
-        tangents.append((t, ok_f | ok_b))
-    (tx, ok_x), (ty, ok_y) = tangents
+    B, _, H, W = vertex.shape
+    idx = torch.nonzero(valid.reshape(-1)).squeeze(1)                 # (b, v, u) raster order
+    if idx.numel() == 0:
+        return torch.zeros_like(vertex), torch.zeros_like(valid)
+    b, rem = torch.div(idx, H * W, rounding_mode="floor"), idx % (H * W)
+    v, u = torch.div(rem, W, rounding_mode="floor"), rem % W
+    points = vertex.permute(0, 2, 3, 1).reshape(-1, 3)[idx]
+    tx, ok_x = _tangent(points, idx, b * H + v, u, search, max_relative_gap)
+    ty, ok_y = _tangent(points, (b * W + u) * H + v, b * W + u, v, search, max_relative_gap)
     n = torch.cross(tx, ty, dim=1)
     norm2 = (n * n).sum(1, keepdim=True)
-    ok = valid & ok_x & ok_y & (norm2 > 1e-20)
-    norm = torch.sqrt(torch.where(ok, norm2, torch.ones_like(norm2)))
-    n = torch.where(ok, n / norm, torch.zeros_like(n))
-    facing = (n * vertex).sum(1, keepdim=True) > 0
-    n = torch.where(facing, -n, n)
-    return n, ok
+    ok = ok_x & ok_y & (norm2[:, 0] > 1e-20)
+    n = torch.where(ok[:, None], n / torch.sqrt(torch.where(ok[:, None], norm2, torch.ones_like(norm2))),
+                    torch.zeros_like(n))
+    n = torch.where(((n * points).sum(1, keepdim=True) > 0), -n, n)
+    normals = torch.zeros(B * H * W, 3, dtype=vertex.dtype, device=vertex.device).index_put((idx,), n)
+    mask = torch.zeros(B * H * W, dtype=torch.bool, device=vertex.device).index_put((idx,), ok)
+    return normals.view(B, H, W, 3).permute(0, 3, 1, 2), mask.view(B, 1, H, W)

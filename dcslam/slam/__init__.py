@@ -1,2 +1,3 @@
-"""Differentiable dense SLAM in PyTorch: point maps (pointmap.py), odometry (odometry.py, solvers.py),
-mappers (fusion.py: PointFusion; icpslam.py: ICP-SLAM map), and the frame loop (pipeline.py)."""
+"""Differentiable dense SLAM in PyTorch: point maps (pointmap.py), odometry (odometry.py, solvers.py, robust.py:
+Geman-McClure kernel and KISS-ICP's adaptive threshold), mappers (fusion.py: PointFusion; icpslam.py: ICP-SLAM map),
+the frame loop (pipeline.py), per-step health verdicts (health.py) and the settings (config.py)."""

@@ -70,12 +70,15 @@ class PointFusion(Mapper):
         keep_graph: keep the autograd graph across frames (for a loss on the final map); otherwise the map is
             detached after every frame and memory stays flat.
         splat: rendering footprint (pixels each side) of map points when the map is rendered for odometry.
+        window, archive: local map of the last ``window`` frames (0: the whole map), see
+            :class:`~dcslam.slam.pointmap.Mapper`.
     """
 
     def __init__(self, voxel_size: float = 0.05, max_distance: float = 0.1, max_relative_distance: float = 0.02,
                  max_normal_angle_deg: float = 30.0, sigma: float = 0.6, min_observations: int = 2,
-                 prune_after: int = 5, keep_graph: bool = False, splat: int = 1):
-        self.voxel_size = voxel_size
+                 prune_after: int = 5, keep_graph: bool = False, splat: int = 1, window: int = 0,
+                 archive: bool = True):
+        self.voxel_size, self.window, self.archive = voxel_size, window, archive
         self.max_distance, self.max_relative_distance = max_distance, max_relative_distance
         self.cos_max_angle = math.cos(math.radians(max_normal_angle_deg))
         self.sigma = sigma
@@ -105,9 +108,9 @@ class PointFusion(Mapper):
             pm = pm.select(~drop)
         if not self.keep_graph:
             pm = pm.detach()
-        self.map = pm
+        self.map = self._slide(pm)
         self.frames += 1
-        return pm
+        return self.map
 
     def _associate(self, pm: PointMap, frame: Frame, T_world_cam: torch.Tensor, pixels: torch.Tensor,
                    v_cam: torch.Tensor, n_w: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -18,10 +18,14 @@ class ICPSLAM(Mapper):
         voxel_size: metres (> 0); one point per voxel, so the map grows with the explored volume.
         keep_graph: keep the autograd graph across frames; otherwise detach after every frame.
         splat: rendering footprint (pixels each side) for odometry.
+        window, archive: local map of the last ``window`` frames (0: the whole map), see
+            :class:`~dcslam.slam.pointmap.Mapper`.
     """
 
-    def __init__(self, voxel_size: float = 0.05, keep_graph: bool = False, splat: int = 1):
+    def __init__(self, voxel_size: float = 0.05, keep_graph: bool = False, splat: int = 1, window: int = 0,
+                 archive: bool = True):
         self.voxel_size, self.keep_graph, self.splat = voxel_size, keep_graph, splat
+        self.window, self.archive = window, archive
         self.reset()
 
     def integrate(self, frame: Frame, T_world_cam: torch.Tensor) -> PointMap:
@@ -33,6 +37,6 @@ class ICPSLAM(Mapper):
         pm = merge(pm, target, new_keys, p_w, n_w, colors, radius, torch.ones_like(radius), self.frames)
         if not self.keep_graph:
             pm = pm.detach()
-        self.map = pm
+        self.map = self._slide(pm)
         self.frames += 1
-        return pm
+        return self.map

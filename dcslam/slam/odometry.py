@@ -18,7 +18,8 @@ from dcslam.errors import DcslamError
 from dcslam.geometry.se3 import rotate, transform_points
 from dcslam.slam.association import ProjectiveAssociation
 from dcslam.slam.frame import Frame
-from dcslam.slam.pointmap import ModelView
+from dcslam.slam.pointmap import ModelView, voxel_representatives
+from dcslam.slam.robust import Quadratic
 from dcslam.slam.solvers import GaussNewton, Linearization
 
 
@@ -33,6 +34,9 @@ class OdometryResult:
     iterations: int = 0
     inliers: int = 0
     rmse: float = 0.0
+    sources: int = 0
+    conditioning: float = math.nan
+    gate: float = math.nan
 
 
 class GroundTruthOdometry:
@@ -47,51 +51,87 @@ class GroundTruthOdometry:
 
 class PointToPlane:
     """Point-to-plane residuals ``r_i = n_i . (T s_i - q_i)`` of source points ``s_i`` (camera frame) against
-    associated target points ``q_i`` and normals ``n_i`` (world frame), within the gates.
+    associated target points ``q_i`` and normals ``n_i`` (world frame), within the gates, weighted by a robust
+    kernel (:mod:`dcslam.slam.robust`; default plain least squares).
+
+    :meth:`linearize` associates at the pose it is given and keeps those pairs; :meth:`cost` scores a candidate
+    pose on the *same* pairs, as ICP's inner least-squares problem does. (Re-associating at the candidate made
+    sparse LiDAR depth self-align: its scan rings land on the same pixels at the initial guess, so any move lost
+    partners and the differentiable LM never left the initial pose.)
 
     Shape: source (F, 3), source_normals (F, 3) camera frame.
     """
 
     def __init__(self, source: torch.Tensor, source_normals: torch.Tensor, associate, max_distance: float,
-                 cos_max_angle: float):
+                 cos_max_angle: float, kernel=None, hold_below: float = 0.0):
         self.source, self.source_normals = source, source_normals
         self.associate, self.max_distance, self.cos_max_angle = associate, max_distance, cos_max_angle
+        self.kernel = kernel if kernel is not None else Quadratic()
+        self.hold_below = hold_below
+        self.scale = float(source.detach().norm(dim=1).mean()) if source.shape[0] else 1.0
+        self.pairs = None
 
     def residuals(self, T: torch.Tensor):
-        """(residuals (M,), inlier source index (M,), target normals (M, 3)) at pose T (4, 4)."""
+        """(residuals (M,), inlier source index (M,), target points (M, 3), target normals (M, 3)) at pose T."""
         p = transform_points(T, self.source)
         src, q, n = self.associate(p)
-        p_src = p[src]
-        diff = p_src - q
+        diff = p[src] - q
         ok = ((diff.detach() ** 2).sum(1) < self.max_distance ** 2) & \
              ((rotate(T.detach(), self.source_normals[src].detach()) * n.detach()).sum(1) > self.cos_max_angle)
-        return (diff[ok] * n[ok]).sum(1), src[ok], n[ok]
+        return (diff[ok] * n[ok]).sum(1), src[ok], q[ok], n[ok]
 
-    def _truncated(self, r: torch.Tensor) -> torch.Tensor:
-        """Mean over all source points of r^2 for inliers and max_distance^2 for the rest: one objective whatever
-        the inlier set, so that solvers may compare costs at different poses."""
-        outliers = self.source.shape[0] - r.numel()
-        return ((r * r).sum() + outliers * self.max_distance ** 2) / max(self.source.shape[0], 1)
+    def _fixed_residuals(self, T: torch.Tensor) -> torch.Tensor:
+        src, q, n = self.pairs
+        return ((transform_points(T, self.source[src]) - q) * n).sum(1)
+
+    def _mean_rho(self, r: torch.Tensor) -> torch.Tensor:
+        return self.kernel.rho(r, self.max_distance).sum() / max(r.numel(), 1)
 
     def cost(self, T: torch.Tensor) -> tuple[torch.Tensor, int]:
-        r, _, _ = self.residuals(T)
-        return self._truncated(r), r.numel()
+        """Mean kernel cost at T of the pairs of the last :meth:`linearize` (which must come first)."""
+        if self.pairs is None:
+            raise DcslamError("PointToPlane.cost before linearize")
+        r = self._fixed_residuals(T)
+        return self._mean_rho(r.double()), r.numel()
 
     def linearize(self, T: torch.Tensor) -> Linearization:
-        r, src, n = self.residuals(T)
+        r, src, q, n = self.residuals(T)
+        self.pairs = (src, q, n)
         m = n @ T[:3, :3]                           # R^T n: the normal in the camera frame
         J = torch.cat([m, torch.cross(self.source[src], m, dim=1)], 1).double()
         rd = r.double()
-        return Linearization(J.T @ J, J.T @ rd, self._truncated(rd), r.numel())
+        w = self.kernel.weight(rd, self.max_distance)
+        lin = Linearization(J.T @ (w[:, None] * J), J.T @ (w * rd), self._mean_rho(rd), r.numel(),
+                            float(w.detach().sum()))
+        if self.hold_below > 0 and r.numel() >= 6:
+            lin.H_step = self._hold(lin)
+        return lin
+
+    def _hold(self, lin: Linearization) -> torch.Tensor:
+        """H plus a stiff prior along the directions the pairs do not constrain (normalised eigenvalue below
+        ``hold_below``, as :meth:`ICPOdometry._conditioning` measures it), so the step leaves the pose at its
+        prediction there instead of sliding along a tunnel or an open road (Zhang et al., ICRA 2016: solution
+        remapping)."""
+        D = torch.tensor([1, 1, 1, self.scale, self.scale, self.scale], dtype=torch.float64, device=lin.H.device)
+        Hn = lin.H.detach() / (D[:, None] * D[None, :]) / max(lin.weight or lin.count, 1e-12)
+        values, vectors = torch.linalg.eigh(Hn)
+        weak = values < self.hold_below
+        if not bool(weak.any()):
+            return lin.H
+        V = vectors[:, weak] * D[:, None]                # back to the unnormalised coordinates
+        stiffness = 1e3 * float(torch.diagonal(lin.H.detach()).sum())
+        return lin.H + stiffness * (V @ V.T)
 
 
 class ICPOdometry:
     """Frame-to-model point-to-plane ICP.
 
     Args:
-        solver: ``GaussNewton()`` (default), ``LevenbergMarquardt()`` or ``DifferentiableLM()``.
-        association: ``ProjectiveAssociation()`` (default) or ``NearestNeighbourAssociation()``.
-        max_distance: metres; pairs further apart are outliers (the 0.5 m gate that halved gradSLAM's error).
+        solver: :class:`~dcslam.slam.solvers.GaussNewton` (default), ``LevenbergMarquardt`` or ``DifferentiableLM``.
+        association: :class:`~dcslam.slam.association.ProjectiveAssociation` (default) or
+            ``NearestNeighbourAssociation``.
+        max_distance: correspondence gate, metres (pairs further apart are outliers); ignored when ``adaptive`` is
+            given. Without a gate every pair pulls (gradSLAM's error).
         max_normal_angle_deg: pairs whose normals differ more are outliers.
         iterations: solver iterations.
         min_inliers: fewer inlier pairs reject the step.
@@ -100,14 +140,25 @@ class ICPOdometry:
             rejected.
         max_step_m, max_step_deg: an estimate further than this from ``T_init`` is rejected as a divergence.
         coarse_to_fine: gate multipliers, one solver run per entry (each up to ``iterations``): a wide gate first
-            catches motions larger than ``max_distance`` (a car moves about 1 m between KITTI frames), the last
-            entry should be 1. ``(1.0,)`` is plain ICP with one gate, as Open3D's ``registration_icp``.
+            catches motions larger than the gate (a car moves about 1 m between KITTI frames), the last entry should
+            be 1. ``(1.0,)`` is plain ICP with one gate, as Open3D's ``registration_icp``.
+        source_voxel: keep one source point per voxel of this size (metres) for the alignment, as KISS-ICP does
+            (0: every valid pixel). Near points no longer outweigh far ones and dense frames align several times
+            faster; the pose stays a differentiable function of the kept pixels' depths.
+        hold_below: directions of motion whose normalised eigenvalue (see :meth:`_conditioning`) is below this are
+            held at the prediction (0: never); a step with such a direction is still reported, and the health check
+            calls it degraded.
+        kernel: robust kernel (:class:`~dcslam.slam.robust.GemanMcClure`) or None for plain least squares.
+        adaptive: an :class:`~dcslam.slam.robust.AdaptiveThreshold` giving the gate from past prediction errors
+            (KISS-ICP), or None for the fixed ``max_distance``. It is updated by :meth:`estimate` after each
+            accepted step; :meth:`reset` clears it.
     """
 
     def __init__(self, solver=None, association=None, max_distance: float = 0.5, max_normal_angle_deg: float = 30.0,
                  iterations: int = 20, min_inliers: int = 100, min_conditioning: float = 1e-5,
                  max_step_m: float = 5.0, max_step_deg: float = 30.0,
-                 coarse_to_fine: tuple[float, ...] = (4.0, 2.0, 1.0)):
+                 coarse_to_fine: tuple[float, ...] = (4.0, 2.0, 1.0), kernel=None, adaptive=None,
+                 source_voxel: float = 0.0, hold_below: float = 0.0):
         if not coarse_to_fine or any(m <= 0 for m in coarse_to_fine):
             raise DcslamError(f"coarse_to_fine must be positive gate multipliers, got {coarse_to_fine}")
         self.coarse_to_fine = tuple(coarse_to_fine)
@@ -117,42 +168,62 @@ class ICPOdometry:
         self.cos_max_angle = math.cos(math.radians(max_normal_angle_deg))
         self.min_inliers, self.min_conditioning = min_inliers, min_conditioning
         self.max_step_m, self.max_step_rad = max_step_m, math.radians(max_step_deg)
+        self.kernel, self.adaptive, self.source_voxel = kernel, adaptive, source_voxel
+        self.hold_below = hold_below
+
+    def reset(self) -> None:
+        """Forget what past steps taught (the adaptive threshold); call at the start of a sequence."""
+        if self.adaptive is not None:
+            self.adaptive.reset()
 
     def estimate(self, frame: Frame, model: ModelView | None, T_init: torch.Tensor,
-                 T_gt: torch.Tensor | None = None) -> OdometryResult:
+                 T_gt: torch.Tensor | None = None, T_last: torch.Tensor | None = None) -> OdometryResult:
+        """Align ``frame`` to ``model`` from ``T_init`` (4, 4), the prediction; ``T_last`` (4, 4), the previous
+        frame's pose, lets the adaptive threshold tell a moving step from a standing one."""
         T_init = T_init.to(frame.vertex.dtype)
         if model is None:
             return OdometryResult(T_init, False, "empty model")
         flat = frame.valid.reshape(-1)
         source = frame.vertex.reshape(-1, 3)[flat]
         if source.shape[0] < self.min_inliers:
-            return OdometryResult(T_init, False, f"{source.shape[0]} valid source points")
-        normals, associate = frame.normal.reshape(-1, 3)[flat], self.association.prepare(model)
+            return OdometryResult(T_init, False, f"{source.shape[0]} valid source points", sources=source.shape[0])
+        normals = frame.normal.reshape(-1, 3)[flat]
+        if self.source_voxel > 0:
+            keep = voxel_representatives(source, self.source_voxel)
+            source, normals = source[keep], normals[keep]
+        associate = self.association.prepare(model)
+        gate = self.adaptive.gate() if self.adaptive is not None else self.max_distance
         T, iterations = T_init, 0
         for multiplier in self.coarse_to_fine:
-            problem = PointToPlane(source, normals, associate, self.max_distance * multiplier, self.cos_max_angle)
+            problem = PointToPlane(source, normals, associate, gate * multiplier, self.cos_max_angle, self.kernel,
+                                   self.hold_below)
             result = self.solver.solve(problem, T, self.iterations)
             T, iterations = result.T, iterations + result.iterations
         lin = problem.linearize(T.detach())
-        r, _, _ = problem.residuals(T.detach())
+        r = problem._fixed_residuals(T.detach())
         rmse = math.sqrt(float((r.double() ** 2).mean())) if r.numel() else math.inf
-        base = dict(iterations=iterations, inliers=lin.count, rmse=rmse)
+        base = dict(iterations=iterations, inliers=lin.count, rmse=rmse, sources=source.shape[0], gate=gate)
         if not bool(torch.isfinite(T).all()):
             return OdometryResult(T_init, False, "non-finite pose", **base)
         if lin.count < self.min_inliers:
             return OdometryResult(T_init, False, f"{lin.count} inliers", **base)
-        conditioning = self._conditioning(lin, source)
+        base["conditioning"] = conditioning = self._conditioning(lin, source)
         if conditioning < self.min_conditioning:
             return OdometryResult(T_init, False, f"degenerate geometry (conditioning {conditioning:.1e})", **base)
         X = torch.linalg.solve(T_init.detach().double(), T.detach().double())
         angle = math.acos(max(-1.0, min(1.0, (float(torch.trace(X[:3, :3])) - 1) / 2)))
         if float(X[:3, 3].norm()) > self.max_step_m or angle > self.max_step_rad:
             return OdometryResult(T_init, False, "diverged", **base)
+        if self.adaptive is not None:
+            self.adaptive.update(T_init, T, T_last if T_last is not None else T_init)
         return OdometryResult(T, True, "", **base)
 
     @staticmethod
     def _conditioning(lin: Linearization, source: torch.Tensor) -> float:
+        """Smallest eigenvalue of J^T W J per unit weight, rotations scaled by the mean range: how well the pairs
+        that count constrain each direction of motion (about 1/3 for a well-spread scene, 0 for a plane)."""
         scale = float(source.detach().norm(dim=1).mean())
         D = torch.tensor([1, 1, 1, scale, scale, scale], dtype=torch.float64, device=lin.H.device)
-        Hn = lin.H.detach() / (D[:, None] * D[None, :]) / max(lin.count, 1)
+        total = lin.weight if lin.weight is not None else lin.count
+        Hn = lin.H.detach() / (D[:, None] * D[None, :]) / max(total, 1e-12)
         return float(torch.linalg.eigvalsh(Hn)[0])

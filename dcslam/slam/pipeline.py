@@ -2,6 +2,7 @@
 with given poses)."""
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -11,6 +12,7 @@ from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_depth
 from dcslam.slam.fusion import PointFusion
 from dcslam.slam.frame import FrameSettings, prepare_frame
+from dcslam.slam.health import HealthRules, assess, summarise
 from dcslam.slam.odometry import GroundTruthOdometry, OdometryResult
 from dcslam.slam.pointmap import PointMap
 
@@ -42,7 +44,12 @@ def build_map(depth: torch.Tensor, K: torch.Tensor, T_world_cam: torch.Tensor, r
 
 @dataclass
 class StepReport:
-    """What one SLAM step did. Shape: T_world_cam (4, 4)."""
+    """What one SLAM step did and how far to trust it (:mod:`dcslam.slam.health`). Shape: T_world_cam (4, 4).
+
+    verdict: accepted, degraded or rejected; health: the reasons. sources: valid points of the frame; inliers: of
+    them, paired within the gates; conditioning: see ``ICPOdometry._conditioning``; gap_m / gap_deg: distance of
+    the estimate from the constant-velocity prediction.
+    """
 
     index: int
     T_world_cam: torch.Tensor
@@ -53,6 +60,12 @@ class StepReport:
     rmse: float
     points: int
     seconds: float
+    verdict: str = "accepted"
+    health: tuple[str, ...] = ()
+    sources: int = 0
+    conditioning: float = math.nan
+    gap_m: float = 0.0
+    gap_deg: float = 0.0
 
 
 class SLAM:
@@ -68,14 +81,32 @@ class SLAM:
     :attr:`rejected`. With ``keep_graph`` (set on the mapper) poses and map stay connected to the inputs.
     """
 
+    #: metric settings scaled by :attr:`reference_depth_m` (object, attribute)
+    _METRIC = (("mapper", "voxel_size"), ("odometry", "source_voxel"), ("odometry", "max_distance"))
+
     def __init__(self, odometry, mapper, frame_settings: FrameSettings = FrameSettings(),
-                 T_world_cam0: torch.Tensor | None = None):
+                 T_world_cam0: torch.Tensor | None = None, health: HealthRules = HealthRules(),
+                 reference_depth_m: float = 0.0):
         self.odometry, self.mapper, self.frame_settings = odometry, mapper, frame_settings
-        self.T_world_cam0 = T_world_cam0
+        self.T_world_cam0, self.health = T_world_cam0, health
+        self.reference_depth_m = reference_depth_m
+        self._metric = {(o, a): getattr(getattr(self, o), a) for o, a in self._METRIC
+                        if hasattr(getattr(self, o), a)}
+        self.scale = 1.0
         self.reset()
 
+    def _set_scale(self, scale: float) -> None:
+        """Voxel sizes and the ICP gate are for scenes of median depth ``reference_depth_m`` (a street); a smaller
+        scene (a room) scales them down in proportion, so one set of defaults serves both."""
+        self.scale = scale
+        for (o, a), value in self._metric.items():
+            setattr(getattr(self, o), a, value * scale)
+
     def reset(self) -> None:
+        self._set_scale(1.0)
         self.mapper.reset()
+        if hasattr(self.odometry, "reset"):
+            self.odometry.reset()
         self.poses: list[torch.Tensor] = []
         self.reports: list[StepReport] = []
 
@@ -86,6 +117,10 @@ class SLAM:
     @property
     def rejected(self) -> list[dict]:
         return [{"frame": r.index, "reason": r.reason} for r in self.reports if not r.accepted]
+
+    def health_summary(self) -> dict:
+        """Verdict counts and the suspect flag of the run so far (:func:`dcslam.slam.health.summarise`)."""
+        return summarise(self.reports, self.health)
 
     def trajectory(self) -> torch.Tensor:
         """Estimated poses so far. Shape: (N, 4, 4)."""
@@ -108,6 +143,9 @@ class SLAM:
         frame = prepare_frame(depth, K, rgb, self.frame_settings)
         T_init = self._prediction(frame.vertex.dtype, frame.vertex.device)
         index = len(self.poses)
+        if index == 0 and self.reference_depth_m > 0 and bool(frame.valid.any()):
+            median = float(frame.vertex[..., 2][frame.valid].median())
+            self._set_scale(min(1.0, median / self.reference_depth_m))
         if index == 0:
             T = T_gt.to(T_init.dtype) if (T_gt is not None and isinstance(self.odometry, GroundTruthOdometry)) \
                 else T_init
@@ -115,11 +153,19 @@ class SLAM:
         else:
             H, W = frame.shape
             model = self.mapper.model(T_init, frame.K, H, W)
-            result = self.odometry.estimate(frame, model, T_init, T_gt)
+            if isinstance(self.odometry, GroundTruthOdometry):
+                result = self.odometry.estimate(frame, model, T_init, T_gt)
+            else:
+                result = self.odometry.estimate(frame, model, T_init, T_gt, T_last=self.poses[-1].detach())
         self.mapper.integrate(frame, result.T_world_cam)
         self.poses.append(result.T_world_cam)
+        gap_m, gap_deg = _distance(T_init, result.T_world_cam)
+        verdict, why = ("accepted", []) if index == 0 or isinstance(self.odometry, GroundTruthOdometry) else assess(
+            result.accepted, result.reason, result.inliers, result.sources, result.conditioning, gap_m, gap_deg,
+            has_velocity=index >= 2, rules=self.health)
         report = StepReport(index, result.T_world_cam, result.accepted, result.reason, result.iterations,
-                            result.inliers, result.rmse, len(self.mapper.map), time.perf_counter() - start)
+                            result.inliers, result.rmse, len(self.mapper.map), time.perf_counter() - start,
+                            verdict, tuple(why), result.sources, result.conditioning, gap_m, gap_deg)
         self.reports.append(report)
         return report
 
@@ -131,3 +177,10 @@ class SLAM:
         for i in range(N):
             self.step(depth[i:i + 1], K, None if rgb is None else rgb[i:i + 1], None if T_gt is None else T_gt[i])
         return self.trajectory()
+
+
+def _distance(T_a: torch.Tensor, T_b: torch.Tensor) -> tuple[float, float]:
+    """Translation (m) and rotation (deg) of T_a^-1 T_b. Shape: (4, 4), (4, 4)."""
+    X = torch.linalg.solve(T_a.detach().double(), T_b.detach().double())
+    angle = math.acos(max(-1.0, min(1.0, (float(torch.trace(X[:3, :3])) - 1) / 2)))
+    return float(X[:3, 3].norm()), math.degrees(angle)

@@ -77,6 +77,15 @@ def voxel_keys(points: torch.Tensor, voxel_size: float) -> torch.Tensor:
     return (ijk[:, 0] << (2 * _KEY_BITS)) | (ijk[:, 1] << _KEY_BITS) | ijk[:, 2]
 
 
+def voxel_representatives(points: torch.Tensor, voxel_size: float) -> torch.Tensor:
+    """Indices of one point per occupied voxel (the first in input order), sorted. Shape: (P, 3) -> (Q,) int64."""
+    keys = voxel_keys(points, voxel_size)
+    unique, inverse = torch.unique(keys, return_inverse=True)
+    first = torch.full((unique.shape[0],), points.shape[0], dtype=torch.int64, device=points.device)
+    first.scatter_reduce_(0, inverse, torch.arange(points.shape[0], device=points.device), reduce="amin")
+    return torch.sort(first).values
+
+
 @dataclass
 class ModelView:
     """A point map rendered into a camera: per pixel the map point nearest to the camera.
@@ -106,9 +115,11 @@ def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int
     index = torch.full((height * width,), -1, dtype=torch.int64, device=device)
     if len(pm):
         p_cam = transform_points(inverse(T_world_cam.to(dtype)), pm.points.detach())
-        uv, z = project(p_cam, K.to(dtype))
-        ids = torch.arange(len(pm), device=device)
+        ids = torch.nonzero(p_cam[:, 2] > 0).squeeze(1)        # only points in front of the camera ...
+        uv, z = project(p_cam[ids], K.to(dtype))
         px = torch.round(uv).to(torch.int64)
+        seen = (px[:, 0] >= -splat) & (px[:, 0] < width + splat) & (px[:, 1] >= -splat) & (px[:, 1] < height + splat)
+        ids, px, z = ids[seen], px[seen], z[seen]                # ... and within reach of the image
         zbuf = torch.full((height * width,), float("inf"), dtype=dtype, device=device)
         cand_pix, cand_z, cand_id = [], [], []
         for dy in range(-splat, splat + 1):
@@ -124,12 +135,14 @@ def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int
         index.scatter_(0, pix[win], idc[win])
     index = index.view(height, width)
     valid = index >= 0
-    if len(pm):
-        safe = index.clamp_min(0)
-        vertex = torch.where(valid[..., None], pm.points[safe], torch.zeros((), dtype=dtype, device=device))
-        normal = torch.where(valid[..., None], pm.normals[safe], torch.zeros((), dtype=dtype, device=device))
-    else:
-        vertex = normal = torch.zeros(height, width, 3, dtype=dtype, device=device)
+    vertex = torch.zeros(height * width, 3, dtype=dtype, device=device)
+    normal = torch.zeros(height * width, 3, dtype=dtype, device=device)
+    if len(pm):                                   # gather at the covered pixels only (few for a sparse map)
+        pix = torch.nonzero(valid.reshape(-1)).squeeze(1)
+        hit = index.reshape(-1)[pix]
+        vertex = vertex.index_put((pix,), pm.points[hit])
+        normal = normal.index_put((pix,), pm.normals[hit])
+    vertex, normal = vertex.view(height, width, 3), normal.view(height, width, 3)
     return ModelView(index, vertex, normal, valid, T_world_cam.to(dtype), K.to(dtype))
 
 
@@ -207,13 +220,42 @@ def merge(pm: PointMap, target: torch.Tensor, new_keys: torch.Tensor, points: to
 class Mapper:
     """What PointFusion and ICP-SLAM share: the current :attr:`map` (None until the first frame), the frame count,
     and the map rendered into a camera for frame-to-model odometry. Subclasses set ``splat`` and implement
-    ``integrate(frame, T_world_cam) -> PointMap``."""
+    ``integrate(frame, T_world_cam) -> PointMap``, ending with ``self.map = self._slide(pm)``.
+
+    A local map (``window`` > 0 frames) keeps only points updated in the last ``window`` frames for odometry and
+    fusion, so that memory and time per frame stay flat however far the car drives; older points move, detached,
+    to an archive on the CPU (``archive=True``, so :meth:`global_map` can still be written at the end) or are
+    dropped (``archive=False``: memory bounded by the window alone).
+    """
 
     splat: int = 1
+    window: int = 0
+    archive: bool = True
 
     def reset(self) -> None:
         self.map: PointMap | None = None
         self.frames = 0
+        self.archived: list[PointMap] = []
+
+    def _slide(self, pm: PointMap) -> PointMap:
+        if self.window <= 0:
+            return pm
+        old = pm.last_seen < self.frames - self.window
+        if not bool(old.any()):
+            return pm
+        if self.archive:
+            self.archived.append(pm.select(old).detach().to("cpu"))
+        return pm.select(~old)
+
+    def global_map(self) -> PointMap | None:
+        """The local map and everything archived from it (detached, on the CPU); the map itself without a
+        window."""
+        if self.map is None or not self.archived:
+            return self.map
+        pm = self.map.detach().to("cpu")
+        for part in self.archived:
+            pm = part.cat(pm)
+        return pm
 
     def model(self, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> ModelView | None:
         """The map rendered into a camera (what frame-to-model odometry aligns to); None while the map is empty."""

@@ -64,7 +64,10 @@ class StreetScene:
         t_ground = (self.ground_y - o[1]) / torch.where(dy.abs() > 1e-12, dy, torch.full_like(dy, 1e-12))
         t_best = torch.where(t_ground > 0, t_ground, t_best)
         inv = 1.0 / torch.where(d.abs() > 1e-12, d, torch.full_like(d, 1e-12))
-        for chunk in self.boxes.split(16):
+        centre = 0.5 * (self.boxes[:, :3] + self.boxes[:, 3:])
+        reach = 0.5 * (self.boxes[:, 3:] - self.boxes[:, :3]).norm(dim=1) + max_depth
+        near = self.boxes[(centre - o).norm(dim=1) <= reach]    # boxes beyond max_depth cannot be seen
+        for chunk in near.split(16):
             t1 = (chunk[None, :, :3] - o) * inv[:, None, :]
             t2 = (chunk[None, :, 3:] - o) * inv[:, None, :]
             t_near = torch.minimum(t1, t2).amax(-1)

@@ -15,13 +15,21 @@ from dcslam.geometry.se3 import se3_exp
 
 @dataclass
 class Linearization:
-    """Normal equations at a pose. Shape: H (6, 6) = J^T J, g (6,) = J^T r over inliers, cost () the problem's
-    objective there (comparable between poses); count the inliers."""
+    """Normal equations at a pose. Shape: H (6, 6) = J^T W J, g (6,) = J^T W r over inliers (W: robust weights,
+    1 without a kernel), cost () the problem's objective there; count the inliers, weight their summed weights
+    (None: all 1); H_step (6, 6) or None, see :attr:`step_matrix`."""
 
     H: torch.Tensor
     g: torch.Tensor
     cost: torch.Tensor
     count: int
+    weight: float | None = None
+    H_step: torch.Tensor | None = None
+
+    @property
+    def step_matrix(self) -> torch.Tensor:
+        """The matrix the step is solved with: ``H_step`` (H with a prior on unobservable directions) or H."""
+        return self.H if self.H_step is None else self.H_step
 
 
 @dataclass
@@ -55,7 +63,7 @@ class GaussNewton:
             lin = problem.linearize(T)
             if lin.count < 6:
                 return SolveResult(T, k, lin)
-            delta = _solve(lin.H, -lin.g)
+            delta = _solve(lin.step_matrix, -lin.g)
             if not bool(torch.isfinite(delta).all()):
                 return SolveResult(T, k, lin)
             T = _retract(T, delta)
@@ -79,7 +87,7 @@ class LevenbergMarquardt:
         for k in range(iterations):
             if lin.count < 6:
                 return SolveResult(T, k, lin)
-            H = lin.H.double()
+            H = lin.step_matrix.double()
             delta = _solve(H + lam * torch.diag(torch.diagonal(H)), -lin.g)
             if not bool(torch.isfinite(delta).all()):
                 return SolveResult(T, k, lin)
@@ -119,7 +127,7 @@ class DifferentiableLM:
             lin = problem.linearize(T)
             if lin.count < 6:
                 return SolveResult(T, k, lin)
-            H = lin.H.double()
+            H = lin.step_matrix.double()
             delta = _solve(H + lam * torch.diag(torch.diagonal(H)), -lin.g)
             if not bool(torch.isfinite(delta).all()):
                 return SolveResult(T, k, lin)
@@ -130,6 +138,11 @@ class DifferentiableLM:
             accept = torch.sigmoid(self.sharpness * (rel + self.margin))
             T = _retract(T, accept * delta)
             lam = (lam * self.factor ** (1 - 2 * accept)).clamp(self.min_damping, self.max_damping)
-            if float((accept * delta).detach().abs().max()) < self.tolerance:
+            # Converged only when a kept step is tiny: a rejected step (accept ~ 0) is also tiny but must be
+            # retried with more damping (stopping there left every pose at its initial guess).
+            kept = float(accept.detach()) > 0.5
+            if kept and float((accept * delta).detach().abs().max()) < self.tolerance:
+                return SolveResult(T, k + 1, lin)
+            if not kept and float(lam.detach()) >= self.max_damping:
                 return SolveResult(T, k + 1, lin)
         return SolveResult(T, iterations, lin)

@@ -8,6 +8,7 @@ The configuration extends :class:`dcslam.slam.config.SlamSettings`, so a field a
 """
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -34,11 +35,17 @@ class SlamStageConfig(SlamSettings):
                                         "default: the most recent.")
     out: Path | None = option(None, help="Output folder (default: slam/<layer>/).")
     device: str = option("cpu", help="torch device, e.g. cpu or cuda.")
+    threads: int = option(1, min=0, help="torch CPU threads while SLAM runs (0 = torch's default). One thread is "
+                                         "fastest for one SLAM process on a shared machine.")
+    strict: bool = option(False, help="Exit 1 when a drive's trajectory is suspect (too many degraded or rejected "
+                                      "steps); its outputs are still written.")
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.frames < 0:
             raise DcslamError(f"--frames must be >= 0, got {self.frames}")
+        if self.threads < 0:
+            raise DcslamError(f"--threads must be >= 0, got {self.threads}")
 
     def settings(self) -> SlamSettings:
         """The SLAM algorithm's own settings (what :func:`dcslam.slam.config.build_slam` takes)."""
@@ -71,14 +78,34 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
         check_outputs(out_dir, path.stem, force)
         jobs.append((path, source))
     results = []
-    for path, source in jobs:
-        slam = build_slam(config.settings())
-        drive_run = run_drive(path, source, slam, config.frames or None, config.device,
-                              settings={**to_dict(config), "source": str(source)})
-        drive_run.name = path.stem
-        written = write_outputs(drive_run, out_dir, force)
-        results.append(SlamDriveResult(path.stem, drive_run.summary(), written))
+    with torch_threads(config.threads):
+        for path, source in jobs:
+            slam = build_slam(config.settings())
+            drive_run = run_drive(path, source, slam, config.frames or None, config.device,
+                                  settings={**to_dict(config), "source": str(source)})
+            drive_run.name = path.stem
+            written = write_outputs(drive_run, out_dir, force)
+            results.append(SlamDriveResult(path.stem, drive_run.summary(), written))
+    suspect = [r for r in results if r.summary["health"]["suspect"]]
+    if config.strict and suspect:
+        raise DcslamError("suspect trajectories (--strict): " + "; ".join(
+            f"{r.drive}: {', '.join(r.summary['health']['reasons'])}" for r in suspect)
+            + f"; outputs written under {out_dir}")
     return results
+
+
+@contextlib.contextmanager
+def torch_threads(threads: int):
+    """Run the block with ``threads`` torch CPU threads (0: leave torch's setting), restoring the setting after."""
+    import torch
+
+    before = torch.get_num_threads()
+    if threads > 0:
+        torch.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 @dataclass
@@ -98,6 +125,7 @@ class DriveRun:
         import torch
 
         from dcslam.geometry.se3 import pose_error
+        from dcslam.slam.health import summarise
 
         dt, dr = pose_error(torch.from_numpy(self.T_gt), torch.from_numpy(self.T_world_cam))
         n = len(self.reports)
@@ -106,6 +134,7 @@ class DriveRun:
             "seconds": round(self.seconds, 3), "seconds_per_frame": round(self.seconds / max(n, 1), 4),
             "map_megabytes": round(self.map.nbytes() / 2 ** 20, 2),
             "rejected_steps": [{"frame": r.index, "reason": r.reason} for r in self.reports if not r.accepted],
+            "health": summarise(self.reports),
             "translation_error_m": {"final": float(dt[-1]), "max": float(dt.max()), "mean": float(dt.mean())},
             "rotation_error_deg": {"final": float(dr[-1]) * 180 / np.pi, "max": float(dr.max()) * 180 / np.pi},
             "settings": self.settings,
@@ -139,7 +168,8 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
                 bar.advance(status=f"{report.points} points" + ("" if report.accepted else " (step rejected)"))
         seconds = time.perf_counter() - start
         poses = slam.trajectory().detach().cpu().double().numpy()
-        return DriveRun(drive.name, poses, drive.timestamps[:n].copy(), T_gt.copy(), slam.map.detach().to("cpu"),
+        global_map = slam.mapper.global_map().detach().to("cpu")
+        return DriveRun(drive.name, poses, drive.timestamps[:n].copy(), T_gt.copy(), global_map,
                         list(slam.reports), seconds, dict(settings or {}))
 
 

@@ -82,3 +82,23 @@ def test_missing_drives_name_prepare(tmp_path):
 
 def test_bad_choice_is_usage_error(workspace):
     assert _run("--odometry", "magic", "-w", str(workspace)).exit_code == 2
+
+
+def test_strict_exits_1_on_a_suspect_drive_and_still_writes_it(workspace, tmp_path):
+    """A layer that is empty after the first frame leaves every step without data: rejected, so the drive is
+    suspect. Without --strict that is reported and exits 0; with it, exit 1 naming the drive and why."""
+    depth = np.zeros((N, H, W), np.float32)
+    scene, K = StreetScene(1), kitti_K(H, W)
+    depth[0] = scene.render(street_trajectory(1, step=0.5)[0], K, H, W).float().numpy()
+    layer = tmp_path / "empty.h5"
+    write_layer(layer, Layer(depth=depth, drive="street_0001", made_by="test", config={}))
+    args = ("--depth", str(layer), "--odometry", "icp", "-w", str(workspace), "--threads", "1")
+    relaxed = _run(*args, "--out", str(tmp_path / "relaxed"))
+    assert relaxed.exit_code == 0, relaxed.output
+    assert "SUSPECT" in relaxed.output and "rejected" in relaxed.output
+    summary = json.loads((tmp_path / "relaxed" / "street_0001.json").read_text())
+    assert summary["health"]["suspect"] and summary["health"]["rejected"] == N - 1
+    strict = CliRunner().invoke(app, ["slam", *args, "--out", str(tmp_path / "strict"), "--strict"])
+    assert strict.exit_code == 1
+    assert "suspect trajectories (--strict): street_0001" in strict.output
+    assert (tmp_path / "strict" / "street_0001.txt").exists()

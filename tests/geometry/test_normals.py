@@ -71,3 +71,35 @@ class TestVertexNormals:
             vertex_normals(torch.zeros(1, 3, 4, 4), search=0)
         with pytest.raises(DcslamError, match="bool"):
             vertex_normals(torch.zeros(1, 3, 4, 4), torch.ones(1, 1, 4, 4))
+
+
+class TestSparseScanLines:
+    def _rows(self, row_step, col_step):
+        n = torch.tensor([0.2, -0.9, -0.4], dtype=torch.float64)
+        n = n / n.norm()
+        depth = _plane_depth(n.tolist(), -5.0, H=60, W=40)
+        mask = torch.zeros_like(depth, dtype=torch.bool)
+        mask[..., 2::row_step, ::col_step] = True
+        return depth * mask, n
+
+    def test_rows_far_apart_are_found_within_search(self):
+        depth, n = self._rows(row_step=20, col_step=3)
+        normals, valid = vertex_normals(backproject(depth, K), search=24)
+        assert int(valid.sum()) == int((depth > 0).sum())
+        torch.testing.assert_close(normals[0].permute(1, 2, 0)[valid[0, 0]], n.expand(int(valid.sum()), 3),
+                                   atol=1e-9, rtol=0)
+
+    def test_rows_beyond_search_give_no_normal(self):
+        depth, _ = self._rows(row_step=20, col_step=3)
+        _, valid = vertex_normals(backproject(depth, K), search=8)
+        assert not valid.any()
+
+    def test_gradcheck_sparse(self):
+        depth, _ = self._rows(row_step=4, col_step=3)
+        depth = depth[..., :20, :12].clone().requires_grad_()
+        mask = depth.detach() > 0
+
+        def normals(d):
+            return vertex_normals(backproject(d, K), mask, search=6)[0]
+
+        assert torch.autograd.gradcheck(normals, (depth,), eps=1e-7, atol=1e-6)

@@ -1,4 +1,6 @@
+import importlib.util
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -84,25 +86,25 @@ def test_ground_truth_odometry(pair):
     assert torch.equal(GroundTruthOdometry().estimate(f0, None, T[0], T[1]).T_world_cam, T[1])
 
 
+_spec = importlib.util.spec_from_file_location("slam_fixtures", Path(__file__).with_name("slam_fixtures.py"))
+slam_fixtures = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(slam_fixtures)
+
+
 def test_differentiable_lm_pose_gradcheck():
     """The pose estimated by ICP with the differentiable LM is a differentiable function of the source depth."""
-    h, w = 10, 14
-    K = torch.tensor([[12.0, 0, 6.5], [0, 12.0, 4.5], [0, 0, 1]], dtype=torch.float64)
-    v, u = torch.meshgrid(torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64), indexing="ij")
-    # A corner of three slanted planes (fully constrained) seen from two poses.
-    rays = torch.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], torch.ones_like(u)], -1)
-    normals = torch.tensor([[0.6, 0.1, -1.0], [-0.7, 0.2, -1.0], [0.1, -0.8, -1.0]], dtype=torch.float64)
-    depth_planes = 3.0 / (rays @ (-normals).T)
-    depth0 = depth_planes.min(-1).values[None, None]
-    target = view_from_frame(prepare_frame(depth0, K), torch.eye(4, dtype=torch.float64))
-    odometry = ICPOdometry(solver=DifferentiableLM(), iterations=3, min_inliers=10, min_conditioning=0,
-                           coarse_to_fine=(1.0,))
-    T_init = se3_exp(torch.tensor([0.01, -0.02, 0.01, 0.005, 0.0, -0.004], dtype=torch.float64))
+    slam_fixtures.pose_gradcheck()
 
-    def pose(depth):
-        return odometry.estimate(prepare_frame(depth, K), target, T_init).T_world_cam
 
-    depth = (depth0 * (1 + 0.001 * torch.sin(u + v))).requires_grad_()
-    assert torch.autograd.gradcheck(pose, (depth,), eps=1e-7, atol=1e-5)
-    grad = torch.autograd.grad(pose(depth)[:3, 3].sum(), depth)[0]
-    assert torch.isfinite(grad).all() and grad.abs().sum() > 0
+def test_unconstrained_directions_are_held_at_the_prediction():
+    """A plane facing the camera fixes depth and two tilts; sliding along it is unobservable. With ``hold_below``
+    the step corrects what the plane constrains and leaves the slide where the prediction put it."""
+    K = kitti_K(H, W)
+    plane = prepare_frame(torch.full((1, 1, H, W), 6.0), K)
+    target = view_from_frame(plane, torch.eye(4))
+    start = se3_exp(torch.tensor([0.3, -0.2, 0.15, 0.0, 0.0, 0.0]))
+    odometry = ICPOdometry(min_conditioning=-math.inf, hold_below=1e-2, coarse_to_fine=(1.0,))
+    held = odometry.estimate(plane, target, start)
+    T = held.T_world_cam
+    assert abs(float(T[2, 3])) < 1e-3                                     # depth corrected
+    assert torch.allclose(T[:2, 3], start[:2, 3], atol=1e-3)              # slide kept at the prediction

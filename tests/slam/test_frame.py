@@ -1,0 +1,32 @@
+import pytest
+import torch
+
+from dcslam.errors import DcslamError
+from dcslam.slam.frame import SPARSE_NORMAL_SEARCH, FrameSettings, prepare_frame
+from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
+
+H, W = 64, 208
+
+
+@pytest.fixture(scope="module")
+def street():
+    scene, K = StreetScene(0), kitti_K(H, W)
+    return scene.render(street_trajectory(1)[0], K, H, W).float(), K
+
+
+def test_sparse_scan_lines_get_normals_by_default(street):
+    depth, K = street
+    sparse = depth * lidar_mask(H, W, row_step=12, col_step=2)   # lines 12 px apart: beyond the old 8 px search
+    auto = prepare_frame(sparse, K)
+    narrow = prepare_frame(sparse, K, settings=FrameSettings(normal_search=8))
+    assert SPARSE_NORMAL_SEARCH >= 12
+    assert int(auto.valid.sum()) > 0.8 * int((sparse > 0).sum()) and not narrow.valid.any()
+
+
+def test_depth_range_and_shapes(street):
+    depth, K = street
+    frame = prepare_frame(depth, K, settings=FrameSettings(max_depth=20.0))
+    assert frame.vertex.shape == (H, W, 3) and frame.normal.shape == (H, W, 3) and frame.valid.shape == (H, W)
+    assert float(frame.vertex[..., 2][frame.valid].max()) <= 20.0
+    with pytest.raises(DcslamError):
+        prepare_frame(torch.zeros(2, 1, H, W), K)

@@ -1,0 +1,114 @@
+import math
+
+import pytest
+import torch
+
+from dcslam.geometry.se3 import pose_error
+from dcslam.slam.config import SlamSettings, build_slam
+from dcslam.slam.health import HealthRules, assess, summarise
+from dcslam.slam.pipeline import StepReport
+from dcslam.slam.scene import kitti_K, lidar_mask
+
+H, W = 64, 208
+
+
+def _tunnel_depth(K: torch.Tensor, half_width: float = 3.0, floor: float = 1.6, ceiling: float = -2.5):
+    """Depth of an endless straight tunnel (two walls, floor, ceiling; nothing along the direction of travel), so
+    every frame looks the same wherever the camera is along it. Shape: (H, W)."""
+    v, u = torch.meshgrid(torch.arange(H, dtype=torch.float64), torch.arange(W, dtype=torch.float64), indexing="ij")
+    x, y = (u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1]
+    big = torch.full_like(x, math.inf)
+    t = torch.minimum(torch.where(x > 1e-9, half_width / x.clamp_min(1e-9), big),
+                      torch.where(x < -1e-9, -half_width / x.clamp_max(-1e-9), big))
+    t = torch.minimum(t, torch.where(y > 1e-9, floor / y.clamp_min(1e-9), big))
+    t = torch.minimum(t, torch.where(y < -1e-9, ceiling / y.clamp_max(-1e-9), big))
+    return torch.where(t < 80, t, torch.zeros_like(t)).float()
+
+
+@pytest.mark.parametrize("sparse", [False, True], ids=["dense", "sparse"])
+@pytest.mark.parametrize("odometry", ["icp", "gradicp"])
+def test_featureless_tunnel_drive_is_flagged_never_silently_wrong(sparse, odometry):
+    """The car drives 1 m per frame down a featureless tunnel, but the frames cannot show it: ICP must not return
+    a trajectory as trustworthy that it cannot have measured."""
+    K = kitti_K(H, W).double()
+    depth = _tunnel_depth(K) * (lidar_mask(H, W, 4, 4) if sparse else 1)
+    frames = 6
+    slam = build_slam(SlamSettings(odometry=odometry))
+    for _ in range(frames):
+        slam.step(depth[None, None], K.float())
+    truth = torch.eye(4, dtype=torch.float64).repeat(frames, 1, 1)
+    truth[:, 2, 3] = torch.arange(frames, dtype=torch.float64)
+    dt, _ = pose_error(slam.trajectory().double(), truth)
+    summary = slam.health_summary()
+    assert float(dt[-1]) > 0.5                       # the motion is not observable ...
+    assert summary["suspect"] and summary["reasons"]  # ... and the run says so
+    assert summary["accepted"] < frames - 1
+
+
+def test_good_drive_is_not_flagged(street_drive):
+    depth, K, T = street_drive
+    slam = build_slam(SlamSettings())
+    poses = slam.run(depth, K)
+    dt, _ = pose_error(poses.double(), T)
+    summary = slam.health_summary()
+    assert float(dt.max()) < 0.2
+    assert not summary["suspect"], summary
+    assert summary["accepted"] == len(T) - 1
+
+
+@pytest.fixture(scope="module")
+def street_drive():
+    from dcslam.slam.scene import StreetScene, street_trajectory
+
+    h, w = 188, 621          # half KITTI size: at 64 x 208 the street's conditioning is ~3x lower than at full size
+    scene, K = StreetScene(0), kitti_K(h, w)
+    T = street_trajectory(5, step=1.0)
+    depth = torch.stack([scene.render(T[i], K, h, w) for i in range(5)]).float()[:, None]
+    return depth, K, T
+
+
+class TestAssess:
+    def test_rejected_keeps_reason(self):
+        assert assess(False, "diverged", 0, 0, math.nan, 0, 0, True) == ("rejected", ["diverged"])
+
+    def test_accepted(self):
+        assert assess(True, "", 900, 1000, 0.1, 0.05, 0.2, True) == ("accepted", [])
+
+    @pytest.mark.parametrize("args,word", [((50, 1000, 0.1, 0.0, 0.0, True), "paired"),
+                                           ((900, 1000, 1e-4, 0.0, 0.0, True), "conditioning"),
+                                           ((900, 1000, 0.1, 0.9, 0.0, True), "prediction"),
+                                           ((900, 1000, 0.1, 0.0, 5.0, True), "prediction")])
+    def test_degraded_says_why(self, args, word):
+        verdict, why = assess(True, "", *args)
+        assert verdict == "degraded" and word in why[0]
+
+    def test_prediction_gap_needs_a_velocity(self):
+        assert assess(True, "", 900, 1000, 0.1, 0.9, 0.0, False)[0] == "accepted"
+
+
+def _report(index, verdict):
+    return StepReport(index, torch.eye(4), verdict != "rejected", "", 0, 0, 0.0, 0, 0.0, verdict, ("x",))
+
+
+class TestSummarise:
+    def test_counts_skip_the_first_frame(self):
+        s = summarise([_report(0, "accepted")] + [_report(i, "accepted") for i in range(1, 11)])
+        assert (s["accepted"], s["degraded"], s["rejected"], s["suspect"]) == (10, 0, 0, False)
+
+    def test_one_rejected_step_makes_a_run_suspect(self):
+        s = summarise([_report(i, "rejected" if i == 3 else "accepted") for i in range(11)])
+        assert s["suspect"] and "rejected" in s["reasons"][0] and s["flagged_steps"][0]["frame"] == 3
+
+    def test_degraded_fraction(self):
+        reports = [_report(i, "degraded" if i <= 2 else "accepted") for i in range(21)]
+        assert not summarise(reports)["suspect"]
+        assert summarise(reports, HealthRules(max_degraded_fraction=0.05))["suspect"]
+
+    def test_a_streak_of_degraded_steps(self):
+        streak = [_report(i, "degraded" if i in (20, 21, 22) else "accepted") for i in range(41)]
+        apart = [_report(i, "degraded" if i in (5, 20, 35) else "accepted") for i in range(41)]
+        assert summarise(streak)["suspect"] and "consecutive" in summarise(streak)["reasons"][0]
+        assert not summarise(apart)["suspect"]
+
+    def test_empty(self):
+        assert summarise([])["suspect"] is False

@@ -1,0 +1,67 @@
+import torch
+
+from dcslam.slam.frame import prepare_frame
+from dcslam.slam.fusion import PointFusion
+from dcslam.slam.icpslam import ICPSLAM
+from dcslam.slam.pointmap import PointMap, assign_voxels, render, voxel_keys, voxel_representatives
+from dcslam.slam.scene import StreetScene, kitti_K, street_trajectory
+
+H, W = 48, 160
+
+
+def _cloud(points):
+    p = torch.tensor(points, dtype=torch.float32)
+    n = len(p)
+    return PointMap(p, torch.tensor([[0.0, 0, -1]]).repeat(n, 1), torch.zeros(n, 3), torch.ones(n), torch.ones(n),
+                    torch.zeros(n, dtype=torch.int64), torch.ones(n, dtype=torch.int64), voxel_keys(p, 0.1))
+
+
+def test_voxel_keys_same_voxel_same_key():
+    keys = voxel_keys(torch.tensor([[0.01, 0.02, 0.03], [0.09, 0.01, 0.05], [0.11, 0.0, 0.0], [-0.01, 0, 0]]), 0.1)
+    assert keys[0] == keys[1] and len(set(keys.tolist())) == 3
+
+
+def test_voxel_representatives_one_per_voxel_first_kept():
+    pts = torch.tensor([[0.01, 0, 0], [0.05, 0, 0], [0.25, 0, 0], [0.02, 0.01, 0], [0.26, 0, 0]])
+    assert voxel_representatives(pts, 0.1).tolist() == [0, 2]
+    assert voxel_representatives(torch.zeros(0, 3), 0.1).numel() == 0
+
+
+def test_render_nearest_point_wins_the_pixel():
+    K = torch.tensor([[10.0, 0, 4.5], [0, 10.0, 4.5], [0, 0, 1]])
+    view = render(_cloud([[0.0, 0, 5.0], [0.0, 0, 2.0], [0.5, 0, 2.0]]), torch.eye(4), K, 10, 10)
+    assert int(view.index[4, 4]) == 1 or int(view.index[5, 5]) == 1
+    assert int(view.valid.sum()) == 2
+
+
+def test_assign_voxels_reuses_existing_voxels():
+    pm = _cloud([[0.01, 0, 0]])
+    keys = voxel_keys(torch.tensor([[0.02, 0.0, 0.0], [1.0, 0, 0], [1.01, 0, 0]]), 0.1)
+    target, new = assign_voxels(pm, keys, torch.full((3,), -1), 0.1)
+    assert target.tolist() == [0, 1, 1] and new.numel() == 1
+
+
+def _drive(frames, mapper):
+    scene, K = StreetScene(0, length=frames + 40.0), kitti_K(H, W)
+    T = street_trajectory(frames, step=1.0).float()
+    sizes = []
+    for i in range(frames):
+        mapper.integrate(prepare_frame(scene.render(T[i].double(), K, H, W).float(), K), T[i])
+        sizes.append(len(mapper.map))
+    return sizes
+
+
+def test_local_map_stays_bounded_and_global_map_keeps_everything():
+    whole = PointFusion(voxel_size=0.2)
+    local = PointFusion(voxel_size=0.2, window=5)
+    full_sizes, local_sizes = _drive(30, whole), _drive(30, local)
+    assert full_sizes[-1] > 2 * max(local_sizes[10:])            # the whole map keeps growing ...
+    assert max(local_sizes[20:]) < 1.5 * max(local_sizes[8:12])   # ... the local one levels off
+    assert len(local.global_map()) >= 0.9 * full_sizes[-1]
+    assert local.global_map().points.device.type == "cpu"
+
+
+def test_local_map_without_archive_drops_old_points():
+    mapper = ICPSLAM(voxel_size=0.2, window=3, archive=False)
+    _drive(12, mapper)
+    assert mapper.archived == [] and len(mapper.global_map()) == len(mapper.map)

@@ -1,0 +1,33 @@
+import json
+
+import numpy as np
+import torch
+
+from dcslam.io.drive import DriveFrame, DriveWriter
+from dcslam.slam.config import SlamSettings, build_slam
+from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
+from dcslam.stages.slam import run_drive, write_outputs
+
+H, W, N = 48, 160, 4
+
+
+def test_summary_carries_health_and_the_whole_map(tmp_path):
+    scene, K = StreetScene(1), kitti_K(H, W)
+    poses = street_trajectory(N, step=0.5)
+    path = tmp_path / "street.h5"
+    with DriveWriter(path, K.double().numpy(), H, W, source="synthetic", date="2011_09_26", drive="street",
+                     split="test") as writer:
+        for i in range(N):
+            dense = scene.render(poses[i], K, H, W).float().numpy()
+            writer.append(DriveFrame(np.zeros((H, W, 3), np.uint8), dense * lidar_mask(H, W).numpy(), dense,
+                                poses[i].numpy(), 0.1 * i, i))
+    slam = build_slam(SlamSettings(local_map_frames=1))
+    run = run_drive(path, "dense", slam)
+    assert len(run.map) > len(slam.map)                      # archived points are in the written map
+    summary = run.summary()
+    health = summary["health"]
+    assert set(health) >= {"accepted", "degraded", "rejected", "suspect", "reasons", "flagged_steps"}
+    assert health["accepted"] + health["degraded"] + health["rejected"] == N - 1
+    written = write_outputs(run, tmp_path / "out")
+    assert json.loads(written["summary"].read_text())["health"] == json.loads(json.dumps(health))
+    assert torch.isfinite(torch.from_numpy(run.T_world_cam)).all()
