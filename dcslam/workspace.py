@@ -141,8 +141,8 @@ def _latest_layer(root: Path, made_by: str) -> str:
 def find_layer(ws: Workspace, ref: str) -> LayerRef | None:
     """The layer ``ref`` names, or ``None``. The grammar, everywhere in dcslam:
 
-    ``sparse`` | ``dense`` | ``sparse@<beams>`` | ``exact`` (the drive files' depth) | ``predicted/<run>`` | ``filtered/<name>`` | ``predicted`` or
-    ``filtered`` alone (the most recent such layer) | ``<name>`` (looked for in predictions/, then filtered/) |
+    ``sparse`` | ``dense`` | ``sparse@<beams>`` | ``exact`` (the drive files' depth) | ``predicted/<run>`` |
+    ``filtered/<name>`` | ``predicted`` or ``filtered`` alone (the most recent such layer) | ``<name>`` (looked for in predictions/, then filtered/) |
     a folder of ``<drive>.h5`` layer files | one ``.h5`` layer file.
     """
     from dcslam.io.drive import is_depth_kind
@@ -174,8 +174,8 @@ def resolve_layer(ws: Workspace, ref: str) -> LayerRef:
         if kind in LAYER_KINDS and name:
             folder, made_by = LAYER_KINDS[kind]
             raise DcslamError(f"{ws.root / folder / name} not found; run `{made_by}` first")
-        raise DcslamError(f"no depth layer {ref!r}: not sparse, dense, sparse@<beams> or exact, and neither {ws.predictions / ref} nor "
-                          f"{ws.filtered / ref} exists; run `dcslam predict` or `dcslam filter` first")
+        raise DcslamError(f"no depth layer {ref!r}: not sparse, dense, sparse@<beams> or exact, and neither "
+                          f"{ws.predictions / ref} nor {ws.filtered / ref} exists; run `dcslam predict` or `dcslam filter` first")
     return layer
 
 
