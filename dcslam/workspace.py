@@ -142,8 +142,8 @@ def find_layer(ws: Workspace, ref: str) -> LayerRef | None:
     """The layer ``ref`` names, or ``None``. The grammar, everywhere in dcslam:
 
     ``sparse`` | ``dense`` | ``sparse@<beams>`` | ``exact`` (the drive files' depth) | ``predicted/<run>`` |
-    ``filtered/<name>`` | ``predicted`` or ``filtered`` alone (the most recent such layer) | ``<name>`` (looked for in predictions/, then filtered/) |
-    a folder of ``<drive>.h5`` layer files | one ``.h5`` layer file.
+    ``filtered/<name>`` | ``predicted`` or ``filtered`` alone (the most recent such layer) | ``<name>`` (looked
+    for in predictions/, then filtered/) | a folder of ``<drive>.h5`` layer files | one ``.h5`` layer file.
     """
     from dcslam.io.drive import is_depth_kind
 
