@@ -175,7 +175,8 @@ def resolve_layer(ws: Workspace, ref: str) -> LayerRef:
             folder, made_by = LAYER_KINDS[kind]
             raise DcslamError(f"{ws.root / folder / name} not found; run `{made_by}` first")
         raise DcslamError(f"no depth layer {ref!r}: not sparse, dense, sparse@<beams> or exact, and neither "
-                          f"{ws.predictions / ref} nor {ws.filtered / ref} exists; run `dcslam predict` or `dcslam filter` first")
+                          f"{ws.predictions / ref} nor {ws.filtered / ref} exists; run `dcslam predict` or "
+                          f"`dcslam filter` first")
     return layer
 
 
