@@ -298,11 +298,29 @@ def index_drive(drive: RawDrive) -> DriveIndex:
     return DriveIndex(drive, calib, ids, stamps[ids], rebase(T_world_cam_raw[ids]))
 
 
-def read_drive(index: DriveIndex) -> Iterator[DriveFrame]:
-    """The frames of a checked drive, read lazily: image, sparse and dense depth, pose, timestamp, frame number.
+def sparse_from_scan(drive: RawDrive, calib: Calibration, frame_id: int, beams: tuple[int, ...],
+                     image_size: tuple[int, int]) -> dict[str, np.ndarray]:
+    """``{"sparse@<B>": (H, W) float32}``: the frame's Velodyne scan cut to ``B`` of its 64 lasers
+    (:func:`dcslam.geometry.lidar_beams.keep_beams`) and projected into camera 2 as ``velodyne_raw`` is."""
+    from dcslam.geometry.lidar_beams import keep_beams
 
-    Raises :class:`DcslamError` naming the file on an unreadable image, an 8-bit or truncated depth PNG, or sizes
-    that differ between a frame's image and its depth.
+    path = drive.velodyne_path(frame_id)
+    if not path.exists():
+        raise DcslamError(f"{path} not found: sparse depth of fewer beams is made from the raw Velodyne scans "
+                          f"(velodyne_points/data/*.bin); add them or drop --beams")
+    scan = read_velodyne(path)
+    try:
+        return {f"sparse@{b}": project_velodyne(keep_beams(scan, b), calib, image_size) for b in beams}
+    except DcslamError as exc:
+        raise DcslamError(f"{path}: {exc}") from None
+
+
+def read_drive(index: DriveIndex, beams: tuple[int, ...] = ()) -> Iterator[DriveFrame]:
+    """The frames of a checked drive, read lazily: image, sparse and dense depth, pose, timestamp, frame number,
+    and for each beam count in ``beams`` the sparse depth of that many lasers (``frame.extra["sparse@<B>"]``).
+
+    Raises :class:`DcslamError` naming the file on an unreadable image, an 8-bit or truncated depth PNG, sizes
+    that differ between a frame's image and its depth, or (with ``beams``) a missing or malformed Velodyne scan.
     """
     drive = index.drive
     for i, frame_id in enumerate(index.frame_ids):
@@ -313,5 +331,6 @@ def read_drive(index: DriveIndex) -> Iterator[DriveFrame]:
             if depth.shape != rgb.shape[:2]:
                 raise DcslamError(f"{drive.depth_path(kind, frame_id)}: depth is {depth.shape[1]}x{depth.shape[0]} "
                                   f"but image {drive.image_path(frame_id).name} is {rgb.shape[1]}x{rgb.shape[0]}")
+        extra = sparse_from_scan(drive, index.calib, frame_id, beams, rgb.shape[:2]) if beams else {}
         yield DriveFrame(rgb=rgb, sparse=sparse, dense=dense, T_world_cam=index.T_world_cam[i],
-                    timestamp=float(index.timestamps[i]), frame_id=int(frame_id))
+                         timestamp=float(index.timestamps[i]), frame_id=int(frame_id), extra=extra)
