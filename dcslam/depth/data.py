@@ -77,17 +77,24 @@ class DriveFrames:
     """The frames of one drive file used for training or validation, read lazily.
 
     ``indices`` are the drive frames used: every ``stride``-th frame, at most ``max_frames`` of them.
-    ``load(positions)`` reads frames ``indices[positions]`` as a :class:`Batch` after crop and scaling.
+    ``load(positions)`` reads frames ``indices[positions]`` as a :class:`Batch` after crop and scaling; the batch's
+    ``sparse`` is the drive's depth kind ``input`` (``sparse``, ``sparse@16``, ...) and its ``dense`` the kind
+    ``target`` (``dense``, or ``exact`` on generated drives).
     """
 
-    def __init__(self, path: Path | str, max_frames: int = 200, stride: int = 1, scale: float = 1.0, crop: int = 0):
-        from dcslam.io.drive import DriveFile
+    def __init__(self, path: Path | str, max_frames: int = 200, stride: int = 1, scale: float = 1.0, crop: int = 0,
+                 input: str = "sparse", target: str = "dense"):
+        from dcslam.io.drive import DriveFile, check_input_kind
 
         if stride < 1 or max_frames < 1:
             raise DcslamError(f"stride and max frames must be >= 1, got {stride} and {max_frames}")
         self.factor = check_view(scale, crop)
         self.crop = crop
+        self.input, self.target = check_input_kind(input), check_input_kind(target)
         self.drive = DriveFile(path)
+        for kind in (input, target):
+            if kind not in self.drive.kinds:
+                self.drive.depth(kind, 0)  # fails with one line naming how to make it
         n, height, _ = self.drive.shape
         if crop > height:
             raise DcslamError(f"--crop {crop} is more rows than the frames of {self.drive.path} have ({height})")
@@ -109,8 +116,8 @@ class DriveFrames:
 
     def load(self, positions) -> Batch:
         frames = [self.indices[p] for p in positions]
-        sparse = np.stack([self._view(self.drive.depth("sparse", i)) for i in frames])
-        dense = np.stack([self._view(self.drive.depth("dense", i)) for i in frames])
+        sparse = np.stack([self._view(self.drive.depth(self.input, i)) for i in frames])
+        dense = np.stack([self._view(self.drive.depth(self.target, i)) for i in frames])
         return Batch(sparse=torch.from_numpy(sparse)[:, None], dense=torch.from_numpy(dense)[:, None],
                      K=torch.from_numpy(self.K), T_world_cam=torch.from_numpy(self.drive.poses[frames]))
 

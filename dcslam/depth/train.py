@@ -53,6 +53,8 @@ class TrainConfig:
     batch_size: int = 1
     seed: int = 0
     device: str = "auto"
+    input: str = "sparse"
+    target: str = "dense"
     train_drives: list = field(default_factory=list)
     val_drives: list = field(default_factory=list)
 
@@ -67,6 +69,10 @@ class TrainConfig:
             if getattr(self, name) < 1:
                 raise DcslamError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
         check_view(self.scale, self.crop)
+        from dcslam.io.drive import check_input_kind
+
+        check_input_kind(self.input)
+        check_input_kind(self.target)
         if not self.train_drives:
             raise DcslamError("no training drives; run `dcslam prepare-kitti` (or `dcslam synth`) first")
 

@@ -75,6 +75,18 @@ def is_depth_kind(kind: str) -> bool:
 def _beams_of(kind: str) -> int | None:
     base, at, beams = kind.partition("@")
     return int(beams) if at else None
+
+
+def input_beams(kind: str) -> int | None:
+    """LiDAR beams behind a depth kind: 64 for ``sparse`` (KITTI's HDL-64E), B for ``sparse@B``, else None."""
+    depth_dataset(kind)
+    return 64 if kind == "sparse" else _beams_of(kind)
+
+
+def check_input_kind(kind: str) -> str:
+    """``kind`` if it names depth held in drive files (a network's input or target), else :class:`DcslamError`."""
+    depth_dataset(kind)
+    return kind
 _COMPRESSION = dict(compression="gzip", compression_opts=1, shuffle=True)
 
 

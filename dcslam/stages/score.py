@@ -62,8 +62,8 @@ def _file_or_layer_output(ws: Workspace, kind: str, path: Path | None, gt: Path 
 class ScoreDepthConfig:
     """Options of ``dcslam score depth``."""
 
-    layer: str | None = option(None, help="sparse, dense, a run or filter name (or predicted/<run>, "
-                                          "filtered/<name>), or a folder of layer files. Required.")
+    layer: str | None = option(None, help="sparse, dense, sparse@<beams>, exact, a run or filter name (or "
+                                          "predicted/<run>, filtered/<name>), or a folder of layer files. Required.")
     drive: list[str] = option(default_factory=list, help=DRIVE_HELP)
     out: Path | None = option(None, help=OUT_HELP)
     raw: bool = option(False, flags=("--raw",), help="No devkit interpolation: score only the pixels where the "
