@@ -75,6 +75,7 @@ class PreparedDrive:
     split: str
     path: Path
     frames: int
+    exact: bool = False  # holds depth/exact (generated drives)
 
 
 @dataclass(frozen=True)
@@ -186,18 +187,20 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
         first = next(frames)  # its image gives the frame size
         height, width = first.rgb.shape[:2]
         with DriveWriter(path, index.K, height, width, source=source, date=drive.date, drive=drive.name,
-                         split=split, force=force, extra=tuple(f"sparse@{b}" for b in beams)) as writer:
+                         split=split, force=force,
+                         extra=(*(f"sparse@{b}" for b in beams), *(("exact",) if drive.has_exact else ()))) as writer:
             writer.append(first)
             for frame in frames:
                 writer.append(frame)
-        written.append(PreparedDrive(drive.name, split, path, len(index)))
+        written.append(PreparedDrive(drive.name, split, path, len(index), drive.has_exact))
 
     out_splits = {split: [d.name for d in written if d.split == split] for split in SPLIT_NAMES}
     write_json_atomic(splits_path, out_splits, force=True)
     config_path = write_json_atomic(out_dir / "prepare-kitti.json", stage_config("prepare-kitti", {
         "kitti_root": str(kitti_root), "out_dir": str(out_dir), "source": source, "splits": label,
         "max_frames": max_frames, "include_unsplit": include_unsplit, "beams": list(beams),
-        "drives": {d.name: {"split": d.split, "frames": d.frames} for d in written}}), force=True)
+        "drives": {d.name: {"split": d.split, "frames": d.frames, "exact": d.exact} for d in written}}),
+        force=True)
     return PrepareResult(source, tuple(written), out_splits, splits_path, config_path, tuple(notes))
 
 

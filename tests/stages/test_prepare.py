@@ -230,6 +230,26 @@ class TestPrepareFailures:
             prepare_kitti(tiny_root, out, include_unsplit=True)
         assert len(calls) == 3 and _files(out) == []
 
+    def test_exact_depth_round_trip_and_mismatch(self, tiny_root, tmp_path):
+        drive = kitti.find_drives(tiny_root)[0]
+        rng = np.random.default_rng(5)
+        exact = {i: rng.uniform(1, 90, (32, 48)).astype(np.float32) for i in range(5, 9)}
+        for i, depth in exact.items():
+            kitti.write_depth_png(drive.exact_path(i), depth)
+        result = prepare_kitti(tiny_root, tmp_path / "drives", include_unsplit=True)
+        assert result.drives[0].exact
+        with DriveFile(result.drives[0].path) as written:
+            assert written.kinds == ("sparse", "dense", "exact")
+            for k, i in enumerate(range(5, 9)):
+                assert np.abs(written.depth("exact", k) - exact[i]).max() <= 0.5 / 256 + 1e-5
+        drive.exact_path(8).unlink()
+        with pytest.raises(DcslamError, match=r"dcslam_exact_synthetic: 3 frames but velodyne_raw has 4"):
+            prepare_kitti(tiny_root, tmp_path / "other", include_unsplit=True)
+        drive.exact_path(8).write_bytes(b"not a png")
+        with pytest.raises(DcslamError, match="0000000008.png"):
+            prepare_kitti(tiny_root, tmp_path / "other", include_unsplit=True)
+        assert _files(tmp_path / "other") == []
+
     def test_max_frames_checked(self, tiny_root, tmp_path):
         with pytest.raises(DcslamError, match="at least 1"):
             prepare_kitti(tiny_root, tmp_path / "drives", max_frames=0)
