@@ -99,3 +99,14 @@ def test_bad_options(workspace, tmp_path):
     with pytest.raises(DcslamError):
         resolve_device("tpu")
     assert resolve_device("auto").type in ("cpu", "cuda")
+
+
+def test_nconv_training_reduces_the_loss(workspace):
+    run = workspace / "runs" / "nconv"
+    train(run, _config(workspace, epochs=4, model="nconv", model_hparams={}, lr=1e-2))
+    rows = _rows(run)
+    first = [r["loss"] for r in rows if r["kind"] == "train" and r["epoch"] == 0]
+    last = [r["loss"] for r in rows if r["kind"] == "train" and r["epoch"] == 3]
+    assert sum(last) < 0.95 * sum(first)
+    vals = [r for r in rows if r["kind"] == "val"]
+    assert vals[-1]["rmse_mm"] < vals[0]["rmse_mm"]

@@ -19,6 +19,7 @@ MODEL_FORMAT = "dcslam.model/1"
 ARCHITECTURES = {  # trainable network name → "module:class" (the class takes its hyperparameters as keywords)
     "sparse-conv": "dcslam.depth.models.sparse_conv:SparseConvNet",
     "dncnn": "dcslam.depth.models.dncnn:DnCNN",
+    "nconv": "dcslam.depth.models.nconv:NConvCNN",
 }
 CLASSICAL = {  # completer that needs no training → "module:factory" (called with no argument)
     "ip-basic-fast": "dcslam.depth.models.ip_basic:fast",
