@@ -32,6 +32,8 @@ With ``depth/sparse_<B>`` datasets the root attribute ``sparse_beams`` lists the
 
 Layer file, schema ``dcslam.layer/1``: dataset ``depth`` (N, H, W) float32 metres (0 = none, never NaN) and root
 attributes ``schema``, ``drive`` (the drive file's name), ``made_by`` (a run or filter name) and ``config`` (JSON).
+Optionally a dataset ``confidence`` (N, H, W) float32 in [0, 1] beside ``depth``: how sure the completer that made
+the layer is of each pixel (confidence-aware completers such as ``nconv``); layers without it still read.
 """
 from __future__ import annotations
 
@@ -337,12 +339,21 @@ class DriveFile:
 
 @dataclass
 class Layer:
-    """A depth layer: ``depth`` (N, H, W) float32 metres (0 = none) with its provenance."""
+    """A depth layer: ``depth`` (N, H, W) float32 metres (0 = none) with its provenance, and optionally the
+    completer's ``confidence`` (N, H, W) float32 in [0, 1]."""
 
     depth: np.ndarray
     drive: str
     made_by: str
     config: dict = field(default_factory=dict)
+    confidence: np.ndarray | None = None
+
+
+def _check_confidence(confidence: np.ndarray, shape: tuple, where: str) -> None:
+    if confidence.shape != shape:
+        raise DcslamError(f"{where}confidence has shape {confidence.shape}, expected {shape} like its depth")
+    if not np.all(np.isfinite(confidence)) or np.any(confidence < 0) or np.any(confidence > 1):
+        raise DcslamError(f"{where}confidence must be finite and within [0, 1]")
 
 
 def write_layer(path: Path | str, layer: Layer, force: bool = False) -> Path:
@@ -355,8 +366,13 @@ def write_layer(path: Path | str, layer: Layer, force: bool = False) -> Path:
     if not np.all(np.isfinite(depth)) or np.any(depth < 0):
         raise DcslamError("layer depth must be finite and >= 0 (0 = no value)")
     n, h, w = depth.shape
+    confidence = None if layer.confidence is None else np.asarray(layer.confidence)
+    if confidence is not None:
+        _check_confidence(confidence, depth.shape, "layer ")
     with atomic_output(path, force=force) as tmp, h5py.File(tmp, "w") as h5:
         h5.create_dataset("depth", data=depth.astype(np.float32), chunks=(1, h, w), **_COMPRESSION)
+        if confidence is not None:
+            h5.create_dataset("confidence", data=confidence.astype(np.float32), chunks=(1, h, w), **_COMPRESSION)
         h5.attrs["schema"] = LAYER_SCHEMA
         h5.attrs["drive"] = layer.drive
         h5.attrs["made_by"] = layer.made_by
@@ -376,12 +392,15 @@ def read_layer(path: Path | str, expect_frames: int | None = None) -> Layer:
             if h5.attrs.get("schema") != LAYER_SCHEMA or "depth" not in h5:
                 raise DcslamError(f"{path}: not a dcslam depth layer (schema {h5.attrs.get('schema')!r})")
             depth = h5["depth"][()]
+            confidence = h5["confidence"][()] if "confidence" in h5 else None
             layer = Layer(depth=depth, drive=str(h5.attrs.get("drive", "")), made_by=str(h5.attrs.get("made_by", "")),
-                          config=json.loads(h5.attrs.get("config", "{}")))
+                          config=json.loads(h5.attrs.get("config", "{}")), confidence=confidence)
     except OSError as exc:
         raise DcslamError(f"{path} is not a readable HDF5 layer file ({exc})") from None
     if depth.ndim != 3:
         raise DcslamError(f"{path}: depth has shape {depth.shape}, expected (N, H, W)")
+    if confidence is not None:
+        _check_confidence(confidence, depth.shape, f"{path}: ")
     if expect_frames is not None and depth.shape[0] != expect_frames:
         raise DcslamError(f"{path}: layer has {depth.shape[0]} frames but its drive has {expect_frames}")
     return layer

@@ -259,6 +259,37 @@ class TestLayers:
             read_layer(tmp_path / "drive.h5")
 
 
+
+class TestLayerConfidence:
+    def test_round_trip_and_old_layers(self, tmp_path):
+        rng = np.random.default_rng(1)
+        depth = rng.uniform(0, 50, (3, H, W)).astype(np.float32)
+        confidence = rng.uniform(0, 1, (3, H, W)).astype(np.float32)
+        write_layer(tmp_path / "c.h5", Layer(depth, drive="d1.h5", made_by="nconv", confidence=confidence))
+        layer = read_layer(tmp_path / "c.h5", expect_frames=3)
+        assert np.array_equal(layer.confidence, confidence) and np.array_equal(layer.depth, depth)
+        with h5py.File(tmp_path / "c.h5") as h5:
+            assert h5["confidence"].dtype == np.float32 and h5["confidence"].chunks == (1, H, W)
+        write_layer(tmp_path / "old.h5", Layer(depth, drive="d1.h5", made_by="sparse-conv"))
+        assert read_layer(tmp_path / "old.h5").confidence is None
+
+    @pytest.mark.parametrize("confidence, match", [
+        (np.full((3, H, W), 1.5, np.float32), r"within \[0, 1\]"),
+        (np.full((3, H, W), np.nan, np.float32), "finite"),
+        (np.ones((2, H, W), np.float32), "like its depth"),
+    ])
+    def test_bad_confidence(self, tmp_path, confidence, match):
+        depth = np.ones((3, H, W), np.float32)
+        with pytest.raises(DcslamError, match=match):
+            write_layer(tmp_path / "c.h5", Layer(depth, drive="d", made_by="x", confidence=confidence))
+        assert _files(tmp_path) == []
+        write_layer(tmp_path / "c.h5", Layer(depth, drive="d", made_by="x"))
+        with h5py.File(tmp_path / "c.h5", "r+") as h5:
+            h5.create_dataset("confidence", data=confidence)
+        with pytest.raises(DcslamError, match=match):
+            read_layer(tmp_path / "c.h5")
+
+
 class TestListingAndSplits:
     def test_list_drives_skips_temporary_files(self, tmp_path):
         write(tmp_path / "b.h5", make_frames(1))
