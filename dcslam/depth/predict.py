@@ -24,12 +24,22 @@ class NetworkCompleter:
         self.model, self.device, self.name = model, device, name
         self.factor = check_view(scale, 0)
 
+    @property
+    def has_confidence(self) -> bool:
+        """Whether the network says how sure it is (``forward_with_confidence``, e.g. ``nconv``)."""
+        return hasattr(self.model, "forward_with_confidence")
+
     def __call__(self, sparse_m: np.ndarray) -> np.ndarray:
         """(H, W) float32 metres → (H, W) float32 metres (finite; 0 = none, else ≥ :data:`MIN_DEPTH_M`).
 
         Outputs below 0.1 m become holes: no depth sensor here measures that near, and a network that outputs them
         (a chamfer-trained one settles on ~0.2 mm where no LiDAR reaches) is saying nothing.
         """
+        return self.complete(sparse_m)[0]
+
+    def complete(self, sparse_m: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Like :meth:`__call__`, with the network's confidence (H, W) float32 in [0, 1] (0 at holes), or None
+        for a network without one."""
         import cv2
         import torch
 
@@ -39,12 +49,21 @@ class NetworkCompleter:
         small = downscale_depth(np.asarray(sparse_m, np.float32), self.factor)
         with torch.no_grad():
             x = torch.from_numpy(small)[None, None].to(self.device)
-            pred = self.model(x, (x > 0).to(x.dtype))[0, 0].float().cpu().numpy()
+            mask = (x > 0).to(x.dtype)
+            if self.has_confidence:
+                pred, confidence = (t[0, 0].float().cpu().numpy() for t in self.model.forward_with_confidence(x, mask))
+            else:
+                pred, confidence = self.model(x, mask)[0, 0].float().cpu().numpy(), None
         pred = np.nan_to_num(pred, nan=0.0, posinf=0.0, neginf=0.0)
         pred[pred < MIN_DEPTH_M] = 0
+        if confidence is not None:
+            confidence = np.clip(np.nan_to_num(confidence, nan=0.0), 0, 1)
+            confidence[pred == 0] = 0
         if pred.shape != (h, w):
             pred = cv2.resize(pred, (w, h), interpolation=cv2.INTER_NEAREST)
-        return pred.astype(np.float32)
+            if confidence is not None:
+                confidence = cv2.resize(confidence, (w, h), interpolation=cv2.INTER_NEAREST)
+        return pred.astype(np.float32), None if confidence is None else confidence.astype(np.float32)
 
 
 @dataclass

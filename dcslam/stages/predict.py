@@ -74,8 +74,9 @@ def predict_drive(predictor, drive_path: Path | str, out_path: Path | str, force
     """Complete every frame's depth of kind ``input`` (``sparse``, ``sparse@16``, ...) of a drive and write the layer
     ``out_path`` atomically.
 
-    The layer holds ``depth`` (N, H, W) float32 metres, the same frames as the drive; its configuration records the
-    input kind and its LiDAR beams (``input``, ``input_beams``).
+    The layer holds ``depth`` (N, H, W) float32 metres, the same frames as the drive (and ``confidence`` when the
+    completer gives one); its configuration records the input kind and its LiDAR beams (``input``,
+    ``input_beams``).
     """
     from dcslam.io.drive import DriveFile, Layer, input_beams, write_layer
     from dcslam.progress import track
@@ -86,10 +87,15 @@ def predict_drive(predictor, drive_path: Path | str, out_path: Path | str, force
     with DriveFile(drive_path) as drive:
         n, h, w = drive.shape
         depth = np.zeros((n, h, w), np.float32)
+        with_confidence = getattr(predictor.completer, "has_confidence", False)
+        confidence = np.zeros((n, h, w), np.float32) if with_confidence else None
         frames = range(n)
         for i in (track(frames, f"predict {drive.name}") if progress else frames):
-            depth[i] = predictor.completer(drive.depth(input, i))
-        layer = Layer(depth=depth, drive=drive.path.name, made_by=predictor.made_by,
+            if with_confidence:
+                depth[i], confidence[i] = predictor.completer.complete(drive.depth(input, i))
+            else:
+                depth[i] = predictor.completer(drive.depth(input, i))
+        layer = Layer(depth=depth, confidence=confidence, drive=drive.path.name, made_by=predictor.made_by,
                       config={**predictor.config, "drive_file": str(drive.path), "input": input,
                               "input_beams": input_beams(input)})
     return write_layer(out_path, layer, force=force)

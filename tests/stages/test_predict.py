@@ -51,3 +51,13 @@ def test_input_of_fewer_beams(tmp_path):
 def test_missing_beams_name_the_command(ws):
     with pytest.raises(DcslamError, match=r"holds no sparse@8 depth.*--beams 8"):
         run(ws, PredictConfig(model="ip-basic", input="sparse@8"))
+
+
+def test_confidence_aware_run_writes_confidence(ws):
+    torch.manual_seed(0)
+    save_model(ws.runs / "nc" / "model.pt", build_model("nconv"), meta={"scale": 0.5})
+    layer = read_layer(run(ws, PredictConfig(run="nc", device="cpu")).layers[0])
+    assert layer.confidence is not None and layer.confidence.shape == layer.depth.shape
+    assert (layer.confidence[layer.depth == 0] == 0).all() and layer.confidence.max() > 0
+    save_model(ws.runs / "sc" / "model.pt", build_model("sparse-conv", channels=4), meta={"scale": 1.0})
+    assert read_layer(run(ws, PredictConfig(run="sc", device="cpu")).layers[0]).confidence is None
