@@ -3,8 +3,9 @@
 One module per filter (``range``, ``bilateral``, ``outlier``, ``hidden``, ``edges``, ``confidence``), registered by
 name in :data:`FILTERS`; adding a filter is one module plus one line there. Every filter is a small frozen object
 with ``apply(depth_m, K) -> depth_m`` on one (H, W) float32 image in metres (a filter with ``needs_confidence``
-also takes the layer's ``confidence=`` (H, W)) (0 = no value) and ``describe() -> dict`` (recorded in the layer file it produces). Filters only ever *remove* depth
-(set pixels to 0) or, for the bilateral filter, smooth the depth of pixels that have one; none of them fills holes.
+also takes the layer's ``confidence=`` (H, W)) (0 = no value) and ``describe() -> dict`` (recorded in the layer
+file it produces). Filters only ever *remove* depth (set pixels to 0) or, for the bilateral filter, smooth the depth
+of pixels that have one; none of them fills holes.
 
 The thesis's code filtered with a depth range of 5–15 m and ``cv2.bilateralFilter(d=5, sigmaColor=80,
 sigmaSpace=80)``; these are the presets ``thesis-range`` and ``thesis-bilateral`` (:data:`PRESETS`). Statistical
