@@ -37,11 +37,18 @@ class NetworkCompleter:
         """
         return self.complete(sparse_m)[0]
 
-    def complete(self, sparse_m: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    @property
+    def guided(self) -> bool:
+        """Whether the network also takes the colour image (give ``rgb`` to :meth:`complete`)."""
+        return bool(getattr(self.model, "GUIDED", False))
+
+    def complete(self, sparse_m: np.ndarray, rgb: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """Like :meth:`__call__`, with the network's confidence (H, W) float32 in [0, 1] (0 at holes), or None
-        for a network without one."""
+        for a network without one. ``rgb`` (H, W, 3) uint8 is required by guided networks."""
         import cv2
         import torch
+
+        from dcslam.depth.data import downscale_rgb
 
         if sparse_m.ndim != 2:
             raise DcslamError(f"sparse depth has shape {sparse_m.shape}, expected (H, W)")
@@ -50,8 +57,15 @@ class NetworkCompleter:
         with torch.no_grad():
             x = torch.from_numpy(small)[None, None].to(self.device)
             mask = (x > 0).to(x.dtype)
+            extra = ()
+            if self.guided:
+                if rgb is None or np.shape(rgb) != (h, w, 3):
+                    raise DcslamError(f"{self.name} is guided: it needs the (H, W, 3) colour image of the frame")
+                extra = (torch.from_numpy(np.ascontiguousarray(downscale_rgb(rgb, self.factor).transpose(2, 0, 1)))
+                         [None].to(self.device, x.dtype),)
             if self.has_confidence:
-                pred, confidence = (t[0, 0].float().cpu().numpy() for t in self.model.forward_with_confidence(x, mask))
+                pred, confidence = (t[0, 0].float().cpu().numpy()
+                                    for t in self.model.forward_with_confidence(x, mask, *extra))
             else:
                 pred, confidence = self.model(x, mask)[0, 0].float().cpu().numpy(), None
         pred = np.nan_to_num(pred, nan=0.0, posinf=0.0, neginf=0.0)

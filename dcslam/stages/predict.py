@@ -92,7 +92,8 @@ def predict_drive(predictor, drive_path: Path | str, out_path: Path | str, force
         frames = range(n)
         for i in (track(frames, f"predict {drive.name}") if progress else frames):
             if with_confidence:
-                depth[i], confidence[i] = predictor.completer.complete(drive.depth(input, i))
+                rgb = drive.rgb(i) if getattr(predictor.completer, "guided", False) else None
+                depth[i], confidence[i] = predictor.completer.complete(drive.depth(input, i), rgb)
             else:
                 depth[i] = predictor.completer(drive.depth(input, i))
         layer = Layer(depth=depth, confidence=confidence, drive=drive.path.name, made_by=predictor.made_by,

@@ -133,6 +133,7 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
     import torch
 
     from dcslam.depth.data import DriveFrames
+    from dcslam.depth.models import is_guided
     from dcslam.io.drive import input_beams
     from dcslam.depth.train import barrier, rank_and_world, resolve_device, seed_all, train_loop
     from dcslam.report.plots import plot_training_curves
@@ -152,11 +153,12 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
 
     open_drives = []
     try:
+        guided = is_guided(config.model)
         train_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop, config.input,
-                                    config.target) for p in config.train_drives]
+                                    config.target, rgb=guided) for p in config.train_drives]
         open_drives += train_frames
         val_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop, config.input,
-                                  config.target) for p in config.val_drives]
+                                  config.target, rgb=guided) for p in config.val_drives]
         open_drives += val_frames
         if rank == 0 and not resume:
             settings = asdict(config)

@@ -43,7 +43,7 @@ def test_mse_dense_run_writes_everything(workspace):
     assert meta["step"] == best["step"]  # the best validation checkpoint is the one kept
 
 
-@pytest.mark.parametrize("model, lr", [("sparse-conv", 1e-3), ("nconv", 1e-2)])
+@pytest.mark.parametrize("model, lr", [("sparse-conv", 1e-3), ("nconv", 1e-2), ("nconv-guided", 1e-2)])
 def test_training_reduces_the_loss(workspace, model, lr):
     run = workspace / "runs" / model
     train(run, _config(workspace, epochs=4, model=model, model_hparams={}, lr=lr))

@@ -61,3 +61,10 @@ def test_confidence_aware_run_writes_confidence(ws):
     assert (layer.confidence[layer.depth == 0] == 0).all() and layer.confidence.max() > 0
     save_model(ws.runs / "sc" / "model.pt", build_model("sparse-conv", channels=4), meta={"scale": 1.0})
     assert read_layer(run(ws, PredictConfig(run="sc", device="cpu")).layers[0]).confidence is None
+
+
+def test_guided_run_reads_the_colour_image(ws):
+    torch.manual_seed(0)
+    save_model(ws.runs / "g" / "model.pt", build_model("nconv-guided"), meta={"scale": 0.5})
+    layer = read_layer(run(ws, PredictConfig(run="g", device="cpu")).layers[0])
+    assert layer.confidence is not None and (layer.depth > 0).mean() > 0.5

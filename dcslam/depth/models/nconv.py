@@ -109,3 +109,52 @@ class NConvCNN(nn.Module):
 
     def forward(self, sparse: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
         return self.forward_with_confidence(sparse, mask)[0]
+
+
+class GuidedNConvCNN(nn.Module):
+    """RGB-guided NConv-CNN: the unguided network's depth and confidence, refined by a small CNN that also sees the
+    colour image (depth edges fall on colour edges), in the spirit of the paper's guided variant.
+
+    The refinement works on depth divided by the mean of the valid sparse input (so the network stays equivariant to
+    the scale of depth): it adds a correction to the normalised depth and gates the confidence.
+
+    Shape:
+        sparse: (B, 1, H, W) depth (0 where unknown), mask: (B, 1, H, W), rgb: (B, 3, H, W) in [0, 1]
+        → (B, 1, H, W)
+    """
+
+    ARCH = "nconv-guided"
+    GUIDED = True
+
+    def __init__(self, channels: int = 2, kernel_size: int = 5, scales: int = 3, features: int = 8,
+                 eps: float = 1e-8):
+        super().__init__()
+        self.hparams = {"channels": int(channels), "kernel_size": int(kernel_size), "scales": int(scales),
+                        "features": int(features), "eps": float(eps)}
+        self.nconv = NConvCNN(channels, kernel_size, scales, eps)
+        self.refine = nn.Sequential(nn.Conv2d(5, features, 3, padding=1), nn.ReLU(),
+                                    nn.Conv2d(features, features, 3, padding=1), nn.ReLU(),
+                                    nn.Conv2d(features, 2, 3, padding=1))
+        with torch.no_grad():  # untrained: the unguided output, unchanged
+            self.refine[-1].weight.zero_()
+            self.refine[-1].bias.copy_(torch.tensor([0.0, 4.0]))
+
+    def forward_with_confidence(self, sparse: torch.Tensor, mask: torch.Tensor | None = None,
+                                rgb: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """Depth and confidence, (B, 1, H, W) each; confidence in [0, 1]."""
+        if rgb is None:
+            raise DcslamError("nconv-guided needs the colour image (rgb (B, 3, H, W))")
+        if rgb.ndim != 4 or rgb.shape[1] != 3 or rgb.shape[0] != sparse.shape[0] or rgb.shape[2:] != sparse.shape[2:]:
+            raise DcslamError(f"rgb has shape {tuple(rgb.shape)}, expected ({sparse.shape[0]}, 3, "
+                              f"{sparse.shape[2]}, {sparse.shape[3]})")
+        if mask is None:
+            mask = (sparse > 0).to(sparse.dtype)
+        depth, confidence = self.nconv.forward_with_confidence(sparse, mask)
+        valid = mask.sum(dim=(1, 2, 3), keepdim=True)
+        scale = ((sparse * mask).sum(dim=(1, 2, 3), keepdim=True) / valid.clamp(min=1)).clamp(min=1e-3)
+        correction, gate = self.refine(torch.cat([rgb.to(depth.dtype), depth / scale, confidence], 1)).unbind(1)
+        return depth + scale * correction[:, None], confidence * torch.sigmoid(gate[:, None])
+
+    def forward(self, sparse: torch.Tensor, mask: torch.Tensor | None = None,
+                rgb: torch.Tensor | None = None) -> torch.Tensor:
+        return self.forward_with_confidence(sparse, mask, rgb)[0]

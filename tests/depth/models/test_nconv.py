@@ -74,3 +74,31 @@ class TestNConvCNN:
             NConv2d(1, 1, 4)
         with pytest.raises(DcslamError):
             build_model("nconv", channels=0)
+
+
+class TestGuidedNConvCNN:
+    def test_untrained_equals_the_unguided_network_and_checks_rgb(self):
+        from dcslam.depth.models import is_guided
+        from dcslam.depth.models.nconv import GuidedNConvCNN
+
+        torch.manual_seed(0)
+        net = build_model("nconv-guided")
+        assert isinstance(net, GuidedNConvCNN) and is_guided("nconv-guided") and not is_guided("nconv")
+        x = torch.rand(2, 1, 20, 30) * 20 * (torch.rand(2, 1, 20, 30) > 0.9)
+        rgb = torch.rand(2, 3, 20, 30)
+        depth, confidence = net.forward_with_confidence(x, None, rgb)
+        plain, plain_confidence = net.nconv.forward_with_confidence(x)
+        assert torch.allclose(depth, plain) and torch.allclose(confidence, plain_confidence * torch.sigmoid(
+            torch.tensor(4.0)))
+        assert torch.allclose(net(2 * x, None, rgb), 2 * depth, rtol=1e-4, atol=1e-4)
+        with pytest.raises(DcslamError, match="needs the colour image"):
+            net(x)
+        with pytest.raises(DcslamError, match="rgb has shape"):
+            net(x, None, torch.rand(2, 3, 20, 31))
+
+    def test_gradients_reach_the_refinement(self):
+        torch.manual_seed(0)
+        net = build_model("nconv-guided").double()
+        x = (torch.rand(1, 1, 12, 16) * 20 * (torch.rand(1, 1, 12, 16) > 0.8)).double()
+        net(x, None, torch.rand(1, 3, 12, 16, dtype=torch.float64)).sum().backward()
+        assert net.refine[-1].weight.grad.abs().sum() > 0 and net.nconv.out.weight.grad.abs().sum() > 0
