@@ -118,11 +118,13 @@ def _latest_layer(root: Path, made_by: str) -> str:
 def find_layer(ws: Workspace, ref: str) -> LayerRef | None:
     """The layer ``ref`` names, or ``None``. The grammar, everywhere in dcslam:
 
-    ``sparse`` | ``dense`` (the drive files' depth) | ``predicted/<run>`` | ``filtered/<name>`` | ``predicted`` or
-    ``filtered`` alone (the most recent such layer) | ``<name>`` (looked for in predictions/, then filtered/) |
-    a folder of ``<drive>.h5`` layer files | one ``.h5`` layer file.
+    ``sparse`` | ``dense`` | ``sparse@<beams>`` | ``exact`` (the drive files' depth) | ``predicted/<run>`` |
+    ``filtered/<name>`` | ``predicted`` or ``filtered`` alone (the most recent such layer) | ``<name>`` (looked
+    for in predictions/, then filtered/) | a folder of ``<drive>.h5`` layer files | one ``.h5`` layer file.
     """
-    if ref in DRIVE_DEPTH:
+    from dcslam.io.drive import is_depth_kind
+
+    if ref in DRIVE_DEPTH or is_depth_kind(ref):
         return LayerRef(ref)
     kind, slash, name = ref.partition("/")
     if kind in LAYER_KINDS and (slash or not name):
@@ -149,8 +151,9 @@ def resolve_layer(ws: Workspace, ref: str) -> LayerRef:
         if kind in LAYER_KINDS and name:
             folder, made_by = LAYER_KINDS[kind]
             raise DcslamError(f"{ws.root / folder / name} not found; run `{made_by}` first")
-        raise DcslamError(f"no depth layer {ref!r}: not sparse or dense, and neither {ws.predictions / ref} nor "
-                          f"{ws.filtered / ref} exists; run `dcslam predict` or `dcslam filter` first")
+        raise DcslamError(f"no depth layer {ref!r}: not sparse, dense, sparse@<beams> or exact, and neither "
+                          f"{ws.predictions / ref} nor {ws.filtered / ref} exists; run `dcslam predict` or "
+                          f"`dcslam filter` first")
     return layer
 
 

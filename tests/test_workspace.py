@@ -24,6 +24,8 @@ def ws(tmp_path):
 
 def test_grammar(ws, tmp_path):
     assert find_layer(ws, "sparse") == LayerRef("sparse") and find_layer(ws, "dense").source("d") == "dense"
+    assert find_layer(ws, "sparse@16") == LayerRef("sparse@16") and find_layer(ws, "exact").source("d") == "exact"
+    assert find_layer(ws, "sparse@x") is None
     assert find_layer(ws, "predicted/mse-dense") == LayerRef("mse-dense", ws.predictions / "mse-dense",
                                                              made_by="dcslam predict")
     assert find_layer(ws, "filtered/mse-dense+edges").source("d") == ws.filtered / "mse-dense+edges" / "d.h5"

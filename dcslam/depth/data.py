@@ -62,32 +62,53 @@ def frame_windows(n: int, size: int) -> list[range]:
 
 @dataclass
 class Batch:
-    """Frames of one drive as tensors. Shapes: sparse, dense (B, 1, h, w) metres; K (3, 3); T_world_cam (B, 4, 4)."""
+    """Frames of one drive as tensors. Shapes: sparse, dense (B, 1, h, w) metres; K (3, 3); T_world_cam (B, 4, 4);
+    rgb None or (B, 3, h, w) in [0, 1] (for guided networks)."""
 
     sparse: torch.Tensor
     dense: torch.Tensor
     K: torch.Tensor
     T_world_cam: torch.Tensor
+    rgb: torch.Tensor | None = None
 
     def to(self, device) -> "Batch":
-        return Batch(self.sparse.to(device), self.dense.to(device), self.K.to(device), self.T_world_cam.to(device))
+        return Batch(self.sparse.to(device), self.dense.to(device), self.K.to(device), self.T_world_cam.to(device),
+                     None if self.rgb is None else self.rgb.to(device))
+
+
+def downscale_rgb(rgb: np.ndarray, factor: int) -> np.ndarray:
+    """Block means of an image. Shape: (..., H, W, 3) uint8 → (..., H // factor, W // factor, 3) float32 in [0, 1]."""
+    rgb = np.asarray(rgb, np.float32) / 255.0
+    if factor == 1:
+        return rgb
+    h, w = rgb.shape[-3] // factor, rgb.shape[-2] // factor
+    blocks = rgb[..., :h * factor, :w * factor, :].reshape(*rgb.shape[:-3], h, factor, w, factor, 3)
+    return blocks.mean(axis=(-4, -2))
 
 
 class DriveFrames:
     """The frames of one drive file used for training or validation, read lazily.
 
     ``indices`` are the drive frames used: every ``stride``-th frame, at most ``max_frames`` of them.
-    ``load(positions)`` reads frames ``indices[positions]`` as a :class:`Batch` after crop and scaling.
+    ``load(positions)`` reads frames ``indices[positions]`` as a :class:`Batch` after crop and scaling; the batch's
+    ``sparse`` is the drive's depth kind ``input`` (``sparse``, ``sparse@16``, ...) and its ``dense`` the kind
+    ``target`` (``dense``, or ``exact`` on generated drives).
     """
 
-    def __init__(self, path: Path | str, max_frames: int = 200, stride: int = 1, scale: float = 1.0, crop: int = 0):
-        from dcslam.io.drive import DriveFile
+    def __init__(self, path: Path | str, max_frames: int = 200, stride: int = 1, scale: float = 1.0, crop: int = 0,
+                 input: str = "sparse", target: str = "dense", rgb: bool = False):
+        from dcslam.io.drive import DriveFile, check_input_kind
 
         if stride < 1 or max_frames < 1:
             raise DcslamError(f"stride and max frames must be >= 1, got {stride} and {max_frames}")
         self.factor = check_view(scale, crop)
         self.crop = crop
+        self.input, self.target = check_input_kind(input), check_input_kind(target)
+        self.with_rgb = rgb
         self.drive = DriveFile(path)
+        for kind in (input, target):
+            if kind not in self.drive.kinds:
+                self.drive.depth(kind, 0)  # fails with one line naming how to make it
         n, height, _ = self.drive.shape
         if crop > height:
             raise DcslamError(f"--crop {crop} is more rows than the frames of {self.drive.path} have ({height})")
@@ -109,10 +130,16 @@ class DriveFrames:
 
     def load(self, positions) -> Batch:
         frames = [self.indices[p] for p in positions]
-        sparse = np.stack([self._view(self.drive.depth("sparse", i)) for i in frames])
-        dense = np.stack([self._view(self.drive.depth("dense", i)) for i in frames])
+        sparse = np.stack([self._view(self.drive.depth(self.input, i)) for i in frames])
+        dense = np.stack([self._view(self.drive.depth(self.target, i)) for i in frames])
+        rgb = None
+        if self.with_rgb:
+            images = np.stack([self.drive.rgb(i) for i in frames])
+            if self.crop:
+                images = images[:, self.height - self.crop:]
+            rgb = torch.from_numpy(np.ascontiguousarray(downscale_rgb(images, self.factor).transpose(0, 3, 1, 2)))
         return Batch(sparse=torch.from_numpy(sparse)[:, None], dense=torch.from_numpy(dense)[:, None],
-                     K=torch.from_numpy(self.K), T_world_cam=torch.from_numpy(self.drive.poses[frames]))
+                     K=torch.from_numpy(self.K), T_world_cam=torch.from_numpy(self.drive.poses[frames]), rgb=rgb)
 
     def close(self) -> None:
         self.drive.close()

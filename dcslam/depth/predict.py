@@ -24,14 +24,31 @@ class NetworkCompleter:
         self.model, self.device, self.name = model, device, name
         self.factor = check_view(scale, 0)
 
+    @property
+    def has_confidence(self) -> bool:
+        """Whether the network says how sure it is (``forward_with_confidence``, e.g. ``nconv``)."""
+        return hasattr(self.model, "forward_with_confidence")
+
     def __call__(self, sparse_m: np.ndarray) -> np.ndarray:
         """(H, W) float32 metres → (H, W) float32 metres (finite; 0 = none, else ≥ :data:`MIN_DEPTH_M`).
 
         Outputs below 0.1 m become holes: no depth sensor here measures that near, and a network that outputs them
         (a chamfer-trained one settles on ~0.2 mm where no LiDAR reaches) is saying nothing.
         """
+        return self.complete(sparse_m)[0]
+
+    @property
+    def guided(self) -> bool:
+        """Whether the network also takes the colour image (give ``rgb`` to :meth:`complete`)."""
+        return bool(getattr(self.model, "GUIDED", False))
+
+    def complete(self, sparse_m: np.ndarray, rgb: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """Like :meth:`__call__`, with the network's confidence (H, W) float32 in [0, 1] (0 at holes), or None
+        for a network without one. ``rgb`` (H, W, 3) uint8 is required by guided networks."""
         import cv2
         import torch
+
+        from dcslam.depth.data import downscale_rgb
 
         if sparse_m.ndim != 2:
             raise DcslamError(f"sparse depth has shape {sparse_m.shape}, expected (H, W)")
@@ -39,12 +56,28 @@ class NetworkCompleter:
         small = downscale_depth(np.asarray(sparse_m, np.float32), self.factor)
         with torch.no_grad():
             x = torch.from_numpy(small)[None, None].to(self.device)
-            pred = self.model(x, (x > 0).to(x.dtype))[0, 0].float().cpu().numpy()
+            mask = (x > 0).to(x.dtype)
+            extra = ()
+            if self.guided:
+                if rgb is None or np.shape(rgb) != (h, w, 3):
+                    raise DcslamError(f"{self.name} is guided: it needs the (H, W, 3) colour image of the frame")
+                extra = (torch.from_numpy(np.ascontiguousarray(downscale_rgb(rgb, self.factor).transpose(2, 0, 1)))
+                         [None].to(self.device, x.dtype),)
+            if self.has_confidence:
+                pred, confidence = (t[0, 0].float().cpu().numpy()
+                                    for t in self.model.forward_with_confidence(x, mask, *extra))
+            else:
+                pred, confidence = self.model(x, mask)[0, 0].float().cpu().numpy(), None
         pred = np.nan_to_num(pred, nan=0.0, posinf=0.0, neginf=0.0)
         pred[pred < MIN_DEPTH_M] = 0
+        if confidence is not None:
+            confidence = np.clip(np.nan_to_num(confidence, nan=0.0), 0, 1)
+            confidence[pred == 0] = 0
         if pred.shape != (h, w):
             pred = cv2.resize(pred, (w, h), interpolation=cv2.INTER_NEAREST)
-        return pred.astype(np.float32)
+            if confidence is not None:
+                confidence = cv2.resize(confidence, (w, h), interpolation=cv2.INTER_NEAREST)
+        return pred.astype(np.float32), None if confidence is None else confidence.astype(np.float32)
 
 
 @dataclass

@@ -53,6 +53,8 @@ class TrainConfig:
     batch_size: int = 1
     seed: int = 0
     device: str = "auto"
+    input: str = "sparse"
+    target: str = "dense"
     train_drives: list = field(default_factory=list)
     val_drives: list = field(default_factory=list)
 
@@ -67,6 +69,10 @@ class TrainConfig:
             if getattr(self, name) < 1:
                 raise DcslamError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
         check_view(self.scale, self.crop)
+        from dcslam.io.drive import check_input_kind
+
+        check_input_kind(self.input)
+        check_input_kind(self.target)
         if not self.train_drives:
             raise DcslamError("no training drives; run `dcslam prepare-kitti` (or `dcslam synth`) first")
 
@@ -122,6 +128,13 @@ def seed_all(seed: int) -> None:
     torch.manual_seed(seed)
 
 
+def run_model(model, batch):
+    """The network's prediction (B, 1, h, w) for a batch: ``model(sparse, mask)``, with ``batch.rgb`` as a third
+    argument when the batch carries the colour image (guided networks)."""
+    mask = (batch.sparse > 0).to(batch.sparse.dtype)
+    return model(batch.sparse, mask) if batch.rgb is None else model(batch.sparse, mask, batch.rgb)
+
+
 class Objective:
     """The training loss of a configuration: ``objective(pred, batch)`` → scalar."""
 
@@ -149,7 +162,7 @@ def validate(model, drives: list[DriveFrames], map_frames: int, device, map_buil
             sq, ab, n, chamfers = 0.0, 0.0, 0, []
             for window in frame_windows(len(frames), map_frames):
                 batch = frames.load(window).to(device)
-                pred = model(batch.sparse, (batch.sparse > 0).to(batch.sparse.dtype))
+                pred = run_model(model, batch)
                 chamfers.append(float(chamfer(pred, batch.dense, batch.K, batch.T_world_cam)))
                 e = batch_depth_errors(pred, batch.dense)
                 if e["pixels"]:
@@ -229,7 +242,7 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
             for position in range(next_chunk, per_rank):
                 d, window = mine[position]
                 batch = train_frames[d].load(window).to(device)
-                pred = wrapped(batch.sparse, (batch.sparse > 0).to(batch.sparse.dtype))
+                pred = run_model(wrapped, batch)
                 loss = objective(pred, batch)
                 if not torch.isfinite(loss):
                     raise DcslamError(f"training loss became {float(loss)} at step {step} ({train_frames[d].name})")

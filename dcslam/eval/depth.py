@@ -169,9 +169,11 @@ def score_frames(pred_m: np.ndarray, gt_m: np.ndarray, interpolate: bool = True,
     return [depth_errors(p, g, interpolate, devkit_exact) for p, g in zip(pred_m, gt_m)]
 
 
-def score_drive(drive_path, source, interpolate: bool = True, devkit_exact: bool = False) -> list[DepthErrors | None]:
-    """Per-frame errors of a depth source (``sparse``, ``dense`` or a layer file) against the drive's dense depth
-    (options as :func:`depth_errors`).
+def score_drive(drive_path, source, interpolate: bool = True, devkit_exact: bool = False,
+                target: str = "dense") -> list[DepthErrors | None]:
+    """Per-frame errors of a depth source (a depth kind of the drive, e.g. ``sparse`` or ``sparse@16``, or a layer
+    file) against the drive's depth of kind ``target`` (``dense``, or ``exact`` on generated drives; options as
+    :func:`depth_errors`).
 
     Fails (:class:`DcslamError`) when a layer's frame count or image size does not match its drive.
     """
@@ -179,5 +181,5 @@ def score_drive(drive_path, source, interpolate: bool = True, devkit_exact: bool
 
     with DriveFile(drive_path) as drive:
         pred = load_depth(drive, source)
-        gt = load_depth(drive, "dense")
+        gt = load_depth(drive, target)
     return score_frames(pred, gt, interpolate, devkit_exact)

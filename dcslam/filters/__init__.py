@@ -1,10 +1,11 @@
 """Filters on depth images, composed into chains that turn one depth layer into another.
 
-One module per filter (``range``, ``bilateral``, ``outlier``, ``hidden``, ``edges``), registered by name in
-:data:`FILTERS`; adding a filter is one module plus one line there. Every filter is a small frozen object with
-``apply(depth_m, K) -> depth_m`` on one (H, W) float32 image in metres
-(0 = no value) and ``describe() -> dict`` (recorded in the layer file it produces). Filters only ever *remove* depth
-(set pixels to 0) or, for the bilateral filter, smooth the depth of pixels that have one; none of them fills holes.
+One module per filter (``range``, ``bilateral``, ``outlier``, ``hidden``, ``edges``, ``confidence``), registered by
+name in :data:`FILTERS`; adding a filter is one module plus one line there. Every filter is a small frozen object
+with ``apply(depth_m, K) -> depth_m`` on one (H, W) float32 image in metres (a filter with ``needs_confidence``
+also takes the layer's ``confidence=`` (H, W)) (0 = no value) and ``describe() -> dict`` (recorded in the layer
+file it produces). Filters only ever *remove* depth (set pixels to 0) or, for the bilateral filter, smooth the depth
+of pixels that have one; none of them fills holes.
 
 The thesis's code filtered with a depth range of 5–15 m and ``cv2.bilateralFilter(d=5, sigmaColor=80,
 sigmaSpace=80)``; these are the presets ``thesis-range`` and ``thesis-bilateral`` (:data:`PRESETS`). Statistical
@@ -17,18 +18,19 @@ from dcslam.errors import DcslamError
 from dcslam.filters.base import backproject
 from dcslam.filters.bilateral import BilateralFilter
 from dcslam.filters.chain import FilterChain, filter_drives, filter_frames
+from dcslam.filters.confidence import ConfidenceFilter
 from dcslam.filters.edges import DiscontinuityFilter
 from dcslam.filters.hidden import HiddenPointFilter
 from dcslam.filters.outlier import StatisticalOutlierFilter
 from dcslam.filters.range import RangeFilter
 
-__all__ = ["FILTERS", "PRESETS", "BilateralFilter", "DiscontinuityFilter", "FilterChain", "HiddenPointFilter",
-           "RangeFilter", "StatisticalOutlierFilter", "backproject", "filter_drives", "filter_frames", "filter_help",
-           "parse_filter"]
+__all__ = ["FILTERS", "PRESETS", "BilateralFilter", "ConfidenceFilter", "DiscontinuityFilter", "FilterChain",
+           "HiddenPointFilter", "RangeFilter", "StatisticalOutlierFilter", "backproject", "filter_drives",
+           "filter_frames", "filter_help", "parse_filter"]
 
 #: Filter names (of the command line and configuration files) → filter classes: the one place they are mapped.
 FILTERS = {"range": RangeFilter, "bilateral": BilateralFilter, "outlier": StatisticalOutlierFilter,
-           "hidden": HiddenPointFilter, "edges": DiscontinuityFilter}
+           "hidden": HiddenPointFilter, "edges": DiscontinuityFilter, "confidence": ConfidenceFilter}
 #: Short keys accepted in a filter spec.
 KEY_ALIASES = {"min": "min_m", "max": "max_m"}
 
@@ -77,7 +79,7 @@ def parse_filter(spec: str):
     kwargs = {}
     for item in filter(None, args.split(",")):
         key, eq, value = item.partition("=")
-        key = KEY_ALIASES.get(key.strip(), key.strip())
+        key = key.strip() if key.strip() in fields else KEY_ALIASES.get(key.strip(), key.strip())
         if not eq or key not in fields:
             raise DcslamError(f"{spec!r}: expected key=value with key one of {', '.join(fields)}")
         try:

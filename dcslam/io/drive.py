@@ -17,8 +17,23 @@ frame_ids     (N,) int64                 KITTI frame numbers
 Root attributes: ``schema``, ``source`` (``kitti`` | ``synthetic`` | ``tum``), ``date``, ``drive``, ``split``.
 Images are chunked one frame per chunk and compressed, so reading frame i reads only frame i.
 
+Optional depth datasets, (N, H, W) float32 metres, 0 = none, each read as a depth kind of its own:
+
+=================  ==============  ==============================================================================
+dataset            kind            meaning
+=================  ==============  ==============================================================================
+depth/sparse_<B>   ``sparse@<B>``  the scans cut to ``B`` of the 64 lasers (:mod:`dcslam.geometry.lidar_beams`),
+                                   projected as ``velodyne_raw`` is; dataset attribute ``beams`` = B
+depth/exact        ``exact``       noise-free depth of every pixel (generated drives only); attribute
+                                   ``synthetic_only`` = True
+=================  ==============  ==============================================================================
+
+With ``depth/sparse_<B>`` datasets the root attribute ``sparse_beams`` lists their beam counts (int array).
+
 Layer file, schema ``dcslam.layer/1``: dataset ``depth`` (N, H, W) float32 metres (0 = none, never NaN) and root
 attributes ``schema``, ``drive`` (the drive file's name), ``made_by`` (a run or filter name) and ``config`` (JSON).
+Optionally a dataset ``confidence`` (N, H, W) float32 in [0, 1] beside ``depth``: how sure the completer that made
+the layer is of each pixel (confidence-aware completers such as ``nconv``); layers without it still read.
 """
 from __future__ import annotations
 
@@ -35,13 +50,52 @@ from dcslam.io.atomic import atomic_output
 DRIVE_SCHEMA = "dcslam.drive/1"
 LAYER_SCHEMA = "dcslam.layer/1"
 DEPTH_KINDS = ("sparse", "dense")
+"""The depth every drive file holds; :func:`depth_dataset` names the optional ones (``sparse@<B>``, ``exact``)."""
+EXACT = "exact"
+
+
+def depth_dataset(kind: str) -> str:
+    """The dataset of a depth kind: ``sparse`` → ``depth/sparse``, ``sparse@16`` → ``depth/sparse_16``,
+    ``exact`` → ``depth/exact``. Raises :class:`DcslamError` on any other name."""
+    if kind in DEPTH_KINDS or kind == EXACT:
+        return f"depth/{kind}"
+    base, at, beams = kind.partition("@")
+    if base == "sparse" and at and beams.isdigit() and int(beams) > 0:
+        return f"depth/sparse_{int(beams)}"
+    raise DcslamError(f"unknown depth kind {kind!r}; expected sparse, dense, exact or sparse@<beams> (e.g. sparse@16)")
+
+
+def is_depth_kind(kind: str) -> bool:
+    """True when ``kind`` names depth held in drive files (see :func:`depth_dataset`)."""
+    try:
+        depth_dataset(str(kind))
+    except DcslamError:
+        return False
+    return True
+
+
+def _beams_of(kind: str) -> int | None:
+    base, at, beams = kind.partition("@")
+    return int(beams) if at else None
+
+
+def input_beams(kind: str) -> int | None:
+    """LiDAR beams behind a depth kind: 64 for ``sparse`` (KITTI's HDL-64E), B for ``sparse@B``, else None."""
+    depth_dataset(kind)
+    return 64 if kind == "sparse" else _beams_of(kind)
+
+
+def check_input_kind(kind: str) -> str:
+    """``kind`` if it names depth held in drive files (a network's input or target), else :class:`DcslamError`."""
+    depth_dataset(kind)
+    return kind
 _COMPRESSION = dict(compression="gzip", compression_opts=1, shuffle=True)
 
 
 @dataclass(frozen=True)
 class DriveFrame:
     """One frame of a drive. Shapes: rgb (H, W, 3) uint8, sparse and dense (H, W) float32 metres,
-    T_world_cam (4, 4) float64."""
+    T_world_cam (4, 4) float64; ``extra`` maps optional depth kinds (``sparse@16``, ``exact``) to (H, W) depth."""
 
     rgb: np.ndarray
     sparse: np.ndarray
@@ -49,9 +103,17 @@ class DriveFrame:
     T_world_cam: np.ndarray
     timestamp: float
     frame_id: int
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
 
 
-def _check_frame(frame: DriveFrame, height: int, width: int) -> None:
+def _check_depth(name: str, frame_id: int, depth: np.ndarray, height: int, width: int) -> None:
+    if depth.shape != (height, width):
+        raise DcslamError(f"frame {frame_id}: {name} has shape {depth.shape}, expected {(height, width)}")
+    if not np.all(np.isfinite(depth)) or np.any(depth < 0):
+        raise DcslamError(f"frame {frame_id}: {name} depth must be finite and >= 0 (0 = no value)")
+
+
+def _check_frame(frame: DriveFrame, height: int, width: int, extra: tuple[str, ...] = ()) -> None:
     expect = {"rgb": ((height, width, 3), np.uint8), "sparse": ((height, width), None),
               "dense": ((height, width), None), "T_world_cam": ((4, 4), None)}
     for name, (shape, dtype) in expect.items():
@@ -61,9 +123,12 @@ def _check_frame(frame: DriveFrame, height: int, width: int) -> None:
         if dtype is not None and value.dtype != dtype:
             raise DcslamError(f"frame {frame.frame_id}: {name} has dtype {value.dtype}, expected {np.dtype(dtype)}")
     for name in DEPTH_KINDS:
-        depth = np.asarray(getattr(frame, name))
-        if not np.all(np.isfinite(depth)) or np.any(depth < 0):
-            raise DcslamError(f"frame {frame.frame_id}: {name} depth must be finite and >= 0 (0 = no value)")
+        _check_depth(name, frame.frame_id, np.asarray(getattr(frame, name)), height, width)
+    if set(frame.extra) != set(extra):
+        raise DcslamError(f"frame {frame.frame_id}: holds depth {sorted(frame.extra)}, the drive file expects "
+                          f"{sorted(extra)}")
+    for name in extra:
+        _check_depth(name, frame.frame_id, np.asarray(frame.extra[name]), height, width)
 
 
 class DriveWriter:
@@ -72,16 +137,29 @@ class DriveWriter:
     >>> with DriveWriter(path, K, height, width, source="synthetic", date="2011_09_26", drive="...") as w:
     ...     for frame in frames:
     ...         w.append(frame)
+
+    ``extra`` names the optional depth kinds (``sparse@16``, ``exact``) every frame brings in ``frame.extra``.
     """
 
     def __init__(self, path: Path | str, K: np.ndarray, height: int, width: int, *, source: str, date: str,
-                 drive: str, split: str = "", force: bool = False, attrs: dict | None = None):
+                 drive: str, split: str = "", force: bool = False, attrs: dict | None = None,
+                 extra: tuple[str, ...] = ()):
         K = np.asarray(K, dtype=np.float64)
         if K.shape != (3, 3):
             raise DcslamError(f"K has shape {K.shape}, expected (3, 3)")
         self.path, self.K, self.height, self.width = Path(path), K, int(height), int(width)
         self.attrs = dict(schema=DRIVE_SCHEMA, source=source, date=date, drive=drive, split=split, **(attrs or {}))
         self.force = force
+        self.extra = tuple(extra)
+        for kind in self.extra:
+            if kind in DEPTH_KINDS:
+                raise DcslamError(f"{kind} is always written; it is no extra depth kind")
+            depth_dataset(kind)
+        if len(set(self.extra)) != len(self.extra):
+            raise DcslamError(f"extra depth kinds {list(self.extra)} repeat a name")
+        beams = sorted((_beams_of(k) for k in self.extra if _beams_of(k)), reverse=True)
+        if beams:
+            self.attrs["sparse_beams"] = np.array(beams, np.int64)
         self._frames: list[tuple[np.ndarray, float, int]] = []
 
     def __enter__(self) -> "DriveWriter":
@@ -97,19 +175,28 @@ class DriveWriter:
             self._depth = {kind: self._h5.create_dataset(f"depth/{kind}", (0, h, w), np.float32,
                                                          maxshape=(None, h, w), chunks=(1, h, w), **_COMPRESSION)
                            for kind in DEPTH_KINDS}
+            for kind in self.extra:
+                dataset = self._h5.create_dataset(depth_dataset(kind), (0, h, w), np.float32, maxshape=(None, h, w),
+                                                  chunks=(1, h, w), **_COMPRESSION)
+                if _beams_of(kind):
+                    dataset.attrs["beams"] = _beams_of(kind)
+                else:
+                    dataset.attrs["synthetic_only"] = True
+                self._depth[kind] = dataset
         except BaseException as exc:
             self._atomic.__exit__(type(exc), exc, exc.__traceback__)
             raise
         return self
 
     def append(self, frame: DriveFrame) -> None:
-        _check_frame(frame, self.height, self.width)
+        _check_frame(frame, self.height, self.width, self.extra)
         n = len(self._frames)
         self._rgb.resize(n + 1, axis=0)
         self._rgb[n] = frame.rgb
-        for kind in DEPTH_KINDS:
+        for kind in (*DEPTH_KINDS, *self.extra):
             self._depth[kind].resize(n + 1, axis=0)
-            self._depth[kind][n] = np.asarray(getattr(frame, kind), dtype=np.float32)
+            depth = frame.extra[kind] if kind in self.extra else getattr(frame, kind)
+            self._depth[kind][n] = np.asarray(depth, dtype=np.float32)
         self._frames.append((np.asarray(frame.T_world_cam, np.float64), float(frame.timestamp), int(frame.frame_id)))
 
     def __exit__(self, exc_type, exc, tb) -> None:
@@ -174,6 +261,37 @@ class DriveFile:
         for name, shape in expect.items():
             if h5[name].shape != shape:
                 raise DcslamError(f"{self.path}: {name} has shape {h5[name].shape}, expected {shape}")
+        declared = sorted(int(b) for b in np.atleast_1d(h5.attrs.get("sparse_beams", [])))
+        for kind in self._extra_kinds():
+            dataset = h5[depth_dataset(kind)]
+            if dataset.shape != (n, h, w):
+                raise DcslamError(f"{self.path}: {dataset.name} has shape {dataset.shape}, expected {(n, h, w)}")
+            recorded = dataset.attrs.get("beams")
+            if _beams_of(kind) is not None and recorded != _beams_of(kind):
+                recorded = int(recorded) if isinstance(recorded, (int, np.integer)) else recorded
+                raise DcslamError(f"{self.path}: {dataset.name} records beams={recorded!r}, "
+                                  f"expected {_beams_of(kind)}; rerun `dcslam prepare-kitti --force`")
+        found = sorted(_beams_of(k) for k in self._extra_kinds() if _beams_of(k) is not None)
+        if found != declared:
+            raise DcslamError(f"{self.path}: attribute sparse_beams is {declared} but the file holds sparse depth "
+                              f"of {found} beams; rerun `dcslam prepare-kitti --force`")
+
+    def _extra_kinds(self) -> list[str]:
+        group = self._h5["depth"]
+        kinds = []
+        for name in group:
+            if name in DEPTH_KINDS:
+                continue
+            kind = EXACT if name == EXACT else f"sparse@{name.removeprefix('sparse_')}"
+            if not (name == EXACT or name.startswith("sparse_")) or not is_depth_kind(kind):
+                raise DcslamError(f"{self.path}: unknown depth dataset depth/{name}")
+            kinds.append(kind)
+        return kinds
+
+    @property
+    def kinds(self) -> tuple[str, ...]:
+        """The depth kinds this file holds: ``sparse``, ``dense``, then e.g. ``sparse@16``, ``exact``."""
+        return (*DEPTH_KINDS, *self._extra_kinds())
 
     @property
     def name(self) -> str:
@@ -192,14 +310,18 @@ class DriveFile:
         return self._h5["rgb"][i]
 
     def depth(self, kind: str, i: int) -> np.ndarray:
-        """(H, W) float32 metres of ``kind`` (``sparse`` or ``dense``)."""
-        if kind not in DEPTH_KINDS:
-            raise DcslamError(f"unknown depth kind {kind!r}; expected one of {', '.join(DEPTH_KINDS)}")
-        return self._h5[f"depth/{kind}"][i]
+        """(H, W) float32 metres of ``kind`` (``sparse``, ``dense``, ``sparse@<beams>`` or ``exact``)."""
+        name = depth_dataset(kind)
+        if name not in self._h5:
+            how = ("it is written for generated drives only (`dcslam synth`, then `dcslam prepare-kitti`)"
+                   if kind == EXACT else f"rerun `dcslam prepare-kitti --beams {_beams_of(kind)} --force`")
+            raise DcslamError(f"{self.path} holds no {kind} depth (it has {', '.join(self.kinds)}); {how}")
+        return self._h5[name][i]
 
     def frame(self, i: int) -> DriveFrame:
         return DriveFrame(rgb=self.rgb(i), sparse=self.depth("sparse", i), dense=self.depth("dense", i),
-                     T_world_cam=self.poses[i], timestamp=float(self.timestamps[i]), frame_id=int(self.frame_ids[i]))
+                          T_world_cam=self.poses[i], timestamp=float(self.timestamps[i]),
+                          frame_id=int(self.frame_ids[i]), extra={k: self.depth(k, i) for k in self._extra_kinds()})
 
     def __iter__(self) -> Iterator[DriveFrame]:
         for i in range(len(self)):
@@ -217,12 +339,21 @@ class DriveFile:
 
 @dataclass
 class Layer:
-    """A depth layer: ``depth`` (N, H, W) float32 metres (0 = none) with its provenance."""
+    """A depth layer: ``depth`` (N, H, W) float32 metres (0 = none) with its provenance, and optionally the
+    completer's ``confidence`` (N, H, W) float32 in [0, 1]."""
 
     depth: np.ndarray
     drive: str
     made_by: str
     config: dict = field(default_factory=dict)
+    confidence: np.ndarray | None = None
+
+
+def _check_confidence(confidence: np.ndarray, shape: tuple, where: str) -> None:
+    if confidence.shape != shape:
+        raise DcslamError(f"{where}confidence has shape {confidence.shape}, expected {shape} like its depth")
+    if not np.all(np.isfinite(confidence)) or np.any(confidence < 0) or np.any(confidence > 1):
+        raise DcslamError(f"{where}confidence must be finite and within [0, 1]")
 
 
 def write_layer(path: Path | str, layer: Layer, force: bool = False) -> Path:
@@ -235,8 +366,13 @@ def write_layer(path: Path | str, layer: Layer, force: bool = False) -> Path:
     if not np.all(np.isfinite(depth)) or np.any(depth < 0):
         raise DcslamError("layer depth must be finite and >= 0 (0 = no value)")
     n, h, w = depth.shape
+    confidence = None if layer.confidence is None else np.asarray(layer.confidence)
+    if confidence is not None:
+        _check_confidence(confidence, depth.shape, "layer ")
     with atomic_output(path, force=force) as tmp, h5py.File(tmp, "w") as h5:
         h5.create_dataset("depth", data=depth.astype(np.float32), chunks=(1, h, w), **_COMPRESSION)
+        if confidence is not None:
+            h5.create_dataset("confidence", data=confidence.astype(np.float32), chunks=(1, h, w), **_COMPRESSION)
         h5.attrs["schema"] = LAYER_SCHEMA
         h5.attrs["drive"] = layer.drive
         h5.attrs["made_by"] = layer.made_by
@@ -256,20 +392,24 @@ def read_layer(path: Path | str, expect_frames: int | None = None) -> Layer:
             if h5.attrs.get("schema") != LAYER_SCHEMA or "depth" not in h5:
                 raise DcslamError(f"{path}: not a dcslam depth layer (schema {h5.attrs.get('schema')!r})")
             depth = h5["depth"][()]
+            confidence = h5["confidence"][()] if "confidence" in h5 else None
             layer = Layer(depth=depth, drive=str(h5.attrs.get("drive", "")), made_by=str(h5.attrs.get("made_by", "")),
-                          config=json.loads(h5.attrs.get("config", "{}")))
+                          config=json.loads(h5.attrs.get("config", "{}")), confidence=confidence)
     except OSError as exc:
         raise DcslamError(f"{path} is not a readable HDF5 layer file ({exc})") from None
     if depth.ndim != 3:
         raise DcslamError(f"{path}: depth has shape {depth.shape}, expected (N, H, W)")
+    if confidence is not None:
+        _check_confidence(confidence, depth.shape, f"{path}: ")
     if expect_frames is not None and depth.shape[0] != expect_frames:
         raise DcslamError(f"{path}: layer has {depth.shape[0]} frames but its drive has {expect_frames}")
     return layer
 
 
 def load_depth(drive: DriveFile, source: str | Path) -> np.ndarray:
-    """All depth frames (N, H, W) float32 of a drive from ``sparse``, ``dense`` or a layer file path."""
-    if str(source) in DEPTH_KINDS:
+    """All depth frames (N, H, W) float32 of a drive from a depth kind it holds (``sparse``, ``dense``,
+    ``sparse@<beams>``, ``exact``) or a layer file path."""
+    if not isinstance(source, Path) and is_depth_kind(str(source)):
         return np.stack([drive.depth(str(source), i) for i in range(len(drive))])
     layer = read_layer(source, expect_frames=len(drive))
     if layer.depth.shape[1:] != drive.shape[1:]:

@@ -7,6 +7,9 @@ Layout under a KITTI root (real, or written by ``dcslam synth``)::
     raw/<date>/<date>_drive_<NNNN>_sync/oxts/data/<frame:010d>.txt, oxts/timestamps.txt
     raw/<date>/<date>_drive_<NNNN>_sync/velodyne_points/data/<frame:010d>.bin, velodyne_points/timestamps.txt
     depth_completion/{train,val}/<date>_drive_<NNNN>_sync/proj_depth/{velodyne_raw,groundtruth}/image_02/<frame:010d>.png
+    depth_completion/{train,val}/<date>_drive_<NNNN>_sync/dcslam_exact_synthetic/image_02/<frame:010d>.png
+        (a dcslam extension written by ``dcslam synth`` only: the noise-free depth of every pixel, uint16 at 1/256 m
+        like the other depth PNGs, for the same frames as velodyne_raw)
     SYNTHETIC              (only in generated roots: a marker file written by ``dcslam synth``)
 
 This module holds the per-file formats (depth PNG, image, Velodyne scan, timestamps) and the drive-level reading:
@@ -122,6 +125,7 @@ def write_timestamps(path: Path | str, seconds: np.ndarray) -> None:
 
 # --- Drives: finding them under a KITTI root, checking that their files line up, reading their frames -------------
 
+EXACT_FOLDER = "dcslam_exact_synthetic"  # generated drives only: noise-free depth, see the module docstring
 SYNTHETIC_MARKER = "SYNTHETIC"  # a file at the root written by `dcslam synth`; its presence makes source "synthetic"
 DEPTH_SPLITS = ("train", "val")  # folders of KITTI depth completion
 _DRIVE_NAME = re.compile(r"^(\d{4}_\d{2}_\d{2})_drive_(\d{4})_sync$")
@@ -177,6 +181,16 @@ class RawDrive:
         if self.depth_dir is None:
             raise DcslamError(f"{self.name}: no depth-completion folder under {self.root / 'depth_completion'}")
         return self.depth_dir / "proj_depth" / kind / "image_02" / frame_name(frame_id, ".png")
+
+    def exact_path(self, frame_id: int) -> Path:
+        """The noise-free depth PNG that ``dcslam synth`` writes (generated drives only)."""
+        if self.depth_dir is None:
+            raise DcslamError(f"{self.name}: no depth-completion folder under {self.root / 'depth_completion'}")
+        return self.depth_dir / EXACT_FOLDER / "image_02" / frame_name(frame_id, ".png")
+
+    @property
+    def has_exact(self) -> bool:
+        return self.depth_dir is not None and (self.depth_dir / EXACT_FOLDER).is_dir()
 
 
 def find_drives(root: Path | str) -> list[RawDrive]:
@@ -294,15 +308,40 @@ def index_drive(drive: RawDrive) -> DriveIndex:
     if sparse_ids[-1] >= len(raw_ids):
         raise DcslamError(f"{kinds['velodyne_raw']}: depth frame {frame_name(sparse_ids[-1], '.png')} has no raw "
                           f"frame ({drive.raw_dir} has {len(raw_ids)} frames)")
+    if drive.has_exact:
+        exact_ids = _frame_ids(drive.depth_dir / EXACT_FOLDER / "image_02", ".png")
+        if exact_ids != sparse_ids:
+            odd = sorted(set(sparse_ids) ^ set(exact_ids))
+            raise DcslamError(f"{drive.depth_dir / EXACT_FOLDER}: {len(exact_ids)} frames but velodyne_raw has "
+                              f"{len(sparse_ids)}; they differ at {frame_name(odd[0], '.png')}")
     ids = np.array(sparse_ids, dtype=np.int64)
     return DriveIndex(drive, calib, ids, stamps[ids], rebase(T_world_cam_raw[ids]))
 
 
-def read_drive(index: DriveIndex) -> Iterator[DriveFrame]:
-    """The frames of a checked drive, read lazily: image, sparse and dense depth, pose, timestamp, frame number.
+def sparse_from_scan(drive: RawDrive, calib: Calibration, frame_id: int, beams: tuple[int, ...],
+                     image_size: tuple[int, int]) -> dict[str, np.ndarray]:
+    """``{"sparse@<B>": (H, W) float32}``: the frame's Velodyne scan cut to ``B`` of its 64 lasers
+    (:func:`dcslam.geometry.lidar_beams.keep_beams`) and projected into camera 2 as ``velodyne_raw`` is."""
+    from dcslam.geometry.lidar_beams import keep_beams
 
-    Raises :class:`DcslamError` naming the file on an unreadable image, an 8-bit or truncated depth PNG, or sizes
-    that differ between a frame's image and its depth.
+    path = drive.velodyne_path(frame_id)
+    if not path.exists():
+        raise DcslamError(f"{path} not found: sparse depth of fewer beams is made from the raw Velodyne scans "
+                          f"(velodyne_points/data/*.bin); add them or drop --beams")
+    scan = read_velodyne(path)
+    try:
+        return {f"sparse@{b}": project_velodyne(keep_beams(scan, b), calib, image_size) for b in beams}
+    except DcslamError as exc:
+        raise DcslamError(f"{path}: {exc}") from None
+
+
+def read_drive(index: DriveIndex, beams: tuple[int, ...] = ()) -> Iterator[DriveFrame]:
+    """The frames of a checked drive, read lazily: image, sparse and dense depth, pose, timestamp, frame number,
+    and for each beam count in ``beams`` the sparse depth of that many lasers (``frame.extra["sparse@<B>"]``), and
+    on generated drives the noise-free depth (``frame.extra["exact"]``).
+
+    Raises :class:`DcslamError` naming the file on an unreadable image, an 8-bit or truncated depth PNG, sizes
+    that differ between a frame's image and its depth, or (with ``beams``) a missing or malformed Velodyne scan.
     """
     drive = index.drive
     for i, frame_id in enumerate(index.frame_ids):
@@ -313,5 +352,12 @@ def read_drive(index: DriveIndex) -> Iterator[DriveFrame]:
             if depth.shape != rgb.shape[:2]:
                 raise DcslamError(f"{drive.depth_path(kind, frame_id)}: depth is {depth.shape[1]}x{depth.shape[0]} "
                                   f"but image {drive.image_path(frame_id).name} is {rgb.shape[1]}x{rgb.shape[0]}")
+        extra = sparse_from_scan(drive, index.calib, frame_id, beams, rgb.shape[:2]) if beams else {}
+        if drive.has_exact:
+            extra["exact"] = read_depth_png(drive.exact_path(frame_id))
+            if extra["exact"].shape != rgb.shape[:2]:
+                raise DcslamError(f"{drive.exact_path(frame_id)}: depth is {extra['exact'].shape[1]}x"
+                                  f"{extra['exact'].shape[0]} but image {drive.image_path(frame_id).name} is "
+                                  f"{rgb.shape[1]}x{rgb.shape[0]}")
         yield DriveFrame(rgb=rgb, sparse=sparse, dense=dense, T_world_cam=index.T_world_cam[i],
-                    timestamp=float(index.timestamps[i]), frame_id=int(frame_id))
+                         timestamp=float(index.timestamps[i]), frame_id=int(frame_id), extra=extra)

@@ -18,13 +18,14 @@ from dcslam.workspace import LayerRef, Workspace, drive_file, find_layer, resolv
 __all__ = ["LayerRef", "TrajectoryPair", "drive_file", "find_layer", "load_pair", "resolve_layer",
            "score_layer_depth", "score_layer_trajectories", "select_drives", "slam_trajectory"]
 
-def score_layer_depth(ws: Workspace, layer: LayerRef, drives: list[str],
-                      interpolate: bool = True) -> dict[str, list[DepthErrors | None]]:
-    """Per-frame depth errors of a layer against each drive's dense depth: ``{drive: [errors per frame]}``."""
+def score_layer_depth(ws: Workspace, layer: LayerRef, drives: list[str], interpolate: bool = True,
+                      target: str = "dense") -> dict[str, list[DepthErrors | None]]:
+    """Per-frame depth errors of a layer against each drive's depth of kind ``target`` (``dense`` or ``exact``):
+    ``{drive: [errors per frame]}``."""
     from dcslam.eval.depth import score_drive
     from dcslam.progress import track
 
-    return {drive: score_drive(drive_file(ws, drive), layer.source(drive), interpolate)
+    return {drive: score_drive(drive_file(ws, drive), layer.source(drive), interpolate, target=target)
             for drive in track(drives, f"depth {layer.name}")}
 
 

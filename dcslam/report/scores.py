@@ -28,14 +28,17 @@ def check_outputs(paths: list[Path], force: bool) -> None:
                           "pass --force to overwrite")
 
 
-def depth_table(ws: Workspace, layer_name: str, drives: list[str], interpolate: bool = True) -> Table:
-    """Depth errors of a layer: one row per drive (mean over its frames) and a row ``all`` (mean over all frames)."""
+def depth_table(ws: Workspace, layer_name: str, drives: list[str], interpolate: bool = True,
+                target: str = "dense") -> Table:
+    """Depth errors of a layer against the drives' ``target`` depth (``dense`` or ``exact``): one row per drive
+    (mean over its frames) and a row ``all`` (mean over all frames)."""
     layer = resolve_layer(ws, layer_name)
-    per_drive = score_layer_depth(ws, layer, drives, interpolate)
+    per_drive = score_layer_depth(ws, layer, drives, interpolate, target)
     columns = [Column("drive", "drive"), Column("frames", "frames"), Column("mae_mm", "MAE (mm)", "{:.1f}"),
                Column("rmse_mm", "RMSE (mm)", "{:.1f}"), Column("imae_per_km", "iMAE (1/km)", "{:.2f}"),
                Column("irmse_per_km", "iRMSE (1/km)", "{:.2f}"), Column("coverage", "coverage", "{:.3f}")]
-    table = Table(f"depth errors of {layer.name}", columns)
+    table = Table(f"depth errors of {layer.name}" + (f" against {target} depth" if target != "dense" else ""),
+                  columns)
     for drive, frames in per_drive.items():
         mean = mean_errors(frames)
         table.rows.append({"drive": drive, "frames": len(frames), **{m: getattr(mean, m) for m in METRICS},

@@ -10,6 +10,7 @@ import numpy as np
 
 from dcslam.depth.models import ALIASES, CLASSICAL
 from dcslam.errors import DcslamError
+from dcslam.io.drive import check_input_kind
 from dcslam.stages.config import option
 from dcslam.workspace import Workspace
 
@@ -25,14 +26,20 @@ class PredictConfig:
                                help=f"A completer that needs no run folder: {', '.join([*ALIASES, *CLASSICAL])}.")
     split: str = option("test", choices=SPLITS, help="Split whose drives to predict (train, val, test).")
     drive: list[Path] = option(default_factory=list, help="Drive file(s) to predict instead of a split.")
-    output: Path | None = option(None, help="Output folder (default predictions/<run>/).")
+    output: Path | None = option(None, help="Output folder (default predictions/<run>/, or predictions/<run>-"
+                                            "sparse16/ for --input sparse@16).")
     device: str = option("auto", help="auto, cpu or cuda.")
+    input: str | None = option(None, validate=lambda kind: check_input_kind(kind), metavar="KIND",
+                               show_default="the run's training input, else sparse",
+                               help="Depth to complete: sparse, or sparse@<beams> (written by prepare-kitti --beams).")
 
     def __post_init__(self) -> None:
         if (self.run is None) == (self.model is None):
             raise DcslamError("give one of --run NAME or --model " + "|".join([*ALIASES, *CLASSICAL]))
         if self.split not in SPLITS:
             raise DcslamError(f"unknown split {self.split!r}; expected train, val or test")
+        if self.input is not None:
+            check_input_kind(self.input)
 
 
 @dataclass
@@ -63,12 +70,15 @@ def run_predictor(run_dir: Path | str, device):
 
 
 def predict_drive(predictor, drive_path: Path | str, out_path: Path | str, force: bool = False,
-                  progress: bool = True) -> Path:
-    """Complete every frame's sparse depth of a drive and write the layer ``out_path`` atomically.
+                  progress: bool = True, input: str = "sparse") -> Path:
+    """Complete every frame's depth of kind ``input`` (``sparse``, ``sparse@16``, ...) of a drive and write the layer
+    ``out_path`` atomically.
 
-    The layer holds ``depth`` (N, H, W) float32 metres, the same frames as the drive.
+    The layer holds ``depth`` (N, H, W) float32 metres, the same frames as the drive (and ``confidence`` when the
+    completer gives one); its configuration records the input kind and its LiDAR beams (``input``,
+    ``input_beams``).
     """
-    from dcslam.io.drive import DriveFile, Layer, write_layer
+    from dcslam.io.drive import DriveFile, Layer, input_beams, write_layer
     from dcslam.progress import track
 
     out_path = Path(out_path)
@@ -77,11 +87,18 @@ def predict_drive(predictor, drive_path: Path | str, out_path: Path | str, force
     with DriveFile(drive_path) as drive:
         n, h, w = drive.shape
         depth = np.zeros((n, h, w), np.float32)
+        with_confidence = getattr(predictor.completer, "has_confidence", False)
+        confidence = np.zeros((n, h, w), np.float32) if with_confidence else None
         frames = range(n)
         for i in (track(frames, f"predict {drive.name}") if progress else frames):
-            depth[i] = predictor.completer(drive.depth("sparse", i))
-        layer = Layer(depth=depth, drive=drive.path.name, made_by=predictor.made_by,
-                      config={**predictor.config, "drive_file": str(drive.path)})
+            if with_confidence:
+                rgb = drive.rgb(i) if getattr(predictor.completer, "guided", False) else None
+                depth[i], confidence[i] = predictor.completer.complete(drive.depth(input, i), rgb)
+            else:
+                depth[i] = predictor.completer(drive.depth(input, i))
+        layer = Layer(depth=depth, confidence=confidence, drive=drive.path.name, made_by=predictor.made_by,
+                      config={**predictor.config, "drive_file": str(drive.path), "input": input,
+                              "input_beams": input_beams(input)})
     return write_layer(out_path, layer, force=force)
 
 
@@ -112,17 +129,21 @@ def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> Predict
         paths = [require(ws.drives / f"{name}.h5", "dcslam prepare-kitti") for name in splits[config.split]]
         if not paths:
             raise DcslamError(f"split {config.split!r} of {ws.splits} has no drives")
-    out_dir = config.output or ws.predictions / chosen.made_by
+    kind = config.input or chosen.config.get("train_settings", {}).get("input", "sparse")
+    trained_on = chosen.config.get("train_settings", {}).get("input", "sparse")
+    suffix = "" if kind == trained_on else "-" + kind.replace("@", "")
+    out_dir = config.output or ws.predictions / f"{chosen.made_by}{suffix}"
     outputs = [out_dir / Path(p).name for p in paths]
     existing = [p for p in outputs if p.exists()]
     if existing and not force:
         raise DcslamError(f"{existing[0]} exists; pass --force to overwrite it")
     for path, out in zip(paths, outputs):
-        predict_drive(chosen, path, out, force=force)
+        predict_drive(chosen, path, out, force=force, input=kind)
     from dcslam.stages.config import to_dict
     from dcslam.io.atomic import write_json_atomic
     from dcslam.workspace import stage_config
 
-    write_json_atomic(out_dir / "config.json", stage_config("predict", {**to_dict(config), "made_by": chosen.made_by}),
+    write_json_atomic(out_dir / "config.json", stage_config("predict", {**to_dict(config), "made_by": chosen.made_by,
+                                                                      "input": kind}),
                       force=True)
     return PredictResult(out_dir, outputs, chosen.made_by)

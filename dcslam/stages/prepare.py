@@ -26,6 +26,16 @@ from dcslam.workspace import Workspace, stage_config
 SPLIT_NAMES = ("train", "val", "test")
 
 
+def check_beams(beams: int) -> int:
+    """``beams`` if it divides the HDL-64E's 64 lasers, else :class:`DcslamError`."""
+    from dcslam.geometry.lidar_beams import BEAM_COUNTS, HDL64_LASERS
+
+    if beams < 1 or HDL64_LASERS % beams:
+        raise DcslamError(f"--beams is {beams}; expected a divisor of the LiDAR's {HDL64_LASERS} beams "
+                          f"(e.g. {', '.join(map(str, BEAM_COUNTS))})")
+    return beams
+
+
 def _names(date: str, numbers: str) -> list[str]:
     return [f"{date}_drive_{n}_sync" for n in numbers.split()]
 
@@ -65,6 +75,7 @@ class PreparedDrive:
     split: str
     path: Path
     frames: int
+    exact: bool = False  # holds depth/exact (generated drives)
 
 
 @dataclass(frozen=True)
@@ -112,7 +123,7 @@ def _assign(found: list[RawDrive], splits: dict[str, list[str]], splits_label: s
 
 
 def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: Path | str | None = None,
-                  max_frames: int | None = None, include_unsplit: bool = False,
+                  max_frames: int | None = None, include_unsplit: bool = False, beams: tuple[int, ...] = (),
                   force: bool = False) -> PrepareResult:
     """Convert the drives of a KITTI root (real or generated) into drive files and ``splits.json``.
 
@@ -123,6 +134,8 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
             split for real KITTI, :func:`proportional_splits` for generated data.
         max_frames: keep at most this many frames (the first ones with depth) per drive.
         include_unsplit: also convert drives found in no split (their ``split`` attribute is empty).
+        beams: for each beam count B (a divisor of 64: 32, 16, 8, ...), also write ``depth/sparse_<B>``: the raw
+            Velodyne scans cut to B lasers and projected into camera 2 (read as the depth kind ``sparse@<B>``).
         force: overwrite drive files and ``splits.json`` that exist.
 
     Every drive is checked (:func:`dcslam.io.kitti.index_drive`) before anything is written; outputs that exist
@@ -131,6 +144,9 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
     kitti_root, out_dir = Path(kitti_root), Path(out_dir)
     if max_frames is not None and max_frames < 1:
         raise DcslamError(f"--max-frames is {max_frames}, expected at least 1")
+    beams = tuple(sorted({int(b) for b in beams}, reverse=True))
+    for b in beams:
+        check_beams(b)
     all_drives = find_drives(kitti_root)
     found = [d for d in all_drives if d.has_raw and d.depth_dir is not None]
     if not found:
@@ -167,22 +183,24 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
 
     written = []
     for (drive, split), index, path in zip(chosen, indexes, targets):
-        frames = track(read_drive(index), drive.name, total=len(index))
+        frames = track(read_drive(index, beams), drive.name, total=len(index))
         first = next(frames)  # its image gives the frame size
         height, width = first.rgb.shape[:2]
         with DriveWriter(path, index.K, height, width, source=source, date=drive.date, drive=drive.name,
-                         split=split, force=force) as writer:
+                         split=split, force=force,
+                         extra=(*(f"sparse@{b}" for b in beams), *(("exact",) if drive.has_exact else ()))) as writer:
             writer.append(first)
             for frame in frames:
                 writer.append(frame)
-        written.append(PreparedDrive(drive.name, split, path, len(index)))
+        written.append(PreparedDrive(drive.name, split, path, len(index), drive.has_exact))
 
     out_splits = {split: [d.name for d in written if d.split == split] for split in SPLIT_NAMES}
     write_json_atomic(splits_path, out_splits, force=True)
     config_path = write_json_atomic(out_dir / "prepare-kitti.json", stage_config("prepare-kitti", {
         "kitti_root": str(kitti_root), "out_dir": str(out_dir), "source": source, "splits": label,
-        "max_frames": max_frames, "include_unsplit": include_unsplit,
-        "drives": {d.name: {"split": d.split, "frames": d.frames} for d in written}}), force=True)
+        "max_frames": max_frames, "include_unsplit": include_unsplit, "beams": list(beams),
+        "drives": {d.name: {"split": d.split, "frames": d.frames, "exact": d.exact} for d in written}}),
+        force=True)
     return PrepareResult(source, tuple(written), out_splits, splits_path, config_path, tuple(notes))
 
 
@@ -204,6 +222,10 @@ class PrepareConfig:
     max_frames: int | None = option(None, min=1, help="Keep at most this many frames (the first with depth) per "
                                                       "drive.")
     all_drives: bool = option(False, flags=("--all-drives",), help="Also convert drives that are in no split.")
+    beams: list[int] = option(default_factory=list, validate=lambda b: check_beams(b), metavar="BEAMS",
+                              help="Also write the sparse depth of this many of the 64 LiDAR beams (repeatable: "
+                                   "--beams 32 --beams 16 --beams 8), read as sparse@<BEAMS> by train, predict, "
+                                   "slam and score.")
 
     def __post_init__(self) -> None:
         if self.max_frames is not None and self.max_frames < 1:
@@ -213,7 +235,8 @@ class PrepareConfig:
 def run(ws: Workspace, config: PrepareConfig, *, force: bool = False) -> PrepareResult:
     """:func:`prepare_kitti` with the workspace's default folders (its record: ``<out>/prepare-kitti.json``)."""
     return prepare_kitti(config.kitti or ws.kitti, config.out or ws.drives, splits_file=config.splits,
-                         max_frames=config.max_frames, include_unsplit=config.all_drives, force=force)
+                         max_frames=config.max_frames, include_unsplit=config.all_drives,
+                         beams=tuple(config.beams), force=force)
 
 
 CONFIG = PrepareConfig

@@ -62,10 +62,12 @@ def _file_or_layer_output(ws: Workspace, kind: str, path: Path | None, gt: Path 
 class ScoreDepthConfig:
     """Options of ``dcslam score depth``."""
 
-    layer: str | None = option(None, help="sparse, dense, a run or filter name (or predicted/<run>, "
-                                          "filtered/<name>), or a folder of layer files. Required.")
+    layer: str | None = option(None, help="sparse, dense, sparse@<beams>, exact, a run or filter name (or "
+                                          "predicted/<run>, filtered/<name>), or a folder of layer files. Required.")
     drive: list[str] = option(default_factory=list, help=DRIVE_HELP)
     out: Path | None = option(None, help=OUT_HELP)
+    target: str = option("dense", choices=("dense", "exact"),
+                         help="Reference depth: dense (annotated) or exact (noise-free; generated drives only).")
     raw: bool = option(False, flags=("--raw",), help="No devkit interpolation: score only the pixels where the "
                                                      "layer has depth.")
 
@@ -78,9 +80,11 @@ def run_depth(ws: Workspace, config: ScoreDepthConfig, *, force: bool = False) -
     from dcslam.report.scores import check_outputs, depth_table
     from dcslam.workspace import select_drives
 
-    out = config.out or ws.results / f"depth_{_slug(Path(config.layer).name)}.csv"
+    suffix = "" if config.target == "dense" else f"_vs_{config.target}"
+    out = config.out or ws.results / f"depth_{_slug(Path(config.layer).name)}{suffix}.csv"
     check_outputs([out], force)
-    table = depth_table(ws, config.layer, select_drives(ws, config.drive), interpolate=not config.raw)
+    table = depth_table(ws, config.layer, select_drives(ws, config.drive), interpolate=not config.raw,
+                        target=config.target)
     return _write("score-depth", config, table, out)
 
 

@@ -25,7 +25,8 @@ from dcslam.workspace import Workspace
 class SlamStageConfig(SlamSettings):
     """Options of ``dcslam slam``: the SLAM's settings plus its input, frames, output and device."""
 
-    depth: str = option("dense", help="Depth input: sparse, dense, predicted (a `dcslam predict` layer), filtered "
+    depth: str = option("dense", help="Depth input: sparse, dense, sparse@<beams> (prepare-kitti --beams), exact "
+                                      "(generated drives), predicted (a `dcslam predict` layer), filtered "
                                       "(a `dcslam filter` layer), predicted/<run>, filtered/<name>, or a layer "
                                       "folder or file path.")
     drive: list[str] = option(default_factory=list, help="Drive name (in drives/) or .h5 path; repeatable. "

@@ -20,6 +20,12 @@ from dcslam.workspace import Workspace, stage_config
 MODELS = tuple(ARCHITECTURES)
 
 
+def _check_kind(kind: str) -> str:
+    from dcslam.io.drive import check_input_kind
+
+    return check_input_kind(kind)
+
+
 @dataclass(frozen=True)
 class TrainStageConfig:
     """Options of ``dcslam train`` (the training's own settings are passed on as a
@@ -41,7 +47,13 @@ class TrainStageConfig:
     batch_size: int = option(1, help="Frames per step (MSE and 1-frame chamfer).")
     seed: int = option(0, help="Random seed.")
     device: str = option("auto", help="auto (a GPU if there is one), cpu or cuda.")
-    name: str | None = option(None, help="Run name (default: mse-dense, mse-sparse, chamfer-1, ...).")
+    input: str = option("sparse", validate=_check_kind, metavar="KIND",
+                        help="Depth fed to the network: sparse (the drive's own), sparse@<beams> (written by "
+                             "prepare-kitti --beams), dense or exact.")
+    target: str = option("dense", validate=_check_kind, metavar="KIND",
+                         help="Depth the loss compares with: dense (annotated) or exact (generated drives only).")
+    name: str | None = option(None, help="Run name (default: mse-dense, mse-sparse, chamfer-1, ...; with another "
+                                         "input or target, e.g. mse-dense-sparse16, mse-dense-to-exact).")
     resume: bool = option(False, flags=("--resume",), help="Continue an interrupted run from last.pt.")
     nproc: int = option(1, help="Processes for distributed data-parallel training (launches torchrun).")
 
@@ -55,10 +67,17 @@ class TrainStageConfig:
         from dcslam.depth.data import check_view
 
         check_view(self.scale, self.crop)
+        _check_kind(self.input)
+        _check_kind(self.target)
 
     @property
     def run_name(self) -> str:
-        return self.name or run_name(self.loss, self.mask, self.map_frames)
+        if self.name:
+            return self.name
+        name = run_name(self.loss, self.mask, self.map_frames)
+        if self.input != "sparse":
+            name += "-" + self.input.replace("@", "")
+        return name + (f"-to-{self.target}" if self.target != "dense" else "")
 
     def train_config(self, train_drives: list[Path], val_drives: list[Path]):
         """The :class:`dcslam.depth.train.TrainConfig` of this run."""
@@ -67,8 +86,8 @@ class TrainStageConfig:
         return TrainConfig(loss=self.loss, mask=self.mask, map_frames=self.map_frames, model=self.model,
                            epochs=self.epochs, lr=self.lr, weight_decay=self.weight_decay,
                            max_frames=self.max_frames, stride=self.stride, scale=self.scale, crop=self.crop,
-                           batch_size=self.batch_size, seed=self.seed, device=self.device,
-                           train_drives=train_drives, val_drives=val_drives)
+                           batch_size=self.batch_size, seed=self.seed, device=self.device, input=self.input,
+                           target=self.target, train_drives=train_drives, val_drives=val_drives)
 
 
 RUN_FILES = ("model.pt", "last.pt", "metrics.jsonl", "config.json", "curves.png")
@@ -114,6 +133,8 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
     import torch
 
     from dcslam.depth.data import DriveFrames
+    from dcslam.depth.models import is_guided
+    from dcslam.io.drive import input_beams
     from dcslam.depth.train import barrier, rank_and_world, resolve_device, seed_all, train_loop
     from dcslam.report.plots import plot_training_curves
 
@@ -132,11 +153,12 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
 
     open_drives = []
     try:
-        train_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop)
-                        for p in config.train_drives]
+        guided = is_guided(config.model)
+        train_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop, config.input,
+                                    config.target, rgb=guided) for p in config.train_drives]
         open_drives += train_frames
-        val_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop)
-                      for p in config.val_drives]
+        val_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop, config.input,
+                                  config.target, rgb=guided) for p in config.val_drives]
         open_drives += val_frames
         if rank == 0 and not resume:
             settings = asdict(config)
@@ -144,6 +166,7 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
             settings["val_drives"] = [str(p) for p in config.val_drives]
             settings["resolved_device"] = str(device)
             settings["world_size"] = world
+            settings["input_beams"] = input_beams(config.input)
             write_json_atomic(run_dir / "config.json", stage_config("train", settings))
         return train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world,
                           on_epoch=lambda: plot_training_curves(run_dir / "curves.png", run_dir / "metrics.jsonl"))

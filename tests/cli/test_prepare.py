@@ -146,3 +146,17 @@ def test_interrupted_conversion(tmp_path, monkeypatch):
     result = run("--kitti", root, "--out", tmp_path / "drives")
     assert result.exit_code == 1 and "interrupted" in result.stderr
     assert _files(tmp_path / "drives") == []
+
+
+def test_beams_option(workspace):
+    scans = workspace / "kitti" / "raw" / "2011_09_26" / REAL / "velodyne_points" / "data"
+    scans.mkdir(parents=True)
+    (scans / "0000000005.bin").symlink_to(fx.REAL_RAW / "velodyne_points" / "data" / "0000000005.bin")
+    bad = run("--workspace", workspace, "--max-frames", 1, "--beams", 12)
+    assert bad.exit_code == 2 and "divisor" in bad.output and not (workspace / "drives").exists()
+    result = run("--workspace", workspace, "--max-frames", 1, "--beams", 32, "--beams", 8)
+    assert result.exit_code == 0, result.output
+    with DriveFile(workspace / "drives" / f"{REAL}.h5") as drive:
+        assert drive.kinds == ("sparse", "dense", "sparse@32", "sparse@8")
+        counts = [(drive.depth(kind, 0) > 0).sum() for kind in ("sparse", "sparse@32", "sparse@8")]
+        assert counts[0] > counts[1] > counts[2] > 0

@@ -43,9 +43,10 @@ def test_mse_dense_run_writes_everything(workspace):
     assert meta["step"] == best["step"]  # the best validation checkpoint is the one kept
 
 
-def test_training_reduces_the_loss(workspace):
-    run = workspace / "runs" / "r"
-    train(run, _config(workspace, epochs=4, model_hparams={}))
+@pytest.mark.parametrize("model, lr", [("sparse-conv", 1e-3), ("nconv", 1e-2), ("nconv-guided", 1e-2)])
+def test_training_reduces_the_loss(workspace, model, lr):
+    run = workspace / "runs" / model
+    train(run, _config(workspace, epochs=4, model=model, model_hparams={}, lr=lr))
     rows = _rows(run)
     first = [r["loss"] for r in rows if r["kind"] == "train" and r["epoch"] == 0]
     last = [r["loss"] for r in rows if r["kind"] == "train" and r["epoch"] == 3]
@@ -99,3 +100,4 @@ def test_bad_options(workspace, tmp_path):
     with pytest.raises(DcslamError):
         resolve_device("tpu")
     assert resolve_device("auto").type in ("cpu", "cuda")
+

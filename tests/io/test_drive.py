@@ -151,6 +151,71 @@ class TestMalformedDriveFiles:
             DriveFile(tmp_path / "d.h5")
 
 
+
+def with_extra(frames, kinds):
+    out = []
+    for k, f in enumerate(frames):
+        extra = {kind: (f.dense * (j + 1) * 0.5 + k).astype(np.float32) for j, kind in enumerate(kinds)}
+        out.append(DriveFrame(f.rgb, f.sparse, f.dense, f.T_world_cam, f.timestamp, f.frame_id, extra))
+    return out
+
+
+class TestExtraDepth:
+    KINDS = ("sparse@16", "sparse@8", "exact")
+
+    def test_round_trip(self, tmp_path):
+        frames = with_extra(make_frames(3), self.KINDS)
+        write(tmp_path / "d1.h5", frames, extra=self.KINDS)
+        with DriveFile(tmp_path / "d1.h5") as drive:
+            assert set(drive.kinds) == {"sparse", "dense", *self.KINDS}
+            assert drive.attrs["sparse_beams"].tolist() == [16, 8]
+            for original, back in zip(frames, drive):
+                assert set(back.extra) == set(self.KINDS)
+                for kind in self.KINDS:
+                    assert np.array_equal(back.extra[kind], original.extra[kind])
+            assert np.array_equal(load_depth(drive, "sparse@8"), np.stack([f.extra["sparse@8"] for f in frames]))
+        with h5py.File(tmp_path / "d1.h5") as h5:
+            assert h5["depth/sparse_16"].attrs["beams"] == 16 and h5["depth/exact"].attrs["synthetic_only"]
+
+    def test_old_files_read_and_name_what_is_missing(self, tmp_path):
+        write(tmp_path / "d1.h5", make_frames(2))
+        with DriveFile(tmp_path / "d1.h5") as drive:
+            assert drive.kinds == ("sparse", "dense") and "sparse_beams" not in drive.attrs
+            assert drive.frame(0).extra == {}
+            with pytest.raises(DcslamError, match=r"holds no sparse@16 depth.*prepare-kitti --beams 16 --force"):
+                drive.depth("sparse@16", 0)
+            with pytest.raises(DcslamError, match="holds no exact depth.*generated drives only"):
+                load_depth(drive, "exact")
+
+    @pytest.mark.parametrize("kind", ["sparse@", "sparse@x", "sparse@0", "dense@16", "exactly"])
+    def test_unknown_kinds(self, tmp_path, kind):
+        with pytest.raises(DcslamError, match="unknown depth kind"):
+            DriveWriter(tmp_path / "d1.h5", K, H, W, source="kitti", date="d", drive="d", extra=(kind,))
+
+    def test_frame_without_its_extra_depth_leaves_no_file(self, tmp_path):
+        frames = make_frames(2)
+        with pytest.raises(DcslamError, match="expects"):
+            write(tmp_path / "d1.h5", frames, extra=("exact",))
+        bad = with_extra(frames, ("exact",))
+        bad[1].extra["exact"][0, 0] = np.nan
+        with pytest.raises(DcslamError, match="exact depth must be finite"):
+            write(tmp_path / "d1.h5", bad, extra=("exact",))
+        assert _files(tmp_path) == []
+
+    @pytest.mark.parametrize("damage, match", [
+        (lambda h5: h5["depth/sparse_16"].attrs.__setitem__("beams", 32), "records beams=32, expected 16"),
+        (lambda h5: h5.attrs.__setitem__("sparse_beams", [16, 32]), "sparse_beams is"),
+        (lambda h5: h5.create_dataset("depth/fused", data=np.zeros((3, H, W), np.float32)), "depth/fused"),
+        (lambda h5: (h5.__delitem__("depth/exact"), h5.create_dataset("depth/exact", data=np.zeros((2, H, W)))),
+         r"depth/exact has shape \(2, 6, 10\)"),
+    ])
+    def test_malformed(self, tmp_path, damage, match):
+        write(tmp_path / "d1.h5", with_extra(make_frames(3), ("sparse@16", "exact")), extra=("sparse@16", "exact"))
+        with h5py.File(tmp_path / "d1.h5", "r+") as h5:
+            damage(h5)
+        with pytest.raises(DcslamError, match=match):
+            DriveFile(tmp_path / "d1.h5")
+
 class TestLayers:
     def test_round_trip(self, tmp_path):
         depth = np.random.default_rng(0).uniform(0, 50, (3, H, W)).astype(np.float32)
@@ -192,6 +257,37 @@ class TestLayers:
         write(tmp_path / "drive.h5", make_frames(1))
         with pytest.raises(DcslamError, match="not a dcslam depth layer"):
             read_layer(tmp_path / "drive.h5")
+
+
+
+class TestLayerConfidence:
+    def test_round_trip_and_old_layers(self, tmp_path):
+        rng = np.random.default_rng(1)
+        depth = rng.uniform(0, 50, (3, H, W)).astype(np.float32)
+        confidence = rng.uniform(0, 1, (3, H, W)).astype(np.float32)
+        write_layer(tmp_path / "c.h5", Layer(depth, drive="d1.h5", made_by="nconv", confidence=confidence))
+        layer = read_layer(tmp_path / "c.h5", expect_frames=3)
+        assert np.array_equal(layer.confidence, confidence) and np.array_equal(layer.depth, depth)
+        with h5py.File(tmp_path / "c.h5") as h5:
+            assert h5["confidence"].dtype == np.float32 and h5["confidence"].chunks == (1, H, W)
+        write_layer(tmp_path / "old.h5", Layer(depth, drive="d1.h5", made_by="sparse-conv"))
+        assert read_layer(tmp_path / "old.h5").confidence is None
+
+    @pytest.mark.parametrize("confidence, match", [
+        (np.full((3, H, W), 1.5, np.float32), r"within \[0, 1\]"),
+        (np.full((3, H, W), np.nan, np.float32), "finite"),
+        (np.ones((2, H, W), np.float32), "like its depth"),
+    ])
+    def test_bad_confidence(self, tmp_path, confidence, match):
+        depth = np.ones((3, H, W), np.float32)
+        with pytest.raises(DcslamError, match=match):
+            write_layer(tmp_path / "c.h5", Layer(depth, drive="d", made_by="x", confidence=confidence))
+        assert _files(tmp_path) == []
+        write_layer(tmp_path / "c.h5", Layer(depth, drive="d", made_by="x"))
+        with h5py.File(tmp_path / "c.h5", "r+") as h5:
+            h5.create_dataset("confidence", data=confidence)
+        with pytest.raises(DcslamError, match=match):
+            read_layer(tmp_path / "c.h5")
 
 
 class TestListingAndSplits:

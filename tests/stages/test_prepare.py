@@ -69,6 +69,46 @@ class TestPrepareReal:
         config = json.loads(result.config_path.read_text())
         assert config["stage"] == "prepare-kitti" and config["settings"]["max_frames"] == 3
 
+    def test_beams_from_the_real_scan(self, tmp_path):
+        from dcslam.geometry.lidar_beams import keep_beams
+
+        root = fx.link_real_drive(tmp_path / "kitti")
+        scan_path = fx.REAL_RAW / "velodyne_points" / "data" / "0000000005.bin"
+        name = "2011_09_26_drive_0001_sync"
+        scans = root / "raw" / "2011_09_26" / name / "velodyne_points" / "data"
+        scans.mkdir(parents=True)
+        for i in (5, 6):
+            (scans / kitti.frame_name(i, ".bin")).symlink_to(scan_path)
+        result = prepare_kitti(root, tmp_path / "drives", max_frames=2, beams=(16, 64, 16))
+        calib = kitti.read_calibration(root / "raw" / "2011_09_26")
+        scan = kitti.read_velodyne(scan_path)
+        with DriveFile(tmp_path / "drives" / f"{name}.h5") as drive:
+            assert drive.kinds == ("sparse", "dense", "sparse@16", "sparse@64")
+            assert drive.attrs["sparse_beams"].tolist() == [64, 16]
+            assert np.array_equal(drive.depth("sparse@64", 1), kitti.project_velodyne(scan, calib))
+            assert np.array_equal(drive.depth("sparse@16", 0), kitti.project_velodyne(keep_beams(scan, 16), calib))
+            assert (drive.depth("sparse@16", 0) > 0).sum() < 0.3 * (drive.depth("sparse", 0) > 0).sum()
+        assert json.loads(result.config_path.read_text())["settings"]["beams"] == [64, 16]
+
+    def test_beams_need_the_scans(self, tmp_path):
+        root = fx.link_real_drive(tmp_path / "kitti")
+        with pytest.raises(DcslamError, match=r"0000000005.bin not found.*drop --beams"):
+            prepare_kitti(root, tmp_path / "drives", max_frames=1, beams=(16,))
+        with pytest.raises(DcslamError, match="--beams is 12; expected a divisor"):
+            prepare_kitti(root, tmp_path / "drives", beams=(12,))
+        assert _files(tmp_path / "drives") == []
+
+    def test_malformed_scan(self, tmp_path):
+        root = fx.link_real_drive(tmp_path / "kitti")
+        scans = root / "raw" / "2011_09_26" / "2011_09_26_drive_0001_sync" / "velodyne_points" / "data"
+        scans.mkdir(parents=True)
+        (scans / "0000000005.bin").write_bytes(np.zeros(4 * 100, np.float32).tobytes())  # 100 points at the origin
+        with pytest.raises(DcslamError, match=r"0000000005.bin: scan has fewer than 64 distinct elevation"):
+            prepare_kitti(root, tmp_path / "drives", max_frames=1, beams=(16,))
+        (scans / "0000000005.bin").write_bytes(b"\0" * 10)
+        with pytest.raises(DcslamError, match="not a whole number"):
+            prepare_kitti(root, tmp_path / "drives", max_frames=1, beams=(16,))
+
     def test_thesis_split_notes_and_unsplit(self, tmp_path):
         root = tmp_path / "kitti"
         for name in ("2011_09_26_drive_0011_sync", "2011_09_26_drive_0029_sync", "2011_09_26_drive_0002_sync"):
@@ -189,6 +229,26 @@ class TestPrepareFailures:
         with pytest.raises(KeyboardInterrupt):
             prepare_kitti(tiny_root, out, include_unsplit=True)
         assert len(calls) == 3 and _files(out) == []
+
+    def test_exact_depth_round_trip_and_mismatch(self, tiny_root, tmp_path):
+        drive = kitti.find_drives(tiny_root)[0]
+        rng = np.random.default_rng(5)
+        exact = {i: rng.uniform(1, 90, (32, 48)).astype(np.float32) for i in range(5, 9)}
+        for i, depth in exact.items():
+            kitti.write_depth_png(drive.exact_path(i), depth)
+        result = prepare_kitti(tiny_root, tmp_path / "drives", include_unsplit=True)
+        assert result.drives[0].exact
+        with DriveFile(result.drives[0].path) as written:
+            assert written.kinds == ("sparse", "dense", "exact")
+            for k, i in enumerate(range(5, 9)):
+                assert np.abs(written.depth("exact", k) - exact[i]).max() <= 0.5 / 256 + 1e-5
+        drive.exact_path(8).unlink()
+        with pytest.raises(DcslamError, match=r"dcslam_exact_synthetic: 3 frames but velodyne_raw has 4"):
+            prepare_kitti(tiny_root, tmp_path / "other", include_unsplit=True)
+        drive.exact_path(8).write_bytes(b"not a png")
+        with pytest.raises(DcslamError, match="0000000008.png"):
+            prepare_kitti(tiny_root, tmp_path / "other", include_unsplit=True)
+        assert _files(tmp_path / "other") == []
 
     def test_max_frames_checked(self, tiny_root, tmp_path):
         with pytest.raises(DcslamError, match="at least 1"):

@@ -31,3 +31,20 @@ def test_usage(ws):
         run_trajectory(ws, ScoreTrajectoryConfig())
     with pytest.raises(DcslamError, match="give --layer"):
         ScoreDepthConfig()
+
+
+def test_depth_against_exact_and_of_fewer_beams(tmp_path):
+    from dcslam.workspace import Workspace
+    from tests.fixtures.depth import write_workspace
+
+    ws = Workspace(write_workspace(tmp_path / "ws", extra=True))
+    exact = run_depth(ws, ScoreDepthConfig(layer="exact", target="exact", raw=True))
+    assert exact.out == ws.results / "depth_exact_vs_exact.csv"
+    assert exact.table.rows[-1]["mae_mm"] == 0 and exact.table.rows[-1]["coverage"] == 1
+    sixteen = run_depth(ws, ScoreDepthConfig(layer="sparse@16", target="exact", raw=True)).table.rows[-1]
+    assert sixteen["mae_mm"] == pytest.approx(0, abs=1e-3) and 0 < sixteen["coverage"] < 0.1
+    dense = run_depth(ws, ScoreDepthConfig(layer="dense", target="exact", raw=True)).table.rows[-1]
+    assert 0.5 < dense["coverage"] < 0.8  # the annotated depth lacks the top quarter of the rows
+    bare = Workspace(write_workspace(tmp_path / "bare"))
+    with pytest.raises(DcslamError, match="holds no exact depth"):
+        run_depth(bare, ScoreDepthConfig(layer="dense", target="exact"))

@@ -29,3 +29,19 @@ def test_layer_references_resolve_through_the_one_resolver(ws):
     with pytest.raises(DcslamError, match="drive file .*nowhere.h5 not found"):
         run(ws, SlamStageConfig(drive=["nowhere"], odometry="gt"))
     assert not ws.slam.exists()
+
+
+def test_sparse_of_fewer_beams_and_exact_depth(tmp_path):
+    import json
+
+    from dcslam.workspace import Workspace
+    from tests.fixtures.depth import write_workspace
+
+    ws = Workspace(write_workspace(tmp_path / "ws", extra=True))
+    for kind in ("sparse@16", "exact"):
+        (result,) = run(ws, SlamStageConfig(depth=kind, odometry="gt", frames=2, voxel_size=0.1))
+        summary = json.loads((ws.slam / kind / "drive_d.json").read_text())
+        assert summary["settings"]["depth"] == kind and summary["points"] == result.summary["points"]
+    sixteen = json.loads((ws.slam / "sparse@16" / "drive_d.json").read_text())["points"]
+    exact = json.loads((ws.slam / "exact" / "drive_d.json").read_text())["points"]
+    assert exact > 0 and sixteen < exact  # two LiDAR rows per frame give (almost) no map points with normals

@@ -35,3 +35,27 @@ def test_several_processes_go_through_the_launcher_with_the_same_config(ws, monk
     assert launched == [(2, "dcslam.stages.train", config)]
     assert result.run_dir == ws.runs / "ddp" and result.steps == 2 and result.epochs == 1
     assert result.best["step"] == 2
+
+
+def test_input_of_fewer_beams_and_exact_target(tmp_path):
+    import pytest
+
+    from dcslam.errors import DcslamError
+    from dcslam.stages.predict import PredictConfig
+    from dcslam.stages.predict import run as predict
+    from dcslam.io.drive import read_layer
+    from dcslam.workspace import Workspace
+    from tests.fixtures.depth import write_workspace
+
+    assert TrainStageConfig(input="sparse@16", target="exact").run_name == "mse-dense-sparse16-to-exact"
+    with pytest.raises(DcslamError, match="unknown depth kind"):
+        TrainStageConfig(input="sparse16")
+    ws = Workspace(write_workspace(tmp_path / "ws", extra=True))
+    result = run(ws, TrainStageConfig(max_frames=2, scale=0.5, device="cpu", input="sparse@16", target="exact"))
+    settings = json.loads((result.run_dir / "config.json").read_text())["settings"]
+    assert (settings["input"], settings["input_beams"], settings["target"]) == ("sparse@16", 16, "exact")
+    layer = read_layer(predict(ws, PredictConfig(run=result.run_dir.name, device="cpu")).layers[0])
+    assert layer.config["input"] == "sparse@16"  # the run's own input by default
+    bare = Workspace(write_workspace(tmp_path / "bare"))
+    with pytest.raises(DcslamError, match="holds no sparse@16 depth"):
+        run(bare, TrainStageConfig(max_frames=2, scale=0.5, device="cpu", input="sparse@16"))

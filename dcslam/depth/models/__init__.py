@@ -19,6 +19,8 @@ MODEL_FORMAT = "dcslam.model/1"
 ARCHITECTURES = {  # trainable network name → "module:class" (the class takes its hyperparameters as keywords)
     "sparse-conv": "dcslam.depth.models.sparse_conv:SparseConvNet",
     "dncnn": "dcslam.depth.models.dncnn:DnCNN",
+    "nconv": "dcslam.depth.models.nconv:NConvCNN",
+    "nconv-guided": "dcslam.depth.models.nconv:GuidedNConvCNN",
 }
 CLASSICAL = {  # completer that needs no training → "module:factory" (called with no argument)
     "ip-basic-fast": "dcslam.depth.models.ip_basic:fast",
@@ -42,6 +44,11 @@ def _registry() -> dict:
 def architectures() -> tuple[str, ...]:
     """Names of the trainable architectures."""
     return tuple(ARCHITECTURES)
+
+
+def is_guided(arch: str) -> bool:
+    """Whether architecture ``arch`` also takes the colour image (``model(sparse, mask, rgb)``)."""
+    return arch in ARCHITECTURES and bool(getattr(_load(ARCHITECTURES[arch]), "GUIDED", False))
 
 
 def classical_name(name: str) -> str | None:

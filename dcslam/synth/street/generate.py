@@ -8,6 +8,8 @@ Per drive ``2011_09_26_drive_<1000 + index>_sync``::
     raw/2011_09_26/<drive>/oxts/data/<frame>.txt                30-field packets, + timestamps.txt, dataformat.txt
     depth_completion/train/<drive>/proj_depth/velodyne_raw/image_02/<frame>.png   frames 5 … N − 6, like KITTI
     depth_completion/train/<drive>/proj_depth/groundtruth/image_02/<frame>.png
+    depth_completion/train/<drive>/dcslam_exact_synthetic/image_02/<frame>.png   noise-free depth of every pixel
+                                                                (a dcslam extension, synthetic only), same frames
     SYNTHETIC, synth_config.json                                a marker for prepare-kitti, and the settings
 
 Each drive is written into hidden temporary folders and renamed when complete, so an interrupted run leaves no
@@ -27,7 +29,8 @@ import numpy as np
 
 from dcslam.errors import DcslamError
 from dcslam.io.atomic import write_json_atomic, write_text_atomic
-from dcslam.io.kitti import frame_name, write_depth_png, write_image, write_timestamps, write_velodyne
+from dcslam.io.kitti import (EXACT_FOLDER, frame_name, write_depth_png, write_image, write_timestamps,
+                             write_velodyne)
 from dcslam.io.kitti_calib import Calibration, copy_calibration, read_calibration
 from dcslam.io.kitti_oxts import OxtsPacket, write_oxts, write_oxts_dataformat
 from dcslam.synth.raycast import CameraGrid
@@ -155,6 +158,7 @@ def write_drive(truth: DriveTruth, rng: np.random.Generator, calib: Calibration,
             gt_i = consistent_groundtruth(points_cam, true_depth[i], calib.K_cam2, stereo[i])
             write_depth_png(depth_dir / "proj_depth" / "velodyne_raw" / "image_02" / frame_name(i, ".png"), raw_i)
             write_depth_png(depth_dir / "proj_depth" / "groundtruth" / "image_02" / frame_name(i, ".png"), gt_i)
+            write_depth_png(depth_dir / EXACT_FOLDER / "image_02" / frame_name(i, ".png"), true_depth[i])
             sparse.append(float(np.mean(raw_i > 0)))
             dense.append(float(np.mean(gt_i > 0)))
         for old in [j for j in scans_world if j < k - 2 * GT_WINDOW]:

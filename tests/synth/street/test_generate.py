@@ -143,3 +143,27 @@ def test_bad_arguments():
         generate("unused", drives=1, frames=0)
     with pytest.raises(DcslamError, match="--drives"):
         generate("unused", drives=0, frames=5)
+
+
+def test_exact_depth_and_fewer_beams_reach_the_drive_file(kitti, frame5, tmp_path):
+    from dcslam.geometry.lidar_beams import laser_ids
+    from dcslam.io.drive import DriveFile
+    from dcslam.stages.prepare import prepare_kitti
+
+    root, _ = kitti
+    true_depth, _ = frame5
+    exact_png = root / "depth_completion" / "train" / "2011_09_26_drive_1000_sync" / "dcslam_exact_synthetic" / \
+        "image_02" / "0000000005.png"
+    exact = read_depth_png(exact_png)
+    assert np.abs(exact - true_depth).max() <= 0.5 / 256 + 1e-6  # the PNG's 1/256 m steps, nothing else
+    assert np.mean(exact > 0) > 0.9  # every pixel but the sky
+    prepare_kitti(root, tmp_path / "drives", beams=(16,), include_unsplit=True)
+    scan = read_velodyne(_drive(root)[0] / "velodyne_points" / "data" / "0000000005.bin")
+    assert len(np.unique(laser_ids(scan))) == 64  # generated scans: lasers told apart by elevation
+    with DriveFile(tmp_path / "drives" / "2011_09_26_drive_1000_sync.h5") as drive:
+        assert set(drive.kinds) == {"sparse", "dense", "sparse@16", "exact"}
+        assert np.array_equal(drive.depth("exact", 0), exact)
+        sparse, sixteen = drive.depth("sparse", 0), drive.depth("sparse@16", 0)
+        assert 0.2 < (sixteen > 0).sum() / (sparse > 0).sum() < 0.3
+        both = (sixteen > 0) & (exact > 0)
+        assert np.median(np.abs(sixteen[both] - exact[both])) < 0.05
