@@ -12,6 +12,7 @@ converted unless ``include_unsplit``. Generated drives are divided deterministic
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -126,11 +127,19 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
         force: overwrite drive files and ``splits.json`` that exist.
 
     Every drive is checked (:func:`dcslam.io.kitti.index_drive`) before anything is written; outputs that exist
-    without ``force`` fail before anything is written. Each drive file is written atomically.
+    without ``force`` fail before anything is written. The set is written atomically: drive files are written under
+    temporary names and renamed only once every drive has been read, so a failure or an interrupt leaves none of
+    them (and no ``splits.json``) and a rerun starts clean.
     """
     kitti_root, out_dir = Path(kitti_root), Path(out_dir)
     if max_frames is not None and max_frames < 1:
         raise DcslamError(f"--max-frames is {max_frames}, expected at least 1")
+    if not kitti_root.is_dir():
+        what = "is a file, not a folder" if kitti_root.exists() else "does not exist"
+        raise DcslamError(f"KITTI root {kitti_root} {what}; pass --kitti DIR (a folder holding raw/ and "
+                          "depth_completion/), or run `dcslam synth` to generate one")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise DcslamError(f"--out {out_dir} is a file; pass a folder for the drive files")
     all_drives = find_drives(kitti_root)
     found = [d for d in all_drives if d.has_raw and d.depth_dir is not None]
     if not found:
@@ -166,16 +175,27 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
     indexes: list[DriveIndex] = [index_drive(drive).head(max_frames) for drive, _ in chosen]
 
     written = []
-    for (drive, split), index, path in zip(chosen, indexes, targets):
-        frames = track(read_drive(index), drive.name, total=len(index))
-        first = next(frames)  # its image gives the frame size
-        height, width = first.rgb.shape[:2]
-        with DriveWriter(path, index.K, height, width, source=source, date=drive.date, drive=drive.name,
-                         split=split, force=force) as writer:
-            writer.append(first)
-            for frame in frames:
-                writer.append(frame)
-        written.append(PreparedDrive(drive.name, split, path, len(index)))
+    staged: list[tuple[Path, Path]] = []  # (complete drive file under a temporary name, its final name)
+    for leftover in out_dir.glob(".*.h5.set-*") if out_dir.is_dir() else ():
+        leftover.unlink(missing_ok=True)  # from an interrupted run
+    try:
+        for (drive, split), index, path in zip(chosen, indexes, targets):
+            frames = track(read_drive(index), drive.name, total=len(index))
+            first = next(frames)  # its image gives the frame size
+            height, width = first.rgb.shape[:2]
+            stage = path.with_name(f".{path.name}.set-{os.getpid()}")
+            staged.append((stage, path))
+            with DriveWriter(stage, index.K, height, width, source=source, date=drive.date, drive=drive.name,
+                             split=split, force=True) as writer:
+                writer.append(first)
+                for frame in frames:
+                    writer.append(frame)
+            written.append(PreparedDrive(drive.name, split, path, len(index)))
+        for stage, path in staged:  # every drive read cleanly: the set appears together
+            os.replace(stage, path)
+    finally:
+        for stage, _ in staged:
+            stage.unlink(missing_ok=True)
 
     out_splits = {split: [d.name for d in written if d.split == split] for split in SPLIT_NAMES}
     write_json_atomic(splits_path, out_splits, force=True)
