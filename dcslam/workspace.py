@@ -185,11 +185,25 @@ def layer_reference(depth: str, run: str | None) -> str:
     return depth
 
 
+def plain_name(name: str, what: str = "name") -> str:
+    """``name`` if it is a plain file or folder name (no ``/``, ``\\``, not ``.`` or ``..``, not hidden); else a
+    :class:`DcslamError`, so that no name given on the command line or read from a file writes outside its folder."""
+    name = str(name)
+    if not name or name in (".", "..") or "/" in name or "\\" in name or name.startswith(".") or "\0" in name:
+        raise DcslamError(f"{what} {name!r} is not a plain name (no '/', '\\', and not starting with '.'); "
+                          "pass a name such as mse-dense+range")
+    return name
+
+
 def select_drives(ws: Workspace, drives: list[str] | None = None, split: str = "test") -> list[str]:
     """``drives`` if given, else the drives of ``split`` in ``splits.json``."""
     from dcslam.io.drive import read_splits
 
+    what = "--drive" if drives else f"drive name in {ws.splits}"
     drives = list(drives) if drives else list(read_splits(ws.splits)[split])
+    for drive in drives:
+        if not str(drive).endswith(".h5"):  # a drive file given by its path is read, never written beside
+            plain_name(drive, what)
     if not drives:
         raise DcslamError(f"{ws.splits}: no {split} drives; pass --drive or rerun `dcslam prepare-kitti`")
     return drives

@@ -52,6 +52,14 @@ class TrainStageConfig:
         for name in ("map_frames", "epochs", "max_frames", "stride", "batch_size", "nproc"):
             if getattr(self, name) < 1:
                 raise DcslamError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+        if not 0 < self.lr < float("inf"):
+            raise DcslamError(f"--lr must be a positive number, got {self.lr}")
+        if not 0 <= self.weight_decay < float("inf"):
+            raise DcslamError(f"--weight-decay must be a non-negative number, got {self.weight_decay}")
+        if self.name is not None:
+            from dcslam.workspace import plain_name
+
+            plain_name(self.name, "--name")
         from dcslam.depth.data import check_view
 
         check_view(self.scale, self.crop)
