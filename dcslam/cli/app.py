@@ -29,6 +29,9 @@ WorkspaceOption = Annotated[Optional[Path], typer.Option(
 ForceOption = Annotated[bool, typer.Option("--force", help="Overwrite outputs that exist.")]
 
 
+INTERRUPTED = "interrupted: no partial output was kept; rerun the command to finish"
+
+
 def fail(message: str) -> None:
     """Print one line on stderr and exit with code 1."""
     typer.echo(f"error: {message}", err=True)
@@ -36,7 +39,7 @@ def fail(message: str) -> None:
 
 
 def known_errors(command):
-    """Turn :class:`~dcslam.errors.DcslamError` (and Ctrl-C) into one line on stderr and exit code 1."""
+    """Turn :class:`~dcslam.errors.DcslamError` into one line on stderr and exit code 1, Ctrl-C into exit 130."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
@@ -47,8 +50,8 @@ def known_errors(command):
         except DcslamError as error:
             fail(str(error))
         except KeyboardInterrupt:
-            typer.echo("interrupted; no partial output was kept", err=True)
-            raise typer.Exit(1) from None
+            typer.echo(INTERRUPTED, err=True)
+            raise typer.Exit(130) from None
 
     return wrapper
 

@@ -9,6 +9,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from dcslam.errors import DcslamError
+from dcslam.interrupt import check
 
 
 def _temporary_name(path: Path) -> Path:
@@ -29,6 +30,7 @@ def atomic_output(path: Path | str, force: bool = False) -> Iterator[Path]:
     tmp = _temporary_name(path)
     try:
         yield tmp
+        check()  # never publish after a Ctrl-C, even one a finalizer swallowed
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
