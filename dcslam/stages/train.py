@@ -95,19 +95,46 @@ def _prepare_run_dir(run_dir: Path, force: bool, resume: bool) -> None:
     run_dir.mkdir(parents=True, exist_ok=True)
 
 
+RESUMABLE = ("epochs", "device")  # what a resumed run may change: more epochs, another device
+
+
+def _plain(value):
+    return json.loads(json.dumps(value, default=str))
+
+
 def _saved_config(run_dir: Path, config):
-    """On resume: the run's own configuration, with only the number of epochs (and the device) taken from
-    ``config``."""
+    """On resume: the run's own configuration, with the number of epochs and the device taken from ``config``.
+
+    Raises :class:`DcslamError` naming every other option in which ``config`` differs from the run's."""
     from dcslam.depth.train import TrainConfig
 
+    path = run_dir / "config.json"
     try:
-        settings = json.loads((run_dir / "config.json").read_text())["settings"]
-    except (OSError, KeyError, json.JSONDecodeError) as exc:
-        raise DcslamError(f"{run_dir / 'config.json'}: cannot resume from it ({exc})") from None
+        settings = json.loads(path.read_text())["settings"]
+        if not isinstance(settings, dict):
+            raise TypeError("settings is not a mapping")
+    except (OSError, KeyError, TypeError, json.JSONDecodeError) as exc:
+        raise DcslamError(f"{path}: cannot resume from it ({exc})") from None
     known = {k: v for k, v in settings.items() if k in TrainConfig.__dataclass_fields__}
+    given = _plain(asdict(config))
+    differ = [f"--{k.replace('_', '-')} {given[k]!r} (the run has {known[k]!r})" for k in sorted(known)
+              if k not in RESUMABLE and _plain(known[k]) != given.get(k)]
+    if differ:
+        raise DcslamError(f"cannot resume {run_dir} with other options: {'; '.join(differ)}; resume with the run's "
+                          "own options (only --epochs and --device may change), or start again with --force")
     known["epochs"] = config.epochs
     known["device"] = config.device
     return TrainConfig(**known)
+
+
+def _record_resume(run_dir: Path, config) -> None:
+    """Write the resumed run's epochs and device into its ``config.json`` (so it says what the run was trained to)."""
+    path = run_dir / "config.json"
+    record = json.loads(path.read_text())
+    record["settings"]["epochs"], record["settings"]["device"] = config.epochs, config.device
+    resumed = stage_config("train --resume", {"epochs": config.epochs, "device": config.device})
+    record.setdefault("resumed", []).append({k: resumed[k] for k in ("dcslam_version", "written", "settings")})
+    write_json_atomic(path, record)
 
 
 def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = False, map_builder=None):
@@ -153,8 +180,11 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
             settings["resolved_device"] = str(device)
             settings["world_size"] = world
             write_json_atomic(run_dir / "config.json", stage_config("train", settings))
-        return train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world,
-                          on_epoch=lambda: plot_training_curves(run_dir / "curves.png", run_dir / "metrics.jsonl"))
+        result = train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world,
+                            on_epoch=lambda: plot_training_curves(run_dir / "curves.png", run_dir / "metrics.jsonl"))
+        if resume and rank == 0:  # only once the epochs are trained
+            _record_resume(run_dir, config)
+        return result
     finally:
         for frames in open_drives:
             frames.close()
