@@ -82,14 +82,23 @@ class TrainStageConfig:
 RUN_FILES = ("model.pt", "last.pt", "metrics.jsonl", "config.json", "curves.png")
 
 
-def _prepare_run_dir(run_dir: Path, force: bool, resume: bool) -> None:
+def _check_run_dir(run_dir: Path, force: bool, resume: bool) -> list[str]:
+    """The run's files that exist; raises if they may not be overwritten, or if there is nothing to resume."""
+    if run_dir.exists() and not run_dir.is_dir():
+        raise DcslamError(f"{run_dir} is a file; remove it or choose another --name")
     existing = [name for name in RUN_FILES if (run_dir / name).exists()]
     if resume:
         if not (run_dir / "last.pt").exists():
             raise DcslamError(f"{run_dir / 'last.pt'} not found; nothing to resume (start the run without --resume)")
-        return
-    if existing and not force:
+    elif existing and not force:
         raise DcslamError(f"run {run_dir} exists; pass --force to overwrite it or --resume to continue it")
+    return existing
+
+
+def _prepare_run_dir(run_dir: Path, force: bool, resume: bool) -> None:
+    existing = _check_run_dir(run_dir, force, resume)
+    if resume:
+        return
     for name in existing:
         (run_dir / name).unlink()
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -221,6 +230,8 @@ def run(ws: Workspace, config: TrainStageConfig, *, force: bool = False):
     run_dir = ws.runs / config.run_name
     if config.nproc > 1 and not distributed.in_torchrun():
         import tempfile
+
+        _check_run_dir(run_dir, force, config.resume)  # here, not in every worker
 
         from dcslam.stages.config import to_toml
 
