@@ -36,10 +36,10 @@ class Workspace:
 
     @classmethod
     def resolve(cls, root: Path | str | None = None) -> "Workspace":
-        """``root`` if given, else ``$DCSLAM_WORKSPACE``, else ``./workspace``."""
+        """``root`` if given, else ``$DCSLAM_WORKSPACE``, else ``./workspace``; a file there is a DcslamError."""
         if root is None:
             root = os.environ.get(ENV_VAR) or "workspace"
-        return cls(Path(root))
+        return cls(output_folder(Path(root), "workspace (-w)"))
 
     @property
     def kitti(self) -> Path:
@@ -183,6 +183,13 @@ def layer_reference(depth: str, run: str | None) -> str:
     if depth in LAYER_KINDS and run:
         return run if Path(run).is_dir() else f"{depth}/{run}"
     return depth
+
+
+def output_folder(path: Path, option: str) -> Path:
+    """``path`` unless it exists and is not a folder (a :class:`DcslamError` naming ``option``)."""
+    if path.exists() and not path.is_dir():
+        raise DcslamError(f"{option} {path} is a file, not a folder; pass a folder (it is made if missing)")
+    return path
 
 
 def plain_name(name: str, what: str = "name") -> str:

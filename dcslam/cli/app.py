@@ -49,6 +49,9 @@ def known_errors(command):
             return command(*args, **kwargs)
         except DcslamError as error:
             fail(str(error))
+        except (FileExistsError, NotADirectoryError, IsADirectoryError, PermissionError) as error:
+            # a path that is the wrong kind of thing, or not ours to write: the user's to fix, not a bug
+            fail(f"{error.filename}: {error.strerror}; check the paths given (--workspace, --out, ...)")
         except KeyboardInterrupt:
             typer.echo(INTERRUPTED, err=True)
             raise typer.Exit(130) from None

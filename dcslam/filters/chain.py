@@ -56,6 +56,7 @@ def filter_drives(jobs: Sequence[tuple[Path, str | Path, Path]], chain: FilterCh
     the whole call with nothing overwritten. Each layer's ``config`` records the source, the chain
     (``describe()`` of each filter) and ``settings``.
     """
+    from dcslam.io.atomic import AtomicSet
     from dcslam.io.drive import DriveFile, Layer, load_depth, write_layer
 
     jobs = [(Path(d), s, Path(o)) for d, s, o in jobs]
@@ -69,11 +70,15 @@ def filter_drives(jobs: Sequence[tuple[Path, str | Path, Path]], chain: FilterCh
         if str(source) not in ("sparse", "dense") and not Path(source).exists():
             raise DcslamError(f"layer file {source} not found; run `dcslam predict` or `dcslam filter` first")
     written = []
-    for drive_path, source, out_path in jobs:
-        with DriveFile(drive_path) as drive:
-            depth = load_depth(drive, source)
-            filtered = filter_frames(depth, drive.K, chain, f"{made_by} {drive.name}")
-            config = {"source": str(source), "drive_file": str(drive_path), "filters": chain.describe(), **settings}
-            write_layer(out_path, Layer(depth=filtered, drive=drive.name, made_by=made_by, config=config), force=force)
-        written.append(out_path)
+    with AtomicSet() as files:  # the layers appear together: a bad input or Ctrl-C leaves none of them
+        for drive_path, source, out_path in jobs:
+            with DriveFile(drive_path) as drive:
+                depth = load_depth(drive, source)
+                filtered = filter_frames(depth, drive.K, chain, f"{made_by} {drive.name}")
+                config = {"source": str(source), "drive_file": str(drive_path), "filters": chain.describe(),
+                          **settings}
+                out_path.parent.mkdir(parents=True, exist_ok=True)
+                write_layer(files.stage(out_path), Layer(depth=filtered, drive=drive.name, made_by=made_by,
+                                                         config=config), force=True)
+            written.append(out_path)
     return written

@@ -40,6 +40,8 @@ def read_tum(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
     path = Path(path)
     if not path.exists():
         raise DcslamError(f"trajectory file {path} not found")
+    if path.is_dir():
+        raise DcslamError(f"trajectory file {path} is a folder; pass a TUM trajectory file ({FORMAT})")
     rows = []
     for number, line in enumerate(path.read_text().splitlines(), 1):
         line = line.strip()
@@ -56,7 +58,8 @@ def read_tum(path: Path | str) -> tuple[np.ndarray, np.ndarray]:
         raise DcslamError(f"{path}: no poses ({FORMAT})")
     data = np.array(rows)
     if not np.all(np.isfinite(data)):
-        raise DcslamError(f"{path}: non-finite values")
+        bad = int(np.flatnonzero(~np.isfinite(data).all(axis=1))[0])
+        raise DcslamError(f"{path}: pose {bad} holds NaN or infinite values (a failed trajectory); remake the file")
     norms = np.linalg.norm(data[:, 4:], axis=1)
     if np.any(np.abs(norms - 1) > 1e-3):
         bad = int(np.argmax(np.abs(norms - 1)))

@@ -102,7 +102,7 @@ def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> Predict
     """Write ``<out>/<drive>.h5`` for every drive of the split (or ``config.drive``); nothing is overwritten without
     ``force`` (checked before any work)."""
     from dcslam.io.drive import read_splits
-    from dcslam.workspace import require
+    from dcslam.workspace import output_folder, require
 
     chosen = predictor(ws, config)
     if config.drive:
@@ -112,7 +112,7 @@ def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> Predict
         paths = [require(ws.drives / f"{name}.h5", "dcslam prepare-kitti") for name in splits[config.split]]
         if not paths:
             raise DcslamError(f"split {config.split!r} of {ws.splits} has no drives")
-    out_dir = config.output or ws.predictions / chosen.made_by
+    out_dir = output_folder(config.output or ws.predictions / chosen.made_by, "--output")
     outputs = [out_dir / Path(p).name for p in paths]
     existing = [p for p in outputs if p.exists()]
     if existing and not force:

@@ -12,7 +12,6 @@ converted unless ``include_unsplit``. Generated drives are divided deterministic
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,7 +20,7 @@ from dcslam.io.drive import DriveWriter, read_splits
 from dcslam.io.kitti import DriveIndex, RawDrive, find_drives, index_drive, read_drive
 from dcslam.progress import track
 from dcslam.stages.config import option
-from dcslam.io.atomic import write_json_atomic
+from dcslam.io.atomic import AtomicSet, write_json_atomic
 from dcslam.workspace import Workspace, stage_config
 
 SPLIT_NAMES = ("train", "val", "test")
@@ -175,27 +174,17 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
     indexes: list[DriveIndex] = [index_drive(drive).head(max_frames) for drive, _ in chosen]
 
     written = []
-    staged: list[tuple[Path, Path]] = []  # (complete drive file under a temporary name, its final name)
-    for leftover in out_dir.glob(".*.h5.set-*") if out_dir.is_dir() else ():
-        leftover.unlink(missing_ok=True)  # from an interrupted run
-    try:
+    with AtomicSet() as files:  # every drive read cleanly, or none of them appears
         for (drive, split), index, path in zip(chosen, indexes, targets):
             frames = track(read_drive(index), drive.name, total=len(index))
             first = next(frames)  # its image gives the frame size
             height, width = first.rgb.shape[:2]
-            stage = path.with_name(f".{path.name}.set-{os.getpid()}")
-            staged.append((stage, path))
-            with DriveWriter(stage, index.K, height, width, source=source, date=drive.date, drive=drive.name,
-                             split=split, force=True) as writer:
+            with DriveWriter(files.stage(path), index.K, height, width, source=source, date=drive.date,
+                             drive=drive.name, split=split, force=True) as writer:
                 writer.append(first)
                 for frame in frames:
                     writer.append(frame)
             written.append(PreparedDrive(drive.name, split, path, len(index)))
-        for stage, path in staged:  # every drive read cleanly: the set appears together
-            os.replace(stage, path)
-    finally:
-        for stage, _ in staged:
-            stage.unlink(missing_ok=True)
 
     out_splits = {split: [d.name for d in written if d.split == split] for split in SPLIT_NAMES}
     write_json_atomic(splits_path, out_splits, force=True)

@@ -66,7 +66,9 @@ def run(ws: Workspace, config: SynthConfig, *, force: bool = False) -> SynthResu
     """Generate the drives (or sequences) of ``config`` under :func:`out_root`."""
     from dcslam.progress import Bar
 
-    root = out_root(ws, config)
+    from dcslam.workspace import output_folder
+
+    root = output_folder(out_root(ws, config), "--out")
     if config.indoor:
         from dcslam.synth.indoor import generate_indoor
 
