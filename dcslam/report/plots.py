@@ -52,8 +52,8 @@ def plot_trajectories(path: Path | str, T_gt: np.ndarray, estimates: dict[str, n
 
 
 def _dilate(depth: np.ndarray, radius: int = 2) -> np.ndarray:
-    """Sparse depth (H, W) with each measurement spread over a (2r+1)² square (where squares overlap, one of them), so that
-    one-pixel LiDAR points are visible in a figure. For display only."""
+    """Sparse depth (H, W) with each measurement spread over a (2r+1)² square (where squares overlap, one of
+    them), so that one-pixel LiDAR points are visible in a figure. For display only."""
     depth = np.asarray(depth, np.float64)
     out = depth.copy()
     h, w = depth.shape
