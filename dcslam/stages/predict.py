@@ -117,8 +117,12 @@ def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> Predict
     existing = [p for p in outputs if p.exists()]
     if existing and not force:
         raise DcslamError(f"{existing[0]} exists; pass --force to overwrite it")
-    for path, out in zip(paths, outputs):
-        predict_drive(chosen, path, out, force=force)
+    from dcslam.io.atomic import AtomicSet
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with AtomicSet() as files:  # the layers appear together: Ctrl-C or a bad drive leaves none of them
+        for path, out in zip(paths, outputs):
+            predict_drive(chosen, path, files.stage(out), force=True)
     from dcslam.stages.config import to_dict
     from dcslam.io.atomic import write_json_atomic
     from dcslam.workspace import stage_config
