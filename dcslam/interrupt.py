@@ -11,6 +11,7 @@ from __future__ import annotations
 import signal
 
 _received = False
+_told = False
 
 
 def _handler(signum, frame) -> None:
@@ -21,8 +22,6 @@ def _handler(signum, frame) -> None:
 
 def install() -> None:
     """Record SIGINT and raise :class:`KeyboardInterrupt` (the command line calls this once, in the main thread)."""
-    global _received
-    _received = False
     signal.signal(signal.SIGINT, _handler)
 
 
@@ -35,3 +34,11 @@ def check() -> None:
     """Raise :class:`KeyboardInterrupt` if a SIGINT arrived, even one that an earlier finalizer swallowed."""
     if _received:
         raise KeyboardInterrupt
+
+
+def tell(echo) -> None:
+    """Tell the user, once, that the command was interrupted (``echo`` writes a line to stderr)."""
+    global _told
+    if not _told:
+        _told = True
+        echo("interrupted: no partial output was kept; rerun the command to finish")

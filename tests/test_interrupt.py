@@ -10,7 +10,6 @@ import weakref
 import pytest
 
 from dcslam import interrupt
-from dcslam.cli.app import INTERRUPTED
 from dcslam.io.atomic import atomic_output
 from dcslam.progress import track
 
@@ -23,7 +22,7 @@ def handler():
     interrupt.install()
     yield
     signal.signal(signal.SIGINT, previous)
-    interrupt._received = False
+    interrupt._received = interrupt._told = False
 
 
 class _Resource:
@@ -68,4 +67,4 @@ def test_command_line_exits_130_when_an_interrupt_was_swallowed(tmp_path):
     done = subprocess.run([sys.executable, "-c", script, "swallow"], capture_output=True, text=True, env=env,
                           timeout=60)
     assert done.returncode == 130, done.stderr
-    assert done.stderr.strip().splitlines()[-1] == INTERRUPTED
+    assert done.stderr.strip().splitlines()[-1] == "interrupted: no partial output was kept; rerun the command to finish"

@@ -29,9 +29,6 @@ WorkspaceOption = Annotated[Optional[Path], typer.Option(
 ForceOption = Annotated[bool, typer.Option("--force", help="Overwrite outputs that exist.")]
 
 
-INTERRUPTED = "interrupted: no partial output was kept; rerun the command to finish"
-
-
 def fail(message: str) -> None:
     """Print one line on stderr and exit with code 1."""
     typer.echo(f"error: {message}", err=True)
@@ -53,7 +50,9 @@ def known_errors(command):
             # a path that is the wrong kind of thing, or not ours to write: the user's to fix, not a bug
             fail(f"{error.filename}: {error.strerror}; check the paths given (--workspace, --out, ...)")
         except KeyboardInterrupt:
-            typer.echo(INTERRUPTED, err=True)
+            from dcslam import interrupt
+
+            interrupt.tell(lambda line: typer.echo(line, err=True))
             raise typer.Exit(130) from None
 
     return wrapper
