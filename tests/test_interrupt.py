@@ -67,4 +67,5 @@ def test_command_line_exits_130_when_an_interrupt_was_swallowed(tmp_path):
     done = subprocess.run([sys.executable, "-c", script, "swallow"], capture_output=True, text=True, env=env,
                           timeout=60)
     assert done.returncode == 130, done.stderr
-    assert done.stderr.strip().splitlines()[-1] == "interrupted: no partial output was kept; rerun the command to finish"
+    assert done.stderr.strip().splitlines()[-1] == \
+        "interrupted: no partial output was kept; rerun the command to finish"
