@@ -17,8 +17,12 @@ def enabled() -> bool:
 
 def track(items: Iterable[T], description: str, total: int | None = None) -> Iterator[T]:
     """Iterate over ``items`` with a progress bar on stderr (a no-op when progress is disabled)."""
+    from dcslam.interrupt import check
+
     if not enabled():
-        yield from items
+        for item in items:
+            check()
+            yield item
         return
     from rich.console import Console
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
@@ -31,6 +35,7 @@ def track(items: Iterable[T], description: str, total: int | None = None) -> Ite
     with Progress(*columns, console=Console(stderr=True), transient=False) as bar:
         task = bar.add_task(description, total=total, status="")
         for item in items:
+            check()
             yield item
             bar.advance(task)
 
@@ -61,6 +66,9 @@ class Bar:
         return self
 
     def advance(self, n: int = 1, status: str | None = None) -> None:
+        from dcslam.interrupt import check
+
+        check()  # a Ctrl-C swallowed by a finalizer still stops the loop here
         if self._progress is not None:
             fields = {} if status is None else {"status": status}
             self._progress.update(self._task, advance=n, **fields)

@@ -36,10 +36,10 @@ class Workspace:
 
     @classmethod
     def resolve(cls, root: Path | str | None = None) -> "Workspace":
-        """``root`` if given, else ``$DCSLAM_WORKSPACE``, else ``./workspace``."""
+        """``root`` if given, else ``$DCSLAM_WORKSPACE``, else ``./workspace``; a file there is a DcslamError."""
         if root is None:
             root = os.environ.get(ENV_VAR) or "workspace"
-        return cls(Path(root))
+        return cls(output_folder(Path(root), "workspace (-w)"))
 
     kitti = property(lambda self: self.root / "kitti", doc="KITTI-format raw + depth folders (real or generated).")
     drives = property(lambda self: self.root / "drives", doc="Drive files and splits.json.")
@@ -165,11 +165,32 @@ def layer_reference(depth: str, run: str | None) -> str:
     return depth
 
 
+def output_folder(path: Path, option: str) -> Path:
+    """``path`` unless it exists and is not a folder (a :class:`DcslamError` naming ``option``)."""
+    if path.exists() and not path.is_dir():
+        raise DcslamError(f"{option} {path} is a file, not a folder; pass a folder (it is made if missing)")
+    return path
+
+
+def plain_name(name: str, what: str = "name") -> str:
+    """``name`` if it is a plain file or folder name (no ``/``, ``\\``, not ``.`` or ``..``, not hidden); else a
+    :class:`DcslamError`, so that no name given on the command line or read from a file writes outside its folder."""
+    name = str(name)
+    if not name or name in (".", "..") or "/" in name or "\\" in name or name.startswith(".") or "\0" in name:
+        raise DcslamError(f"{what} {name!r} is not a plain name (no '/', '\\', and not starting with '.'); "
+                          "pass a name such as mse-dense+range")
+    return name
+
+
 def select_drives(ws: Workspace, drives: list[str] | None = None, split: str = "test") -> list[str]:
     """``drives`` if given, else the drives of ``split`` in ``splits.json``."""
     from dcslam.io.drive import read_splits
 
+    what = "--drive" if drives else f"drive name in {ws.splits}"
     drives = list(drives) if drives else list(read_splits(ws.splits)[split])
+    for drive in drives:
+        if not str(drive).endswith(".h5"):  # a drive file given by its path is read, never written beside
+            plain_name(drive, what)
     if not drives:
         raise DcslamError(f"{ws.splits}: no {split} drives; pass --drive or rerun `dcslam prepare-kitti`")
     return drives

@@ -1,4 +1,5 @@
 """The ``dcslam`` command line: one module per command, registered on one Typer app."""
+from dcslam import interrupt
 from dcslam.cli.app import app
 from dcslam.cli import synth, prepare, train, predict, filter as filter_, slam, score, reproduce, demo_icl  # noqa: F401,E501
 
@@ -6,4 +7,30 @@ __all__ = ["app", "main"]
 
 
 def main() -> None:
-    app()
+    """The ``dcslam`` command: exit 0, 1 (a known error), 2 (a usage error) or 130 (interrupted by Ctrl-C)."""
+    import signal
+
+    try:
+        interrupt.install()
+        app()
+    except KeyboardInterrupt:  # before Typer's own handler runs
+        _interrupted()
+    except SystemExit as done:
+        # Typer turns a Ctrl-C outside the command (while it parses options) into a silent exit 130, and click or a
+        # finalizer may swallow one: every way out after a Ctrl-C says so and exits 130
+        if done.code == 130 or interrupt.received():
+            _interrupted()
+        raise
+    finally:
+        # the outcome is decided and written: a Ctrl-C while Python shuts down (which can take a second with torch
+        # loaded) changes nothing, and must neither print "Exception ignored" nor kill the process
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if interrupt.received():
+        _interrupted()
+
+
+def _interrupted() -> None:
+    import sys
+
+    interrupt.tell(lambda line: sys.stderr.write(line + "\n"))
+    sys.exit(130)

@@ -36,7 +36,7 @@ def fail(message: str) -> None:
 
 
 def known_errors(command):
-    """Turn :class:`~dcslam.errors.DcslamError` (and Ctrl-C) into one line on stderr and exit code 1."""
+    """Turn :class:`~dcslam.errors.DcslamError` into one line on stderr and exit code 1, Ctrl-C into exit 130."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
@@ -46,9 +46,14 @@ def known_errors(command):
             return command(*args, **kwargs)
         except DcslamError as error:
             fail(str(error))
+        except (FileExistsError, NotADirectoryError, IsADirectoryError, PermissionError) as error:
+            # a path that is the wrong kind of thing, or not ours to write: the user's to fix, not a bug
+            fail(f"{error.filename}: {error.strerror}; check the paths given (--workspace, --out, ...)")
         except KeyboardInterrupt:
-            typer.echo("interrupted; no partial output was kept", err=True)
-            raise typer.Exit(1) from None
+            from dcslam import interrupt
+
+            interrupt.tell(lambda line: typer.echo(line, err=True))
+            raise typer.Exit(130) from None
 
     return wrapper
 

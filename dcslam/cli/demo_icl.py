@@ -35,4 +35,5 @@ def report(result) -> None:
             f"{seconds:.0f} s")
 
 
-demo_icl_command = stage_command(app, "demo-icl", demo_icl.DemoIclConfig, run, report, help=HELP)
+demo_icl_command = stage_command(app, "demo-icl", demo_icl.DemoIclConfig, run, report, help=HELP,
+                                 examples=("dcslam demo-icl --force", "dcslam demo-icl --sigma 0.02 --steps 200"))

@@ -15,4 +15,6 @@ def report(result: filter_stage.FilterResult) -> None:
             f"{result.out_dir}")
 
 
-filter_command = stage_command(app, "filter", filter_stage.FilterConfig, filter_stage.run, report, help=HELP)
+filter_command = stage_command(app, "filter", filter_stage.FilterConfig, filter_stage.run, report, help=HELP,
+                               examples=("dcslam filter --run mse-dense --filter thesis-range --filter edges",
+                                         "dcslam filter --depth sparse --filter outlier --name sparse-clean"))

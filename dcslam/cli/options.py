@@ -66,6 +66,13 @@ def _usage_check(validate: Callable, hint: str) -> Callable:
     return callback
 
 
+def examples_help(examples: tuple[str, ...]) -> str:
+    """The examples block of a command's help: one unwrapped paragraph (click's ``\\b``) of command lines."""
+    if not examples:
+        return ""
+    return "\n\nExamples:\n\n\b\n" + "\n".join(f"  {line}" for line in examples)
+
+
 def _plain(value):
     if isinstance(value, enum.Enum):
         return value.value
@@ -75,10 +82,12 @@ def _plain(value):
 
 
 def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, report: Callable[[object], None],
-                  *, help: str, force: bool = True, prepare: Callable | None = None) -> Callable:
+                  *, help: str, force: bool = True, prepare: Callable | None = None,
+                  examples: tuple[str, ...] = ()) -> Callable:
     """Register ``name`` on ``parent``: options → ``config_cls`` → ``run(workspace, config, force=)`` → ``report``.
 
     ``prepare(config, workspace)`` (optional) may return a changed configuration before it is printed or run.
+    ``examples``: command lines shown at the end of ``--help``.
     """
     from dcslam.stages.config import options_of
 
@@ -124,5 +133,5 @@ def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, rep
     wrapped.__annotations__ = {p.name: p.annotation for p in parameters}
     del wrapped.__wrapped__
     wrapped.__name__ = f"{name.replace('-', '_')}_command"
-    parent.command(name, help=help)(wrapped)
+    parent.command(name, help=help + examples_help(examples))(wrapped)
     return wrapped

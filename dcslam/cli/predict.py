@@ -14,4 +14,6 @@ def report(result: predict.PredictResult) -> None:
     summary(f"{len(result.layers)} prediction layer(s) by {result.made_by} in {result.out_dir}")
 
 
-predict_command = stage_command(app, "predict", predict.PredictConfig, predict.run, report, help=HELP)
+predict_command = stage_command(app, "predict", predict.PredictConfig, predict.run, report, help=HELP,
+                                examples=("dcslam predict --run mse-dense",
+                                          "dcslam predict --model ip-basic-fast    # no training needed"))

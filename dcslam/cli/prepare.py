@@ -21,6 +21,14 @@ def report_prepared(result) -> None:
     summary("\n".join(lines))
 
 
+EXAMPLES = {
+    "kitti": ("dcslam prepare-kitti    # what `dcslam synth` wrote in the workspace",
+              "dcslam prepare-kitti --kitti /data/kitti --max-frames 200"),
+    "tum": ("dcslam prepare-tum -w indoor    # what `dcslam synth --indoor` wrote",
+            "dcslam prepare-tum --tum PATH --intrinsics 525,525,319.5,239.5 --stride 2"),
+}
+
 for _name in DATASETS:
     _module = dataset(_name)
-    stage_command(app, f"prepare-{_name}", _module.CONFIG, _module.run, report_prepared, help=_module.HELP)
+    stage_command(app, f"prepare-{_name}", _module.CONFIG, _module.run, report_prepared, help=_module.HELP,
+                  examples=EXAMPLES.get(_name, ()))

@@ -30,4 +30,6 @@ def report(result) -> None:
     _log(f"done in {seconds / 60:.1f} min; tables, CSV and PNGs in {markdown.parent}")
 
 
-reproduce_command = stage_command(app, "reproduce", reproduce.ReproduceConfig, run, report, help=HELP, force=False)
+reproduce_command = stage_command(app, "reproduce", reproduce.ReproduceConfig, run, report, help=HELP, force=False,
+                                  examples=("dcslam reproduce --profile smoke -w /tmp/check    # a few minutes",
+                                            "dcslam reproduce --table 5.1 --kitti /data/kitti"))

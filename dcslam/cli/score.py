@@ -41,15 +41,21 @@ def report_tables(report) -> None:
 
 stage_command(score_app, "depth", score.ScoreDepthConfig, score.run_depth, report,
               help="MAE, RMSE (mm), iMAE, iRMSE (1/km) of a depth layer against the dense depth, as the KITTI devkit "
-                   "computes them (per image, then averaged).")
+                   "computes them (per image, then averaged).",
+              examples=("dcslam score depth --layer mse-dense", "dcslam score depth --layer dense --drive DRIVE"))
 stage_command(score_app, "trajectory", score.ScoreTrajectoryConfig, score.run_trajectory, report,
               help="Thesis localisation accuracy, ATE and RPE (as evo computes them) of estimated TUM trajectories: "
                    "--est X.txt --gt drive.h5|Y.txt, or --layer NAME for slam/<layer>/<drive>.txt over the test "
-                   "drives.")
+                   "drives.",
+              examples=("dcslam score trajectory --layer dense",
+                        "dcslam score trajectory --est slam/dense/DRIVE.txt --gt drives/DRIVE.h5"))
 stage_command(score_app, "map", score.ScoreMapConfig, score.run_map, report,
               help="Chamfer distance (the thesis's: mean squared nearest-neighbour distances, both ways) between maps "
                    "and ground-truth maps (PLY): --map X.ply --gt Y.ply, or --layer NAME [--gt-layer dense] for "
-                   "slam/<layer>/<drive>.ply.")
+                   "slam/<layer>/<drive>.ply.",
+              examples=("dcslam score map --layer mse-dense --gt-layer dense",
+                        "dcslam score map --map a.ply --gt b.ply"))
 stage_command(score_app, "tables", score.ScoreTablesConfig, score.run_tables, report_tables,
               help="Tables 5.1 (validation of each recipe) and 5.2 (test drives) as Markdown and CSV under results/, "
-                   "with a trajectory plot per test drive and depth examples.")
+                   "with a trajectory plot per test drive and depth examples.",
+              examples=("dcslam score tables", "dcslam score tables --force    # after rerunning a stage"))

@@ -19,4 +19,6 @@ def report(results: list[slam.SlamDriveResult]) -> None:
                 f"{h['degraded']} degraded / {h['rejected']} rejected, {verdict} -> {r.written['trajectory'].parent}")
 
 
-slam_command = stage_command(app, "slam", slam.SlamStageConfig, slam.run, report, help=HELP)
+slam_command = stage_command(app, "slam", slam.SlamStageConfig, slam.run, report, help=HELP,
+                             examples=("dcslam slam --depth dense --odometry icp --frames 30",
+                                       "dcslam slam --depth predicted --run mse-dense --mapper pointfusion"))

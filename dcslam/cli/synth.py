@@ -49,4 +49,6 @@ def report(result: synth.SynthResult) -> None:
             f"to {result.root}{densities}")
 
 
-synth_command = stage_command(app, "synth", synth.SynthConfig, synth.run, report, help=HELP)
+synth_command = stage_command(app, "synth", synth.SynthConfig, synth.run, report, help=HELP,
+                              examples=("dcslam synth --drives 6 --frames 60 --seed 0",
+                                        "dcslam synth --indoor --drives 1 --frames 60 -w indoor"))

@@ -20,4 +20,7 @@ def report(result) -> None:
                f"RMSE {best['rmse_mm']:.1f} mm" if best else "none (no validation drives)"))
 
 
-train_command = stage_command(app, "train", train.TrainStageConfig, train.run, report, help=HELP)
+train_command = stage_command(app, "train", train.TrainStageConfig, train.run, report, help=HELP,
+                              examples=("dcslam train --loss chamfer --map-frames 8 --scale 0.5 --epochs 3",
+                                        "dcslam train --loss mse --mask dense --resume    # after Ctrl-C: continue "
+                                        "from last.pt"))

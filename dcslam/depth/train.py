@@ -183,6 +183,25 @@ def _chunks(drives: list[DriveFrames], chunk: int) -> list[tuple[int, range]]:
     return [(d, window) for d, frames in enumerate(drives) for window in frame_windows(len(frames), chunk)]
 
 
+def _read_last(path: Path, model, optimizer) -> dict:
+    """The resume checkpoint ``path``, loaded into ``model`` and ``optimizer``; any broken file is a DcslamError."""
+    from dcslam.depth.models import read_torch_file
+
+    fix = "start the run again with --force (without --resume)"
+    state = read_torch_file(path, "training checkpoint", fix)
+    try:
+        model.load_state_dict(state["model"]["state_dict"])
+        optimizer.load_state_dict(state["optimizer"])
+        json.loads(state["best"] or "null")
+        for key in ("epoch", "next_chunk", "step", "metrics_lines"):
+            int(state[key])
+        torch.set_rng_state(state["rng"])
+    except Exception as exc:  # missing keys, wrong shapes or types: the file is not one of this run's checkpoints
+        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
+        raise DcslamError(f"{path}: not a checkpoint of this run ({type(exc).__name__}: {reason}); {fix}") from None
+    return state
+
+
 def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[DriveFrames],
                val_frames: list[DriveFrames],
                resume: bool = False, map_builder=None, rank: int = 0, world: int = 1, on_epoch=None) -> TrainResult:
@@ -196,12 +215,9 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
     metrics_path = run_dir / "metrics.jsonl"
     epoch, next_chunk, step, best, last_val = 0, 0, 0, None, None
     if resume:
-        state = torch.load(run_dir / "last.pt", map_location="cpu", weights_only=True)
-        model.load_state_dict(state["model"]["state_dict"])
-        optimizer.load_state_dict(state["optimizer"])
+        state = _read_last(run_dir / "last.pt", model, optimizer)
         epoch, next_chunk, step = state["epoch"], state["next_chunk"], state["step"]
         best = json.loads(state["best"]) if state["best"] else None
-        torch.set_rng_state(state["rng"])
         if rank == 0:  # drop log lines written after the checkpoint
             lines = metrics_path.read_text().splitlines(keepends=True) if metrics_path.exists() else []
             metrics_path.write_text("".join(lines[:state["metrics_lines"]]))

@@ -66,6 +66,7 @@ def filter_drives(jobs: Sequence[tuple[Path, str | Path, Path]], chain: FilterCh
     the whole call with nothing overwritten. Each layer's ``config`` records the source, the chain
     (``describe()`` of each filter) and ``settings``.
     """
+    from dcslam.io.atomic import AtomicSet
     from dcslam.io.drive import DriveFile, Layer, is_depth_kind, load_depth, read_layer, write_layer
 
     jobs = [(Path(d), s, Path(o)) for d, s, o in jobs]
@@ -79,18 +80,22 @@ def filter_drives(jobs: Sequence[tuple[Path, str | Path, Path]], chain: FilterCh
         if (isinstance(source, Path) or not is_depth_kind(str(source))) and not Path(source).exists():
             raise DcslamError(f"layer file {source} not found; run `dcslam predict` or `dcslam filter` first")
     written = []
-    for drive_path, source, out_path in jobs:
-        with DriveFile(drive_path) as drive:
-            depth = load_depth(drive, source)
-            from_file = isinstance(source, Path) or not is_depth_kind(str(source))
-            confidence = read_layer(source).confidence if from_file else None
-            if chain.needs_confidence and confidence is None:
-                raise DcslamError(f"{source} holds no confidence; the confidence filter needs a layer predicted by a "
-                                  f"confidence-aware model (e.g. `dcslam train --model nconv`, then `dcslam predict`)")
-            filtered = filter_frames(depth, drive.K, chain, f"{made_by} {drive.name}", confidence)
-            config = {"source": str(source), "drive_file": str(drive_path), "filters": chain.describe(), **settings}
-            kept = None if confidence is None else np.where(filtered > 0, confidence, 0).astype(np.float32)
-            write_layer(out_path, Layer(depth=filtered, drive=drive.name, made_by=made_by, config=config,
-                                        confidence=kept), force=force)
-        written.append(out_path)
+    with AtomicSet() as files:  # the layers appear together: a bad input or Ctrl-C leaves none of them
+        for drive_path, source, out_path in jobs:
+            with DriveFile(drive_path) as drive:
+                depth = load_depth(drive, source)
+                from_file = isinstance(source, Path) or not is_depth_kind(str(source))
+                confidence = read_layer(source).confidence if from_file else None
+                if chain.needs_confidence and confidence is None:
+                    raise DcslamError(f"{source} holds no confidence; the confidence filter needs a layer predicted "
+                                      f"by a confidence-aware model (e.g. `dcslam train --model nconv`, then "
+                                      f"`dcslam predict`)")
+                filtered = filter_frames(depth, drive.K, chain, f"{made_by} {drive.name}", confidence)
+                config = {"source": str(source), "drive_file": str(drive_path), "filters": chain.describe(),
+                          **settings}
+                kept = None if confidence is None else np.where(filtered > 0, confidence, 0).astype(np.float32)
+                out_path.parent.mkdir(parents=True, exist_ok=True)
+                write_layer(files.stage(out_path), Layer(depth=filtered, drive=drive.name, made_by=made_by,
+                                                         config=config, confidence=kept), force=True)
+            written.append(out_path)
     return written

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 from collections.abc import Iterator
 from pathlib import Path
 
 from dcslam.errors import DcslamError
+from dcslam.interrupt import check
 
 
 def _temporary_name(path: Path) -> Path:
@@ -29,11 +31,48 @@ def atomic_output(path: Path | str, force: bool = False) -> Iterator[Path]:
     tmp = _temporary_name(path)
     try:
         yield tmp
+        check()  # never publish after a Ctrl-C, even one a finalizer swallowed
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
         raise
+
+
+class AtomicSet:
+    """Files that appear together or not at all: :meth:`stage` gives each final path a temporary name beside it,
+    and leaving the ``with`` block cleanly renames them all; any exception (Ctrl-C included) removes them all.
+
+    >>> with AtomicSet() as files:
+    ...     for drive in drives:
+    ...         write_layer(files.stage(out / f"{drive}.h5"), layer, force=True)
+    """
+
+    def __init__(self) -> None:
+        self._staged: list[tuple[Path, Path]] = []
+
+    def stage(self, path: Path | str) -> Path:
+        """The temporary name to write ``path`` under (``.<name>.set-<pid>``, left over ones removed first)."""
+        path = Path(path)
+        for leftover in path.parent.glob(f".{path.name}.set-*") if path.parent.is_dir() else ():
+            leftover.unlink(missing_ok=True)
+        tmp = path.with_name(f".{path.name}.set-{os.getpid()}")
+        self._staged.append((tmp, path))
+        return tmp
+
+    def __enter__(self) -> "AtomicSet":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if exc_type is None:
+                check()
+                for tmp, path in self._staged:
+                    os.replace(tmp, path)
+        finally:
+            for tmp, _ in self._staged:
+                with contextlib.suppress(FileNotFoundError):
+                    tmp.unlink()
 
 
 def write_text_atomic(path: Path | str, text: str, force: bool = True) -> Path:
@@ -44,8 +83,21 @@ def write_text_atomic(path: Path | str, text: str, force: bool = True) -> Path:
 
 
 def write_json_atomic(path: Path | str, obj, force: bool = True) -> Path:
-    """Write ``obj`` as indented JSON atomically; paths become strings and arrays lists."""
-    return write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=False, default=_json_default) + "\n", force)
+    """Write ``obj`` as indented JSON atomically; paths become strings, arrays lists, and NaN or infinite numbers
+    ``null`` (bare ``NaN`` is not JSON)."""
+    text = json.dumps(_finite(json.loads(json.dumps(obj, default=_json_default))), indent=2, sort_keys=False,
+                      allow_nan=False)
+    return write_text_atomic(path, text + "\n", force)
+
+
+def _finite(obj):
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_finite(v) for v in obj]
+    return obj
 
 
 def _json_default(obj):

@@ -218,6 +218,42 @@ class DriveWriter:
         self._atomic.__exit__(exc_type, exc, tb)
 
 
+def _check_dims(path: Path, h5, names: tuple[str, ...], ndim: int) -> None:
+    for name in names:
+        if h5[name].ndim < ndim:
+            raise DcslamError(f"{path}: {name} has shape {h5[name].shape}, expected (N, H, W...)")
+
+
+def _agreed(path: Path, sizes: dict, what: str):
+    """The size most datasets agree on; a :class:`DcslamError` naming the dataset(s) that differ."""
+    from collections import Counter
+
+    common, _ = Counter(sizes.values()).most_common(1)[0]
+    odd = [f"{name} has {size}" for name, size in sizes.items() if size != common]
+    if odd:
+        raise DcslamError(f"{path}: {', '.join(odd)} {what} where the other datasets have {common}; remake the "
+                          "drive file with `dcslam prepare-kitti --force`")
+    return common
+
+
+def check_depth(depth: np.ndarray, source: str, first_frame: int = 0) -> np.ndarray:
+    """``depth`` (H, W) or (N, H, W) if every value is finite and >= 0 (0 = no value); else a :class:`DcslamError`
+    naming ``source`` and the first bad frame (``first_frame`` is the index of ``depth``'s first frame)."""
+    depth = np.asarray(depth)
+    if depth.dtype.kind != "f":
+        raise DcslamError(f"{source}: depth has dtype {depth.dtype}, expected float32 metres")
+    bad = ~np.isfinite(depth) | (depth < 0)
+    if bad.any():
+        frames = bad.reshape(-1, *depth.shape[-2:]).any(axis=(1, 2))
+        i = int(np.argmax(frames))
+        values = depth.reshape(-1, *depth.shape[-2:])[i][bad.reshape(-1, *depth.shape[-2:])[i]]
+        kinds = [k for k, hit in (("NaN", np.isnan(values).any()), ("infinite", np.isinf(values).any()),
+                                  ("negative", (values < 0).any())) if hit]
+        raise DcslamError(f"{source}: frame {first_frame + i} holds {' and '.join(kinds)} depths ({len(values)} "
+                          "pixels); depth must be finite and >= 0 (0 = no value): remake the file")
+    return depth
+
+
 class DriveFile:
     """Read a drive file lazily: ``len(drive)``, ``drive.frame(i)``, ``drive.depth("dense", i)``, ``drive.poses``.
 
@@ -255,12 +291,27 @@ class DriveFile:
         missing = [name for name in self.REQUIRED if name not in h5]
         if missing:
             raise DcslamError(f"{self.path}: missing dataset(s) {', '.join(missing)}")
-        n, h, w = h5["depth/dense"].shape
+        _check_dims(self.path, h5, ("rgb", "depth/sparse", "depth/dense"), 3)
+        framed = ("rgb", "depth/sparse", "depth/dense", "T_world_cam", "timestamps", "frame_ids")
+        n = _agreed(self.path, {name: h5[name].shape[0] for name in framed}, "frames")
+        h, w = _agreed(self.path, {name: h5[name].shape[1:3] for name in framed[:3]}, "rows × columns")
         expect = {"rgb": (n, h, w, 3), "depth/sparse": (n, h, w), "T_world_cam": (n, 4, 4), "K": (3, 3),
                   "timestamps": (n,), "frame_ids": (n,)}
         for name, shape in expect.items():
             if h5[name].shape != shape:
                 raise DcslamError(f"{self.path}: {name} has shape {h5[name].shape}, expected {shape}")
+        if h5["rgb"].dtype != np.uint8:
+            raise DcslamError(f"{self.path}: rgb has dtype {h5['rgb'].dtype}, expected uint8")
+        for name in ("depth/sparse", "depth/dense", "T_world_cam", "K", "timestamps"):
+            if h5[name].dtype.kind != "f":
+                raise DcslamError(f"{self.path}: {name} has dtype {h5[name].dtype}, expected floating point")
+        for name in ("T_world_cam", "K", "timestamps"):
+            bad = np.flatnonzero(~np.isfinite(h5[name][()]).reshape(len(h5[name]), -1).all(axis=1))
+            if len(bad):
+                where = "" if name == "K" else f" at frame {bad[0]}" + (f" (and {len(bad) - 1} more)" if len(bad) > 1
+                                                                       else "")
+                raise DcslamError(f"{self.path}: {name} is not finite{where}; remake the drive file with "
+                                  "`dcslam prepare-kitti --force`")
         declared = sorted(int(b) for b in np.atleast_1d(h5.attrs.get("sparse_beams", [])))
         for kind in self._extra_kinds():
             dataset = h5[depth_dataset(kind)]
@@ -316,7 +367,7 @@ class DriveFile:
             how = ("it is written for generated drives only (`dcslam synth`, then `dcslam prepare-kitti`)"
                    if kind == EXACT else f"rerun `dcslam prepare-kitti --beams {_beams_of(kind)} --force`")
             raise DcslamError(f"{self.path} holds no {kind} depth (it has {', '.join(self.kinds)}); {how}")
-        return self._h5[name][i]
+        return check_depth(self._h5[name][i], f"{self.path}: {name}", i)
 
     def frame(self, i: int) -> DriveFrame:
         return DriveFrame(rgb=self.rgb(i), sparse=self.depth("sparse", i), dense=self.depth("dense", i),
@@ -399,6 +450,7 @@ def read_layer(path: Path | str, expect_frames: int | None = None) -> Layer:
         raise DcslamError(f"{path} is not a readable HDF5 layer file ({exc})") from None
     if depth.ndim != 3:
         raise DcslamError(f"{path}: depth has shape {depth.shape}, expected (N, H, W)")
+    check_depth(depth, str(path))
     if confidence is not None:
         _check_confidence(confidence, depth.shape, f"{path}: ")
     if expect_frames is not None and depth.shape[0] != expect_frames:

@@ -17,6 +17,9 @@ def read_number_rows(path: Path | str, columns: int, fmt: str, what: str = "pose
     line naming the file and line for a missing file, a wrong count, a non-number, no rows or a NaN/inf.
     """
     path = Path(path)
+    if path.is_dir():
+        raise DcslamError(f"{what} {path} is a folder; pass a {'TUM trajectory' if comments else 'pose'} file "
+                          f"({fmt})")
     if not path.is_file():
         raise DcslamError(f"{what} {path} not found")
     rows = []
@@ -40,5 +43,7 @@ def read_number_rows(path: Path | str, columns: int, fmt: str, what: str = "pose
     data = np.array(rows)
     finite = np.isfinite(data).all(axis=1)
     if not finite.all():
-        raise DcslamError(f"{path}: pose {int(np.flatnonzero(~finite)[0])} has non-finite values (NaN or inf)")
+        bad = int(np.flatnonzero(~finite)[0])
+        raise DcslamError(f"{path}: pose {bad} has non-finite values (NaN or infinite: a failed trajectory?); "
+                          f"remake the file")
     return data

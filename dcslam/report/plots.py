@@ -51,9 +51,25 @@ def plot_trajectories(path: Path | str, T_gt: np.ndarray, estimates: dict[str, n
     return Path(path)
 
 
+def _dilate(depth: np.ndarray, radius: int = 2) -> np.ndarray:
+    """Sparse depth (H, W) with each measurement spread over a (2r+1)² square (where squares overlap, one of
+    them), so that one-pixel LiDAR points are visible in a figure. For display only."""
+    depth = np.asarray(depth, np.float64)
+    out = depth.copy()
+    h, w = depth.shape
+    for dy in range(-radius, radius + 1):
+        for dx in range(-radius, radius + 1):
+            shifted = np.zeros_like(depth)
+            shifted[max(dy, 0):h + min(dy, 0), max(dx, 0):w + min(dx, 0)] = \
+                depth[max(-dy, 0):h + min(-dy, 0), max(-dx, 0):w + min(-dx, 0)]
+            out = np.where((out == 0) & (shifted > 0), shifted, out)
+    return out
+
+
 def plot_depth_examples(path: Path | str, rows: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]],
                         rgb: np.ndarray | None = None, max_depth_m: float | None = None, force: bool = False) -> Path:
-    """One row per method: input depth, prediction, ground truth, absolute error (where there is ground truth).
+    """One row per method: input depth (dilated so sparse points show), prediction, ground truth, absolute error
+    (where there is ground truth; one colour range, the 99th percentile over all rows, so rows compare).
 
     ``rows``: (label, input (H, W), prediction (H, W), ground truth (H, W)), metres, 0 = none; ``rgb`` (H, W, 3)
     uint8 shown above them when given.
@@ -64,18 +80,20 @@ def plot_depth_examples(path: Path | str, rows: list[tuple[str, np.ndarray, np.n
     extra = rgb is not None
     fig, axes = plt.subplots(len(rows) + extra, 4, figsize=(16, 1.6 * (len(rows) + extra) + 0.6), squeeze=False)
     vmax = max_depth_m or float(max(np.max(r[3]) for r in rows) or 1.0)
+    errors = [np.where(gt > 0, np.abs(pred - gt), np.nan) for _, _, pred, gt in rows]
+    finite = np.concatenate([e[np.isfinite(e)] for e in errors] + [np.zeros(1)])
+    error_max = float(np.percentile(finite, 99)) or 1e-3  # one colour range for every row's error
     if extra:
         axes[0, 0].imshow(rgb)
         axes[0, 0].set_title("image", fontsize=8)
         for ax in axes[0]:
             ax.axis("off")
-    for i, (label, inp, pred, gt) in enumerate(rows, start=extra):
-        error = np.where(gt > 0, np.abs(pred - gt), np.nan)
-        panels = [(inp, "input", "viridis", vmax), (pred, "prediction", "viridis", vmax),
-                  (gt, "ground truth", "viridis", vmax), (error, "|error| (m)", "magma", None)]
+    for i, ((label, inp, pred, gt), error) in enumerate(zip(rows, errors), start=extra):
+        panels = [(_dilate(inp), "input (dilated to be seen)", "viridis", vmax), (pred, "prediction", "viridis", vmax),
+                  (gt, "ground truth", "viridis", vmax), (error, "|error| (m)", "magma", error_max)]
         for ax, (image, name, cmap, top) in zip(axes[i], panels):
-            shown = np.where(image > 0, image, np.nan) if name != "|error| (m)" else image
-            im = ax.imshow(shown, cmap=cmap, vmin=0, vmax=top if top else np.nanmax(np.r_[error.ravel(), 1e-3]))
+            shown = np.where(image > 0, image, np.nan) if cmap == "viridis" else image
+            im = ax.imshow(shown, cmap=cmap, vmin=0, vmax=top, interpolation="nearest")
             ax.set_title(f"{label}: {name}", fontsize=8)
             ax.axis("off")
         fig.colorbar(im, ax=axes[i, 3], fraction=0.03)
@@ -87,34 +105,33 @@ def plot_depth_examples(path: Path | str, rows: list[tuple[str, np.ndarray, np.n
 
 
 def plot_training_curves(path: Path | str, metrics_path: Path | str) -> Path:
-    """A training run's curves from its ``metrics.jsonl``: the training loss per step, and the validation RMSE, MAE
-    (mm) and chamfer (m²) per validation."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """A training run's curves from its ``metrics.jsonl``, one quantity family per panel (so no legend covers
+    another's curves): the training loss per step; the validation RMSE and MAE (mm); the validation MSE (m², the
+    checkpoint criterion of MSE runs) and chamfer (m², that of chamfer runs), each on its own axis."""
+    plt = _pyplot()
     rows = [json.loads(line) for line in Path(metrics_path).read_text().splitlines() if line.strip()]
     train = [(r["step"], r["loss"]) for r in rows if r["kind"] == "train"]
     val = [r for r in rows if r["kind"] == "val"]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
+    fig, axes = plt.subplots(1, 4, figsize=(16, 3.6))
     if train:
         axes[0].plot(*zip(*train), lw=0.8, label="training loss")
-    axes[0].set_xlabel("step")
-    axes[0].set_ylabel("loss")
-    axes[0].set_yscale("log")
-    axes[0].legend()
-    if val:
-        steps = [r["step"] for r in val]
-        axes[1].plot(steps, [r["rmse_mm"] for r in val], "o-", label="val RMSE (mm)")
-        axes[1].plot(steps, [r["mae_mm"] for r in val], "s-", label="val MAE (mm)")
-        twin = axes[1].twinx()
-        twin.plot(steps, [r["chamfer"] for r in val], "^--", color="tab:green", label="val chamfer (m²)")
-        twin.set_ylabel("chamfer (m²)")
-        twin.legend(loc="upper center")
-    axes[1].set_xlabel("step")
-    axes[1].set_ylabel("mm")
-    axes[1].legend(loc="upper right")
+    axes[0].set(xlabel="step", ylabel="loss", yscale="log", title="training loss")
+    steps = [r["step"] for r in val]
+    panels = [(axes[1], (("rmse_mm", "val RMSE", "o-"), ("mae_mm", "val MAE", "s-")), "mm", "validation depth errors"),
+              (axes[2], (("mse", "val MSE", "o-"),), "m²", "validation MSE (MSE runs' criterion)"),
+              (axes[3], (("chamfer", "val chamfer", "^-"),), "m²", "validation chamfer (chamfer runs' criterion)")]
+    for ax, curves, unit, title in panels:
+        for key, label, style in curves:
+            points = [(s, r[key]) for s, r in zip(steps, val) if r.get(key) is not None]
+            if points:
+                ax.plot(*zip(*points), style, label=label)
+        ax.set(xlabel="step", ylabel=unit, title=title)
+        if ax.lines:
+            ax.legend(loc="best", fontsize=8)
+    if train:
+        axes[0].legend(loc="best", fontsize=8)
+    for ax in axes:
+        ax.title.set_fontsize(9)
     fig.tight_layout()
     with atomic_output(path, force=True) as tmp:
         fig.savefig(tmp, dpi=100, format="png")

@@ -22,6 +22,9 @@ from dcslam.workspace import Workspace
 
 def check_outputs(paths: list[Path], force: bool) -> None:
     """Fail, before anything is written, when an output exists and ``force`` is false."""
+    for path in paths:
+        if Path(path).is_dir():
+            raise DcslamError(f"--out {path} is a folder; pass a file name such as {Path(path) / 'scores.csv'}")
     existing = [str(p) for p in paths if Path(p).exists()]
     if existing and not force:
         raise DcslamError(f"{existing[0]} exists{f' (and {len(existing) - 1} more)' if len(existing) > 1 else ''}; "

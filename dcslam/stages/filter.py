@@ -34,6 +34,10 @@ class FilterConfig:
         if self.depth in ("predicted", "filtered") and not self.run:
             raise DcslamError(f"--depth {self.depth} needs --run NAME (a run or filter name, or a folder of layer "
                               "files)")
+        if self.name is not None:
+            from dcslam.workspace import plain_name
+
+            plain_name(self.name, "--name")
 
     def chain(self):
         from dcslam.filters import FilterChain
@@ -54,11 +58,11 @@ def run(ws: Workspace, config: FilterConfig, *, force: bool = False) -> FilterRe
     from dcslam.filters import filter_drives
     from dcslam.stages.config import to_dict
     from dcslam.io.atomic import write_json_atomic
-    from dcslam.workspace import layer_reference, resolve_layer, select_drives, stage_config
+    from dcslam.workspace import layer_reference, plain_name, resolve_layer, select_drives, stage_config
 
     chain = config.chain()
     layer = resolve_layer(ws, layer_reference(config.depth, config.run))
-    name = config.name or f"{layer.name}+{chain.name}"
+    name = plain_name(config.name or f"{layer.name}+{chain.name}", "--name")
     out_dir = config.out_dir or ws.filtered / name
     drives = select_drives(ws, config.drive)
     jobs = [(ws.drives / f"{d}.h5", layer.source(d), out_dir / f"{d}.h5") for d in drives]

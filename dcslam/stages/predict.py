@@ -119,7 +119,7 @@ def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> Predict
     """Write ``<out>/<drive>.h5`` for every drive of the split (or ``config.drive``); nothing is overwritten without
     ``force`` (checked before any work)."""
     from dcslam.io.drive import read_splits
-    from dcslam.workspace import require
+    from dcslam.workspace import output_folder, require
 
     chosen = predictor(ws, config)
     if config.drive:
@@ -132,13 +132,17 @@ def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> Predict
     kind = config.input or chosen.config.get("train_settings", {}).get("input", "sparse")
     trained_on = chosen.config.get("train_settings", {}).get("input", "sparse")
     suffix = "" if kind == trained_on else "-" + kind.replace("@", "")
-    out_dir = config.output or ws.predictions / f"{chosen.made_by}{suffix}"
+    out_dir = output_folder(config.output or ws.predictions / f"{chosen.made_by}{suffix}", "--output")
     outputs = [out_dir / Path(p).name for p in paths]
     existing = [p for p in outputs if p.exists()]
     if existing and not force:
         raise DcslamError(f"{existing[0]} exists; pass --force to overwrite it")
-    for path, out in zip(paths, outputs):
-        predict_drive(chosen, path, out, force=force, input=kind)
+    from dcslam.io.atomic import AtomicSet
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with AtomicSet() as files:  # the layers appear together: Ctrl-C or a bad drive leaves none of them
+        for path, out in zip(paths, outputs):
+            predict_drive(chosen, path, files.stage(out), force=True, input=kind)
     from dcslam.stages.config import to_dict
     from dcslam.io.atomic import write_json_atomic
     from dcslam.workspace import stage_config

@@ -20,7 +20,7 @@ from dcslam.io.drive import DriveWriter, read_splits
 from dcslam.io.kitti import DriveIndex, RawDrive, find_drives, index_drive, read_drive
 from dcslam.progress import track
 from dcslam.stages.config import option
-from dcslam.io.atomic import write_json_atomic
+from dcslam.io.atomic import AtomicSet, write_json_atomic
 from dcslam.workspace import Workspace, stage_config
 
 SPLIT_NAMES = ("train", "val", "test")
@@ -139,11 +139,19 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
         force: overwrite drive files and ``splits.json`` that exist.
 
     Every drive is checked (:func:`dcslam.io.kitti.index_drive`) before anything is written; outputs that exist
-    without ``force`` fail before anything is written. Each drive file is written atomically.
+    without ``force`` fail before anything is written. The set is written atomically: drive files are written under
+    temporary names and renamed only once every drive has been read, so a failure or an interrupt leaves none of
+    them (and no ``splits.json``) and a rerun starts clean.
     """
     kitti_root, out_dir = Path(kitti_root), Path(out_dir)
     if max_frames is not None and max_frames < 1:
         raise DcslamError(f"--max-frames is {max_frames}, expected at least 1")
+    if not kitti_root.is_dir():
+        what = "is a file, not a folder" if kitti_root.exists() else "does not exist"
+        raise DcslamError(f"KITTI root {kitti_root} {what}; pass --kitti DIR (a folder holding raw/ and "
+                          "depth_completion/), or run `dcslam synth` to generate one")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise DcslamError(f"--out {out_dir} is a file; pass a folder for the drive files")
     beams = tuple(sorted({int(b) for b in beams}, reverse=True))
     for b in beams:
         check_beams(b)
@@ -182,17 +190,18 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
     indexes: list[DriveIndex] = [index_drive(drive).head(max_frames) for drive, _ in chosen]
 
     written = []
-    for (drive, split), index, path in zip(chosen, indexes, targets):
-        frames = track(read_drive(index, beams), drive.name, total=len(index))
-        first = next(frames)  # its image gives the frame size
-        height, width = first.rgb.shape[:2]
-        with DriveWriter(path, index.K, height, width, source=source, date=drive.date, drive=drive.name,
-                         split=split, force=force,
-                         extra=(*(f"sparse@{b}" for b in beams), *(("exact",) if drive.has_exact else ()))) as writer:
-            writer.append(first)
-            for frame in frames:
-                writer.append(frame)
-        written.append(PreparedDrive(drive.name, split, path, len(index), drive.has_exact))
+    with AtomicSet() as files:  # every drive read cleanly, or none of them appears
+        for (drive, split), index, path in zip(chosen, indexes, targets):
+            frames = track(read_drive(index, beams), drive.name, total=len(index))
+            first = next(frames)  # its image gives the frame size
+            height, width = first.rgb.shape[:2]
+            extra = (*(f"sparse@{b}" for b in beams), *(("exact",) if drive.has_exact else ()))
+            with DriveWriter(files.stage(path), index.K, height, width, source=source, date=drive.date,
+                             drive=drive.name, split=split, force=True, extra=extra) as writer:
+                writer.append(first)
+                for frame in frames:
+                    writer.append(frame)
+            written.append(PreparedDrive(drive.name, split, path, len(index), drive.has_exact))
 
     out_splits = {split: [d.name for d in written if d.split == split] for split in SPLIT_NAMES}
     write_json_atomic(splits_path, out_splits, force=True)

@@ -8,12 +8,17 @@ The experiment composes the other stages' configurations and runs them in this p
 
 A stage is skipped when its outputs exist, are newer than its inputs, and were made with the same configuration by
 the same dcslam (version and a hash of its sources, recorded in ``<workspace>/.reproduce/<stage>.json``), so a rerun
-after a change redoes only what changed. Training with several processes (``nproc``) still launches through torchrun.
+after a change redoes only what changed. A stage's stamp says "running" while it runs, so an interrupted stage is
+redone on the next run. Outputs that exist but were not made by this pipeline (no stamp, or changed after a finished
+stage's stamp: a run trained by hand, a layer filtered by hand) are never overwritten without ``force`` (``dcslam
+reproduce --force``); the error names the stage and the file. Training with several processes (``nproc``) still
+launches through torchrun.
 A profile chooses the scale: ``quick`` (the default, about half an hour on 2 CPU cores), ``smoke`` (a check that
 every stage runs) or ``thesis`` (the thesis's 15 / 4 / 5 drives of 200 frames, for a GPU).
 """
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -79,6 +84,8 @@ class ReproduceConfig:
     kitti: Path | None = option(None, help="Real KITTI root (raw/ and depth_completion/); default: generate "
                                            "KITTI-format drives with `dcslam synth`.")
     seed: int = option(0, help="Seed of the generated drives and of training.")
+    force: bool = option(False, flags=("--force",), help="Overwrite outputs in the workspace that `dcslam "
+                         "reproduce` did not make itself (runs trained, layers made by hand).")
 
     def __post_init__(self) -> None:
         if self.table not in TABLES:
@@ -111,8 +118,9 @@ def _mtime(paths: list[Path]) -> tuple[float, float]:
 class Pipeline:
     """Runs stages in order in this process, skipping those whose outputs are up to date."""
 
-    def __init__(self, workspace: Workspace, log: Callable[[str], None] = lambda line: None):
+    def __init__(self, workspace: Workspace, log: Callable[[str], None] = lambda line: None, force: bool = False):
         self.ws = workspace
+        self.force = force
         self.state = workspace.root / ".reproduce"
         self.log = log
         self.timings: dict[str, float] = {}
@@ -121,8 +129,6 @@ class Pipeline:
         return self.state / f"{stage.name}.json"
 
     def up_to_date(self, stage: Stage) -> bool:
-        import json
-
         stamp = self._stamp(stage)
         if not stamp.exists():
             return False
@@ -130,18 +136,42 @@ class Pipeline:
             made = json.loads(stamp.read_text())
         except json.JSONDecodeError:
             return False
-        if {k: made.get(k) for k in ("stage", "config", "dcslam")} != stage.record():
+        if {k: made.get(k) for k in ("stage", "config", "dcslam")} != stage.record() or not made.get("complete"):
             return False
         outputs, inputs = stage.outputs(), stage.inputs()
         if not outputs or not all(p.exists() for p in outputs):
             return False
         return _mtime(outputs)[0] >= _mtime(inputs)[1]
 
+    def foreign_output(self, stage: Stage) -> Path | None:
+        """The first existing output of ``stage`` this pipeline did not make (no stamp, or changed after it)."""
+        existing = [p for p in stage.outputs() if p.exists()]
+        if not existing:
+            return None
+        stamp = self._stamp(stage)
+        if not stamp.exists():
+            return existing[0]
+        try:
+            if not json.loads(stamp.read_text()).get("complete"):
+                return None  # this pipeline was interrupted while making them
+        except json.JSONDecodeError:
+            return existing[0]
+        made = stamp.stat().st_mtime
+        return next((p for p in existing if p.stat().st_mtime > made), None)
+
     def run(self, stage: Stage):
-        """Run ``stage`` unless it is up to date; returns its result (None when skipped)."""
+        """Run ``stage`` unless it is up to date; returns its result (None when skipped).
+
+        Refuses (:class:`DcslamError`) to overwrite outputs the pipeline did not make unless ``force``.
+        """
         if self.up_to_date(stage):
             self.log(f"[skip] {stage.name}: up to date")
             return None
+        foreign = None if self.force else self.foreign_output(stage)
+        if foreign is not None:
+            raise DcslamError(f"stage {stage.name} would overwrite {foreign}, which `dcslam reproduce` did not make; "
+                              "move it away or pass --force to overwrite it")
+        write_json_atomic(self._stamp(stage), {**stage.record(), "complete": False})  # claims nothing until done
         options = " ".join(f"{k}={v}" for k, v in changed(stage.config).items())
         self.log(f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} {options}".rstrip())
         start = time.perf_counter()
@@ -151,30 +181,33 @@ class Pipeline:
             raise DcslamError(f"stage {stage.name} failed ({error}); fix it and rerun: finished stages will be "
                               "skipped") from None
         self.timings[stage.name] = time.perf_counter() - start
-        write_json_atomic(self._stamp(stage), {**stage.record(), "seconds": self.timings[stage.name]})
+        write_json_atomic(self._stamp(stage), {**stage.record(), "complete": True,
+                                                "seconds": self.timings[stage.name]})
         return result
 
 
 def run(ws: Workspace, config: ReproduceConfig, *, log: Callable[[str], None] = lambda line: None) -> Path:
     """Run the experiment at the profile's scale; return the Markdown file of the requested table."""
     return reproduce(ws, PROFILES[config.profile], table=config.table, kitti_root=config.kitti, seed=config.seed,
-                     log=log)
+                     log=log, force=config.force)
 
 
 def reproduce(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_root: Path | None = None,
-              seed: int = 0, log: Callable[[str], None] = lambda line: None) -> Path:
-    """Run the experiment at ``profile``'s scale; return the Markdown file of the requested table."""
+              seed: int = 0, log: Callable[[str], None] = lambda line: None, force: bool = False) -> Path:
+    """Run the experiment at ``profile``'s scale; return the Markdown file of the requested table.
+
+    ``force``: overwrite outputs this pipeline did not make (see :meth:`Pipeline.run`)."""
     if table not in TABLES:
         raise DcslamError(f"unknown table {table!r}; expected 5.1 or 5.2")
     ws = workspace
-    pipe = Pipeline(ws, log)
+    pipe = Pipeline(ws, log, force=force)
     kitti = Path(kitti_root) if kitti_root else ws.kitti
     drives = lambda: sorted(ws.drives.glob("*.h5"))  # noqa: E731
     if kitti_root is None:
         pipe.run(Stage("synth", synth.run, synth.SynthConfig(drives=profile.drives, frames=profile.frames, seed=seed),
                        outputs=lambda: [ws.kitti / "SYNTHETIC"]))
-    elif not kitti.exists():
-        raise DcslamError(f"KITTI root {kitti} not found")
+    elif not kitti.is_dir():
+        raise DcslamError(f"KITTI root {kitti} does not exist or is not a folder; pass --kitti DIR")
     pipe.run(Stage("prepare-kitti", prepare.run, prepare.PrepareConfig(kitti=kitti),
                    outputs=lambda: [ws.splits, *drives()],
                    inputs=lambda: [p for p in (kitti / "SYNTHETIC",) if p.exists()]))

@@ -67,12 +67,16 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
     from dcslam.io.drive import read_splits
     from dcslam.slam.config import build_slam
     from dcslam.stages.config import to_dict
-    from dcslam.workspace import drive_file, layer_reference, resolve_layer
+    from dcslam.workspace import drive_file, layer_reference, output_folder, resolve_layer
 
     names = config.drive or read_splits(ws.splits)["test"]
     paths = [drive_file(ws, name) for name in names]
     layer = resolve_layer(ws, layer_reference(config.depth, config.run))
     out_dir = config.out if config.out is not None else ws.slam / layer.name
+    output_folder(out_dir, "--out")
+    from dcslam.depth.train import resolve_device
+
+    resolve_device(config.device)  # a GPU asked for on a CPU-only torch: one line, before any work
     jobs = []
     for path in paths:
         source = layer.require(path.stem)

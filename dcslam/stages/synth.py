@@ -9,6 +9,9 @@ from dcslam.stages.config import option
 from dcslam.workspace import Workspace
 
 
+MIN_FRAMES = 11  # KITTI gives no depth map to the first and last 5 raw frames of a drive
+
+
 @dataclass(frozen=True)
 class SynthConfig:
     """Options of ``dcslam synth``."""
@@ -34,6 +37,9 @@ class SynthConfig:
     def __post_init__(self) -> None:
         if self.drives < 1 or self.frames < 1:
             raise DcslamError(f"synth needs at least 1 drive of 1 frame, got {self.drives} of {self.frames}")
+        if not self.indoor and self.frames < MIN_FRAMES:
+            raise DcslamError(f"--frames {self.frames} gives no frame a depth map (KITTI skips 5 frames at each "
+                              f"end); pass --frames {MIN_FRAMES} or more")
         if not 0.05 <= self.scale <= 4.0:
             raise DcslamError(f"--scale must be in [0.05, 4], got {self.scale}")
         if not self.azimuth_step > 0:
@@ -60,7 +66,9 @@ def run(ws: Workspace, config: SynthConfig, *, force: bool = False) -> SynthResu
     """Generate the drives (or sequences) of ``config`` under :func:`out_root`."""
     from dcslam.progress import Bar
 
-    root = out_root(ws, config)
+    from dcslam.workspace import output_folder
+
+    root = output_folder(out_root(ws, config), "--out")
     if config.indoor:
         from dcslam.synth.indoor import generate_indoor
 
@@ -70,8 +78,7 @@ def run(ws: Workspace, config: SynthConfig, *, force: bool = False) -> SynthResu
         return SynthResult(root, True, list(result.sequences), [])
     from dcslam.synth import generate
 
-    notes = [f"with --frames {config.frames} < 11 no frame gets depth maps (KITTI skips 5 at each end)"] \
-        if config.frames < 11 else []
+    notes: list[str] = []
     with Bar("synth", total=config.drives * config.frames) as bar:
         reports = generate(root, drives=config.drives, frames=config.frames, seed=config.seed, force=force,
                            lidar_azimuth_step_deg=config.azimuth_step, on_frame=bar.advance)

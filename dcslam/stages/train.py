@@ -64,6 +64,14 @@ class TrainStageConfig:
         for name in ("map_frames", "epochs", "max_frames", "stride", "batch_size", "nproc"):
             if getattr(self, name) < 1:
                 raise DcslamError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+        if not 0 < self.lr < float("inf"):
+            raise DcslamError(f"--lr must be a positive number, got {self.lr}")
+        if not 0 <= self.weight_decay < float("inf"):
+            raise DcslamError(f"--weight-decay must be a non-negative number, got {self.weight_decay}")
+        if self.name is not None:
+            from dcslam.workspace import plain_name
+
+            plain_name(self.name, "--name")
         from dcslam.depth.data import check_view
 
         check_view(self.scale, self.crop)
@@ -93,32 +101,68 @@ class TrainStageConfig:
 RUN_FILES = ("model.pt", "last.pt", "metrics.jsonl", "config.json", "curves.png")
 
 
-def _prepare_run_dir(run_dir: Path, force: bool, resume: bool) -> None:
+def _check_run_dir(run_dir: Path, force: bool, resume: bool) -> list[str]:
+    """The run's files that exist; raises if they may not be overwritten, or if there is nothing to resume."""
+    if run_dir.exists() and not run_dir.is_dir():
+        raise DcslamError(f"{run_dir} is a file; remove it or choose another --name")
     existing = [name for name in RUN_FILES if (run_dir / name).exists()]
     if resume:
         if not (run_dir / "last.pt").exists():
             raise DcslamError(f"{run_dir / 'last.pt'} not found; nothing to resume (start the run without --resume)")
-        return
-    if existing and not force:
+    elif existing and not force:
         raise DcslamError(f"run {run_dir} exists; pass --force to overwrite it or --resume to continue it")
+    return existing
+
+
+def _prepare_run_dir(run_dir: Path, force: bool, resume: bool) -> None:
+    existing = _check_run_dir(run_dir, force, resume)
+    if resume:
+        return
     for name in existing:
         (run_dir / name).unlink()
     run_dir.mkdir(parents=True, exist_ok=True)
 
 
+RESUMABLE = ("epochs", "device")  # what a resumed run may change: more epochs, another device
+
+
+def _plain(value):
+    return json.loads(json.dumps(value, default=str))
+
+
 def _saved_config(run_dir: Path, config):
-    """On resume: the run's own configuration, with only the number of epochs (and the device) taken from
-    ``config``."""
+    """On resume: the run's own configuration, with the number of epochs and the device taken from ``config``.
+
+    Raises :class:`DcslamError` naming every other option in which ``config`` differs from the run's."""
     from dcslam.depth.train import TrainConfig
 
+    path = run_dir / "config.json"
     try:
-        settings = json.loads((run_dir / "config.json").read_text())["settings"]
-    except (OSError, KeyError, json.JSONDecodeError) as exc:
-        raise DcslamError(f"{run_dir / 'config.json'}: cannot resume from it ({exc})") from None
+        settings = json.loads(path.read_text())["settings"]
+        if not isinstance(settings, dict):
+            raise TypeError("settings is not a mapping")
+    except (OSError, KeyError, TypeError, json.JSONDecodeError) as exc:
+        raise DcslamError(f"{path}: cannot resume from it ({exc})") from None
     known = {k: v for k, v in settings.items() if k in TrainConfig.__dataclass_fields__}
+    given = _plain(asdict(config))
+    differ = [f"--{k.replace('_', '-')} {given[k]!r} (the run has {known[k]!r})" for k in sorted(known)
+              if k not in RESUMABLE and _plain(known[k]) != given.get(k)]
+    if differ:
+        raise DcslamError(f"cannot resume {run_dir} with other options: {'; '.join(differ)}; resume with the run's "
+                          "own options (only --epochs and --device may change), or start again with --force")
     known["epochs"] = config.epochs
     known["device"] = config.device
     return TrainConfig(**known)
+
+
+def _record_resume(run_dir: Path, config) -> None:
+    """Write the resumed run's epochs and device into its ``config.json`` (so it says what the run was trained to)."""
+    path = run_dir / "config.json"
+    record = json.loads(path.read_text())
+    record["settings"]["epochs"], record["settings"]["device"] = config.epochs, config.device
+    resumed = stage_config("train --resume", {"epochs": config.epochs, "device": config.device})
+    record.setdefault("resumed", []).append({k: resumed[k] for k in ("dcslam_version", "written", "settings")})
+    write_json_atomic(path, record)
 
 
 def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = False, map_builder=None):
@@ -168,8 +212,11 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
             settings["world_size"] = world
             settings["input_beams"] = input_beams(config.input)
             write_json_atomic(run_dir / "config.json", stage_config("train", settings))
-        return train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world,
-                          on_epoch=lambda: plot_training_curves(run_dir / "curves.png", run_dir / "metrics.jsonl"))
+        result = train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world,
+                            on_epoch=lambda: plot_training_curves(run_dir / "curves.png", run_dir / "metrics.jsonl"))
+        if resume and rank == 0:  # only once the epochs are trained
+            _record_resume(run_dir, config)
+        return result
     finally:
         for frames in open_drives:
             frames.close()
@@ -206,6 +253,8 @@ def run(ws: Workspace, config: TrainStageConfig, *, force: bool = False):
     run_dir = ws.runs / config.run_name
     if config.nproc > 1 and not distributed.in_torchrun():
         import tempfile
+
+        _check_run_dir(run_dir, force, config.resume)  # here, not in every worker
 
         from dcslam.stages.config import to_toml
 

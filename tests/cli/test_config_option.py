@@ -9,7 +9,7 @@ from dcslam.cli import app
 
 runner = CliRunner()
 COMMANDS = {  # command → options it needs to make a valid configuration, and an option to override
-    "synth": ([], ("--frames", "7", "frames", 7)),
+    "synth": ([], ("--frames", "17", "frames", 17)),
     "prepare-kitti": ([], ("--max-frames", "3", "max_frames", 3)),
     "prepare-tum": ([], ("--stride", "2", "stride", 2)),
     "train": ([], ("--loss", "chamfer", "loss", "chamfer")),

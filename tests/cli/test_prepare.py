@@ -144,7 +144,7 @@ def test_interrupted_conversion(tmp_path, monkeypatch):
 
     monkeypatch.setattr(kitti, "read_depth_png", interrupted)
     result = run("--kitti", root, "--out", tmp_path / "drives")
-    assert result.exit_code == 1 and "interrupted" in result.stderr
+    assert result.exit_code == 130 and "interrupted" in result.stderr
     assert _files(tmp_path / "drives") == []
 
 

@@ -9,32 +9,36 @@ runner = CliRunner()
 
 
 def test_synth_writes_drives_into_the_workspace(tmp_path):
-    result = runner.invoke(app, ["synth", "--workspace", str(tmp_path), "--drives", "2", "--frames", "2",
+    result = runner.invoke(app, ["synth", "--workspace", str(tmp_path), "--drives", "1", "--frames", "11",
                                  "--seed", "9"])
     assert result.exit_code == 0, result.output
-    assert "wrote 2 drives" in result.stdout
+    assert "wrote 1 drives" in result.stdout
     kitti = tmp_path / "kitti"
-    for number in ("1000", "1001"):
-        raw = kitti / "raw" / "2011_09_26" / f"2011_09_26_drive_{number}_sync"
-        assert sorted(p.name for p in (raw / "image_02" / "data").iterdir()) == ["0000000000.png", "0000000001.png"]
-        assert len(list((raw / "velodyne_points" / "data").glob("*.bin"))) == 2
-        assert len(list((raw / "oxts" / "data").glob("*.txt"))) == 2
+    raw = kitti / "raw" / "2011_09_26" / "2011_09_26_drive_1000_sync"
+    assert len(list((raw / "image_02" / "data").iterdir())) == 11
+    assert len(list((raw / "velodyne_points" / "data").glob("*.bin"))) == 11
+    assert len(list((raw / "oxts" / "data").glob("*.txt"))) == 11
+    depth = kitti / "depth_completion" / "train" / "2011_09_26_drive_1000_sync" / "proj_depth" / "groundtruth"
+    assert [p.name for p in (depth / "image_02").iterdir()] == ["0000000005.png"]
     assert (kitti / "raw" / "2011_09_26" / "calib_cam_to_cam.txt").exists()
     assert (kitti / "SYNTHETIC").exists()
     config = json.loads((kitti / "synth_config.json").read_text())
     assert config["stage"] == "synth" and config["settings"]["seed"] == 9
 
-    again = runner.invoke(app, ["synth", "--out", str(kitti), "--drives", "1", "--frames", "2"])
+    again = runner.invoke(app, ["synth", "--out", str(kitti), "--drives", "1", "--frames", "12"])
     assert again.exit_code == 1
     assert "--force" in again.stderr
-
-    forced = runner.invoke(app, ["synth", "--out", str(kitti), "--drives", "1", "--frames", "1", "--force"])
-    assert forced.exit_code == 0, forced.output
-    raw0 = kitti / "raw" / "2011_09_26" / "2011_09_26_drive_1000_sync" / "image_02" / "data"
-    assert [p.name for p in raw0.iterdir()] == ["0000000000.png"]
 
 
 def test_synth_rejects_bad_options(tmp_path):
     result = runner.invoke(app, ["synth", "--out", str(tmp_path), "--frames", "0"])
     assert result.exit_code == 2
     assert not (tmp_path / "raw").exists()
+
+
+def test_synth_refuses_drives_too_short_for_depth_before_any_work(tmp_path):
+    result = runner.invoke(app, ["synth", "--out", str(tmp_path / "k"), "--frames", "5"])
+    assert result.exit_code == 1
+    assert result.stderr.strip().splitlines() == [
+        "error: --frames 5 gives no frame a depth map (KITTI skips 5 frames at each end); pass --frames 11 or more"]
+    assert not (tmp_path / "k").exists()

@@ -32,6 +32,18 @@ def test_train_mse_dense_writes_the_run(ws):
     assert resumed.exit_code == 0, resumed.output
     rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert [r["epoch"] for r in rows if r["kind"] == "val"] == [0, 1]
+    record = json.loads((run / "config.json").read_text())
+    assert record["settings"]["epochs"] == 2 and record["resumed"][0]["settings"]["epochs"] == 2
+
+    other = _run("train", "-w", str(ws), "--batch-size", "2", "--epochs", "3", "--resume", "--lr", "0.01",
+                 "--name", "mse-dense", "--loss", "chamfer")
+    assert other.exit_code == 1
+    assert other.stderr.strip().splitlines() == [
+        f"error: cannot resume {run} with other options: --loss 'chamfer' (the run has 'mse'); --lr 0.01 (the run "
+        "has 0.001); resume with the run's own options (only --epochs and --device may change), or start again "
+        "with --force"]
+    assert [r["epoch"] for r in rows if r["kind"] == "val"] == [0, 1]
+    assert json.loads((run / "config.json").read_text()) == record
 
 
 def test_train_chamfer_and_sparse_names(ws):
@@ -50,3 +62,14 @@ def test_train_errors(ws, tmp_path):
     assert result.exit_code == 2 and "l1" in result.output  # an unknown choice is a usage error
     assert _run("train", "-w", str(ws), "--scale", "0.3").exit_code == 1
     assert not (ws / "runs" / "mse-dense" / "model.pt").exists()
+
+
+@pytest.mark.parametrize("args, line", [
+    (["--lr", "-1"], "error: --lr must be a positive number, got -1.0"),
+    (["--nproc", "0"], "error: --nproc must be >= 1, got 0"),
+    (["--weight-decay", "nan"], "error: --weight-decay must be a non-negative number, got nan"),
+])
+def test_bad_numbers_give_one_line(ws, args, line):
+    result = _run("train", "-w", str(ws), *args)
+    assert result.exit_code == 1 and result.stderr.strip().splitlines() == [line]
+    assert not (ws / "runs").exists()

@@ -36,3 +36,29 @@ def test_json_refuses_objects_it_cannot_write(tmp_path):
     with pytest.raises(TypeError, match="object"):
         write_json_atomic(tmp_path / "y.json", {"x": object()})
     assert not list(tmp_path.iterdir())
+
+
+def test_json_never_holds_bare_nan(tmp_path):
+    import numpy as np
+
+    path = write_json_atomic(tmp_path / "s.json", {"drift": float("nan"), "poses": np.array([1.0, np.inf]),
+                                                    "nested": [{"x": -np.inf}], "ok": 2.5})
+    assert json.loads(path.read_text(), parse_constant=lambda c: pytest.fail(f"bare {c}")) == {
+        "drift": None, "poses": [1.0, None], "nested": [{"x": None}], "ok": 2.5}
+
+
+def test_atomic_set_appears_together_or_not_at_all(tmp_path):
+    from dcslam.io.atomic import AtomicSet
+
+    (tmp_path / ".b.txt.set-1").write_text("left by an interrupted run")
+    with pytest.raises(KeyboardInterrupt):
+        with AtomicSet() as files:
+            files.stage(tmp_path / "a.txt").write_text("a")
+            files.stage(tmp_path / "b.txt").write_text("b")
+            raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+    with AtomicSet() as files:
+        files.stage(tmp_path / "a.txt").write_text("a")
+        files.stage(tmp_path / "b.txt").write_text("b")
+        assert not (tmp_path / "a.txt").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt"]

@@ -147,8 +147,52 @@ class TestMalformedDriveFiles:
         with h5py.File(tmp_path / "d.h5", "a") as h5:
             del h5["T_world_cam"]
             h5["T_world_cam"] = np.tile(np.eye(4), (3, 1, 1))
-        with pytest.raises(DcslamError, match=r"T_world_cam has shape \(3, 4, 4\), expected \(2, 4, 4\)"):
+        with pytest.raises(DcslamError, match=r"d.h5: T_world_cam has 3 frames where the other datasets have 2"):
             DriveFile(tmp_path / "d.h5")
+
+    def test_one_dataset_short_of_a_frame_is_the_one_blamed(self, tmp_path):
+        write(tmp_path / "d.h5", make_frames(4))
+        with h5py.File(tmp_path / "d.h5", "a") as h5:
+            dense = h5["depth/dense"][:3]
+            del h5["depth/dense"]
+            h5["depth/dense"] = dense
+        with pytest.raises(DcslamError) as error:
+            DriveFile(tmp_path / "d.h5")
+        assert str(error.value) == (f"{tmp_path / 'd.h5'}: depth/dense has 3 frames where the other datasets have 4; "
+                                    "remake the drive file with `dcslam prepare-kitti --force`")
+
+    @pytest.mark.parametrize("name, value, match", [
+        ("T_world_cam", np.nan, "T_world_cam is not finite at frame 1"),
+        ("timestamps", np.inf, "timestamps is not finite at frame 1"),
+        ("K", np.nan, "K is not finite; remake"),
+    ])
+    def test_non_finite_poses_and_intrinsics(self, tmp_path, name, value, match):
+        write(tmp_path / "d.h5", make_frames(3))
+        with h5py.File(tmp_path / "d.h5", "a") as h5:
+            data = h5[name][()]
+            data.reshape(-1)[data[0].size if data.ndim > 1 and name != "K" else 1] = value
+            del h5[name]
+            h5[name] = data
+        with pytest.raises(DcslamError, match=match):
+            DriveFile(tmp_path / "d.h5")
+
+    def test_wrong_dtype(self, tmp_path):
+        write(tmp_path / "d.h5", make_frames(2))
+        with h5py.File(tmp_path / "d.h5", "a") as h5:
+            rgb = h5["rgb"][()].astype(np.float32)
+            del h5["rgb"]
+            h5["rgb"] = rgb
+        with pytest.raises(DcslamError, match="rgb has dtype float32, expected uint8"):
+            DriveFile(tmp_path / "d.h5")
+
+    def test_bad_depth_is_named_by_file_and_frame_when_read(self, tmp_path):
+        write(tmp_path / "d.h5", make_frames(3))
+        with h5py.File(tmp_path / "d.h5", "a") as h5:
+            h5["depth/sparse"][2, 0, 0] = -1.0
+        with DriveFile(tmp_path / "d.h5") as drive:
+            drive.depth("sparse", 1)
+            with pytest.raises(DcslamError, match=r"d.h5: depth/sparse: frame 2 holds negative depths \(1 pixels\)"):
+                drive.depth("sparse", 2)
 
 
 
@@ -217,6 +261,19 @@ class TestExtraDepth:
             DriveFile(tmp_path / "d1.h5")
 
 class TestLayers:
+    @pytest.mark.parametrize("value, kinds", [(np.nan, "NaN"), (np.inf, "infinite"), (-2.0, "negative")])
+    def test_non_finite_or_negative_depth_is_refused_naming_file_and_frame(self, tmp_path, value, kinds):
+        import h5py
+
+        depth = np.ones((3, H, W), np.float32)
+        write_layer(tmp_path / "l.h5", Layer(depth, drive="d1.h5", made_by="x"))
+        with h5py.File(tmp_path / "l.h5", "a") as h5:
+            h5["depth"][1, 2, :3] = value
+        with pytest.raises(DcslamError) as error:
+            read_layer(tmp_path / "l.h5")
+        assert str(error.value) == (f"{tmp_path / 'l.h5'}: frame 1 holds {kinds} depths (3 pixels); depth must be "
+                                    "finite and >= 0 (0 = no value): remake the file")
+
     def test_round_trip(self, tmp_path):
         depth = np.random.default_rng(0).uniform(0, 50, (3, H, W)).astype(np.float32)
         write_layer(tmp_path / "l.h5", Layer(depth, drive="d1.h5", made_by="run-a", config={"lr": 1e-3}))

@@ -36,7 +36,7 @@ class TestTumFile:
         ("0 1 2 3 0 0 0 2\n", "norm 2.0000, expected 1"),
         ("0 1 2 3 0 0 0 1\n0 1 2 3 0 0 0 1\n", "not strictly increasing"),
         ("2 1 2 3 0 0 0 1\n1 1 2 3 0 0 0 1\n", "not strictly increasing"),
-        ("0 nan 2 3 0 0 0 1\n", "non-finite"),
+        ("0 nan 2 3 0 0 0 1\n", "pose 0 has non-finite values"),
         ("# only a comment\n", "no poses"),
     ])
     def test_malformed(self, tmp_path, text, match):

@@ -172,8 +172,41 @@ class TestPrepareFailures:
     """Each failure names the file, and leaves no drive file (complete or partial) and no temporary file."""
 
     def test_no_data_suggests_synth(self, tmp_path):
+        (tmp_path / "empty").mkdir()
         with pytest.raises(DcslamError, match=r"no KITTI drives under .*empty.*dcslam synth"):
             prepare_kitti(tmp_path / "empty", tmp_path / "drives")
+
+    def test_missing_root_or_a_file_does_not_exist(self, tmp_path):
+        with pytest.raises(DcslamError, match=r"KITTI root .*nowhere does not exist; pass --kitti DIR"):
+            prepare_kitti(tmp_path / "nowhere", tmp_path / "drives")
+        (tmp_path / "file").write_text("x")
+        with pytest.raises(DcslamError, match=r"KITTI root .*file is a file, not a folder"):
+            prepare_kitti(tmp_path / "file", tmp_path / "drives")
+        assert not (tmp_path / "drives").exists()
+
+    def test_out_a_regular_file_is_refused(self, tiny_root, tmp_path):
+        (tmp_path / "out").write_text("mine")
+        with pytest.raises(DcslamError, match=r"--out .*out is a file; pass a folder"):
+            prepare_kitti(tiny_root, tmp_path / "out", include_unsplit=True)
+        assert (tmp_path / "out").read_text() == "mine"
+
+    def test_a_broken_second_drive_leaves_no_drive_and_the_rerun_completes(self, tmp_path):
+        root = tmp_path / "two"
+        fx.write_tiny_drive(root, name="2011_09_26_drive_0002_sync")
+        fx.write_tiny_drive(root, name="2011_09_26_drive_0003_sync")
+        second = kitti.find_drives(root)[1]
+        png = second.depth_path("groundtruth", 8)
+        good = png.read_bytes()
+        png.write_bytes(good[:100])
+        out = tmp_path / "drives"
+        with pytest.raises(DcslamError, match="0000000008.png: not a readable PNG"):
+            prepare_kitti(root, out, include_unsplit=True)
+        assert _files(out) == []  # not even the first, complete drive
+        png.write_bytes(good)
+        result = prepare_kitti(root, out, include_unsplit=True)
+        assert len(result.drives) == 2
+        assert _files(out) == ["2011_09_26_drive_0002_sync.h5", "2011_09_26_drive_0003_sync.h5", "prepare-kitti.json",
+                               "splits.json"]
 
     def test_existing_output_needs_force(self, tiny_root, tmp_path):
         out = tmp_path / "drives"

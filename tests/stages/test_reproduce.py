@@ -84,7 +84,8 @@ def test_failed_stage_stops_the_pipeline_with_one_line(tmp_path, monkeypatch):
     monkeypatch.setattr("dcslam.stages.synth.run", fail)
     with pytest.raises(DcslamError, match="stage synth failed \\(no luck\\)"):
         reproduce(Workspace(tmp_path), PROFILES["smoke"], log=lambda line: None)
-    assert not (tmp_path / ".reproduce" / "synth.json").exists()
+    stamp = tmp_path / ".reproduce" / "synth.json"
+    assert json.loads(stamp.read_text())["complete"] is False  # claims nothing: the next run redoes it
 
 
 def test_unknown_profile_and_table_fail_with_exit_code(tmp_path):
@@ -93,7 +94,7 @@ def test_unknown_profile_and_table_fail_with_exit_code(tmp_path):
     result = runner.invoke(app, ["reproduce", "--table", "9.9", "--workspace", str(tmp_path)])
     assert result.exit_code == 2 and "9.9" in result.stderr
     result = runner.invoke(app, ["reproduce", "--kitti", str(tmp_path / "nowhere"), "--workspace", str(tmp_path)])
-    assert result.exit_code == 1 and "not found" in result.stderr
+    assert result.exit_code == 1 and "does not exist" in result.stderr
 
 
 def test_smoke_profile_runs_every_stage_and_writes_the_tables(tmp_path):

@@ -1,22 +1,14 @@
 """The synth stage: KITTI-layout drives (or indoor sequences) under the workspace, with their settings."""
-import json
-
 import pytest
 
 from dcslam.errors import DcslamError
 from dcslam.stages.synth import SynthConfig, run
 
 
-def test_short_drive_is_noted_and_written_under_the_workspace(tmp_path):
-    from dcslam.workspace import Workspace
-
-    ws = Workspace(tmp_path / "ws")
-    result = run(ws, SynthConfig(drives=1, frames=2, seed=3))
-    assert result.root == ws.kitti and len(result.reports) == 1
-    assert result.notes and "no frame gets depth" in result.notes[0]
-    assert json.loads((ws.kitti / "synth_config.json").read_text())["stage"] == "synth"
-    with pytest.raises(DcslamError, match="--force"):
-        run(ws, SynthConfig(drives=1, frames=2, seed=3))
+def test_drives_too_short_for_depth_are_refused_indoor_sequences_are_not():
+    with pytest.raises(DcslamError, match="--frames 10 gives no frame a depth map"):
+        SynthConfig(drives=1, frames=10)
+    assert SynthConfig(indoor=True, frames=2).frames == 2
 
 
 def test_indoor_sequences(tmp_path):

@@ -2,6 +2,9 @@
 import dataclasses
 import json
 
+import pytest
+
+from dcslam.errors import DcslamError
 from dcslam.stages.config import from_mapping, read_config_file
 from dcslam.stages.train import TrainStageConfig, run, run_name
 
@@ -59,3 +62,15 @@ def test_input_of_fewer_beams_and_exact_target(tmp_path):
     bare = Workspace(write_workspace(tmp_path / "bare"))
     with pytest.raises(DcslamError, match="holds no sparse@16 depth"):
         run(bare, TrainStageConfig(max_frames=2, scale=0.5, device="cpu", input="sparse@16"))
+
+
+def test_several_processes_on_an_existing_run_are_refused_before_any_worker_starts(ws, monkeypatch):
+    (ws.runs / "ddp").mkdir(parents=True)
+    (ws.runs / "ddp" / "model.pt").write_bytes(b"mine")
+    launched = []
+    monkeypatch.setattr("dcslam.depth.distributed.launch", lambda *args: launched.append(args) or 0)
+    with pytest.raises(DcslamError, match=r"run .*ddp exists; pass --force to overwrite it or --resume"):
+        run(ws, TrainStageConfig(nproc=2, name="ddp"))
+    with pytest.raises(DcslamError, match=r"last.pt not found; nothing to resume"):
+        run(ws, TrainStageConfig(nproc=2, name="ddp", resume=True))
+    assert launched == [] and (ws.runs / "ddp" / "model.pt").read_bytes() == b"mine"

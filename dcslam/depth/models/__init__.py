@@ -102,18 +102,23 @@ def model_from_record(record: dict, source: str = "model record"):
     return model
 
 
-def load_model(path: Path | str, device: str = "cpu"):
-    """Rebuild a model from its file alone (safe load, ``weights_only=True``); returns it in eval mode on ``device``."""
-    import pickle
-
+def read_torch_file(path: Path, what: str, fix: str):
+    """``torch.load(path, weights_only=True)``; a truncated, empty or malicious file is a :class:`DcslamError`
+    naming ``path`` (``what`` it should be, and ``fix``: what to do), never a traceback."""
     import torch
 
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises RuntimeError, OSError, IndexError, UnpicklingError... on broken files
+        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0].split(". ")[0]
+        raise DcslamError(f"{path}: not a readable {what} ({reason}); {fix}") from None
+
+
+def load_model(path: Path | str, device: str = "cpu"):
+    """Rebuild a model from its file alone (safe load, ``weights_only=True``); returns it in eval mode on ``device``."""
     path = Path(path)
     if not path.exists():
         raise DcslamError(f"model file {path} not found; run `dcslam train` first")
-    try:
-        record = torch.load(path, map_location="cpu", weights_only=True)
-    except (RuntimeError, pickle.UnpicklingError, EOFError, ValueError) as exc:
-        raise DcslamError(f"{path}: not a readable model file ({str(exc).splitlines()[0]})") from None
+    record = read_torch_file(path, "model file", "retrain it with `dcslam train --force`")
     model = model_from_record(record, str(path))
     return model.to(device).eval(), record.get("meta", {})

@@ -167,3 +167,39 @@ def test_exact_depth_and_fewer_beams_reach_the_drive_file(kitti, frame5, tmp_pat
         assert 0.2 < (sixteen > 0).sum() / (sparse > 0).sum() < 0.3
         both = (sixteen > 0) & (exact > 0)
         assert np.median(np.abs(sixteen[both] - exact[both])) < 0.05
+
+
+def _drives(root):
+    return sorted(p.name for p in (root / "raw" / "2011_09_26").glob("*_drive_*"))
+
+
+def test_force_with_fewer_drives_removes_the_earlier_drives_and_leftovers(tmp_path):
+    generate(tmp_path, drives=2, frames=1, seed=0)
+    leftover = tmp_path / "depth_completion" / "train" / ".2011_09_26_drive_1003_sync.tmp-99999"
+    leftover.mkdir()
+    (leftover / "half.png").write_bytes(b"x")
+    with pytest.raises(DcslamError, match="--force"):
+        generate(tmp_path, drives=1, frames=1, seed=5)
+    generate(tmp_path, drives=1, frames=1, seed=5, force=True)
+    assert _drives(tmp_path) == ["2011_09_26_drive_1000_sync"]
+    assert sorted(p.name for p in (tmp_path / "depth_completion" / "train").iterdir()) == [
+        "2011_09_26_drive_1000_sync"]  # the old 1001 and the temporary folder are gone
+    assert "seed 5, 1 drives" in (tmp_path / "SYNTHETIC").read_text()
+
+
+def test_an_interrupted_run_claims_no_drive_in_its_marker(tmp_path):
+    generate(tmp_path, drives=1, frames=1, seed=0)
+    calls = []
+
+    def interrupt_second_drive():
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        generate(tmp_path, drives=2, frames=1, seed=7, force=True, on_frame=interrupt_second_drive)
+    assert not (tmp_path / "SYNTHETIC").exists() and not (tmp_path / "synth_config.json").exists()
+    assert not list(tmp_path.rglob("*.tmp-*"))
+    generate(tmp_path, drives=2, frames=1, seed=7, force=True)  # the rerun completes
+    assert _drives(tmp_path) == ["2011_09_26_drive_1000_sync", "2011_09_26_drive_1001_sync"]
+    assert "seed 7, 2 drives" in (tmp_path / "SYNTHETIC").read_text()

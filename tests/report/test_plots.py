@@ -1,0 +1,44 @@
+"""The figures a researcher looks at: training curves with validation MSE, depth examples that show the sparse
+input and share one error colour range."""
+import json
+
+import numpy as np
+
+from dcslam.report import plots
+
+
+def test_training_curves_plot_validation_mse_in_its_own_panel(tmp_path, monkeypatch):
+    rows = [{"kind": "train", "epoch": 0, "step": s, "loss": 1.0 / (s + 1)} for s in range(4)]
+    rows += [{"kind": "val", "epoch": e, "step": 2 * e + 2, "mse": 0.5 - 0.1 * e, "chamfer": 2.0 - e,
+              "mae_mm": 900.0, "rmse_mm": 1200.0} for e in range(2)]
+    metrics = tmp_path / "metrics.jsonl"
+    metrics.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    figures = []
+    plt = plots._pyplot()
+    monkeypatch.setattr(plt, "close", figures.append)
+    out = plots.plot_training_curves(tmp_path / "curves.png", metrics)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    axes = figures[0].axes
+    labels = [[line.get_label() for line in ax.lines] for ax in axes]
+    assert labels == [["training loss"], ["val RMSE", "val MAE"], ["val MSE"], ["val chamfer"]]
+    assert list(axes[2].lines[0].get_ydata()) == [0.5, 0.4]
+    monkeypatch.undo()
+    plt.close(figures[0])
+
+
+def test_depth_examples_dilate_the_input_and_share_the_error_range(tmp_path, monkeypatch):
+    gt = np.full((20, 30), 10.0)
+    sparse = np.zeros_like(gt)
+    sparse[10, 15] = 10.0
+    rows = [("small", sparse, gt + 0.1, gt), ("large", sparse, gt + 3.0, gt)]
+    figures = []
+    plt = plots._pyplot()
+    monkeypatch.setattr(plt, "close", figures.append)
+    plots.plot_depth_examples(tmp_path / "ex.png", rows)
+    images = [ax.images[0] for ax in figures[0].axes if ax.images]
+    inputs = [im for im in images if "input" in im.axes.get_title()]
+    assert np.count_nonzero(np.isfinite(np.asarray(inputs[0].get_array(), float))) == 25  # one point, 5 × 5
+    errors = [im for im in images if "error" in im.axes.get_title()]
+    assert len(errors) == 2 and errors[0].get_clim() == errors[1].get_clim() == (0, 3.0)
+    monkeypatch.undo()
+    plt.close(figures[0])

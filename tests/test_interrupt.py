@@ -1,0 +1,71 @@
+"""A Ctrl-C that lands in a finalizer (where Python prints "Exception ignored" and carries on) is not lost: the next
+progress step raises it again, an atomic write publishes nothing, and the command exits 130."""
+import gc
+import os
+import signal
+import subprocess
+import sys
+import weakref
+
+import pytest
+
+from dcslam import interrupt
+from dcslam.io.atomic import atomic_output
+from dcslam.progress import track
+
+pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")  # the swallowed one
+
+
+@pytest.fixture
+def handler():
+    previous = signal.getsignal(signal.SIGINT)
+    interrupt.install()
+    yield
+    signal.signal(signal.SIGINT, previous)
+    interrupt._received = interrupt._told = False
+
+
+class _Resource:
+    pass
+
+
+def _swallowed_sigint():
+    """SIGINT delivered while a weak-reference callback runs: Python reports it as 'Exception ignored'."""
+    resource = _Resource()
+    weakref.finalize(resource, lambda: os.kill(os.getpid(), signal.SIGINT) or [0 for _ in range(10_000)])
+    del resource
+    gc.collect()
+
+
+def test_a_swallowed_interrupt_stops_the_next_progress_step(handler, capsys):
+    steps = []
+    with pytest.raises(KeyboardInterrupt):
+        for i in track(range(5), "demo"):
+            steps.append(i)
+            if i == 1:
+                _swallowed_sigint()
+    assert steps == [0, 1] and interrupt.received()
+
+
+def test_a_swallowed_interrupt_publishes_no_atomic_file(handler, tmp_path):
+    target = tmp_path / "out.txt"
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_output(target) as tmp:
+            tmp.write_text("complete")
+            _swallowed_sigint()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_command_line_exits_130_when_an_interrupt_was_swallowed(tmp_path):
+    script = ("import dcslam.cli as c\n"
+              "from tests.test_interrupt import _swallowed_sigint\n"
+              "@c.app.command('swallow')\n"
+              "def swallow():\n"
+              "    _swallowed_sigint()\n"
+              "c.main()\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([os.getcwd(), *sys.path])}
+    done = subprocess.run([sys.executable, "-c", script, "swallow"], capture_output=True, text=True, env=env,
+                          timeout=60)
+    assert done.returncode == 130, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == \
+        "interrupted: no partial output was kept; rerun the command to finish"
