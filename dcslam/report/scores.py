@@ -14,8 +14,8 @@ from dcslam.errors import DcslamError
 from dcslam.eval.depth import METRICS, mean_errors
 from dcslam.report.layers import (TrajectoryPair, drive_file, resolve_layer, score_layer_depth)
 from dcslam.eval.maps import MapScores
-from dcslam.report.tables import (FAILURE_THRESHOLD, Column, LayerResult, Table, list_runs, table_5_1, table_5_2,
-                                  table_5_2_results, table_5_3, thesis_figures)
+from dcslam.report.table_5_2 import FAILURE_THRESHOLD, LayerResult, table_5_2, table_5_2_results
+from dcslam.report.tables import Column, Table, list_runs, table_5_1, table_5_3, thesis_figures
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
 from dcslam.io.atomic import write_text_atomic
 from dcslam.workspace import Workspace
