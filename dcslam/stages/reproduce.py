@@ -49,6 +49,7 @@ class Profile:
     filters: dict[str, list[str]] = field(default_factory=dict)  # filter name → filter specs of `dcslam filter`
     description: str = ""
     split: tuple[int, int, int] | None = None  # (train, val, test) drive counts; None: the thesis's proportion
+    slam: dict = field(default_factory=dict)    # SLAM settings other than the defaults (fields of SlamSettings)
 
     def __post_init__(self) -> None:
         if self.split is not None and (sum(self.split) != self.drives or min(self.split) < 1):
@@ -64,9 +65,9 @@ PROFILES = {
                     "resolution, SLAM on the first 30 frames of each test drive, one outlier filter"),
     "smoke": Profile(
         name="smoke", drives=3, frames=12, train={"epochs": 1, "max_frames": 2, "scale": 0.25},
-        slam_frames=2, filters={"edges": ["edges"]},
-        description="a check that every stage runs (3 drives of 12 frames, tiny training, SLAM over 2 frames): "
-                    "numbers mean nothing"),
+        slam_frames=2, filters={"edges": ["edges"]}, slam={"iterations": 3, "voxel_size": 0.2},
+        description="a check that every stage runs (3 drives of 12 frames, tiny training, SLAM over 2 frames with "
+                    "3 ICP iterations and a coarse map): numbers mean nothing"),
     "thesis": Profile(
         name="thesis", drives=24, frames=211, train={"epochs": 5, "max_frames": 200},
         slam_frames=30,
@@ -300,8 +301,8 @@ def reproduce(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_
         for drive, source in zip(test, files):
             made = [ws.slam / layer / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt")]
             slam_outputs += made
-            config = slam.SlamStageConfig(depth=reference, drive=[drive.stem], odometry="icp",
-                                          frames=profile.slam_frames)
+            config = slam.SlamStageConfig(**{"odometry": "icp", **profile.slam}, depth=reference,
+                                          drive=[drive.stem], frames=profile.slam_frames)
             slam_stages.append(Stage(f"slam-{layer}-{drive.stem}", slam.run, config, outputs=lambda made=made: made,
                                      inputs=lambda d=drive, s=source: [d, s]))
     pipe.run_all(slam_stages, jobs)
