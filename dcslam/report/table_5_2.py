@@ -137,13 +137,14 @@ class LayerResult:
             row["drives"] = len(self.pairs)
             row["failures"] = sum(self.failed(d) for d in self.pairs)
             row["localisation_median_text"] = f"{row['localisation_median']:.4f}"
-            if reference is not None and reference is not self and reference.pairs:
+            if reference is self:
+                row["vs_sparse"] = "reference"
+            elif reference is not None and reference.pairs:
                 common = [d for d in self.pairs if d in reference.pairs]
                 verdict = differs([self.scores[d].localisation for d in common],
                                   [reference.scores[d].localisation for d in common])
                 row["vs_sparse"] = {None: "one drive", True: "differs", False: "within spread"}[verdict]
-        if any(k in DRIFT_KEYS for k in per_drive.get(next(iter(per_drive), ""), {})) and \
-                not any(f"{k}_drives" in row for k in DRIFT_KEYS):
+        if self.pairs and not any(f"{k}_drives" in row for k in DRIFT_KEYS):
             longest = max(r.get("path_m") or 0.0 for r in per_drive.values())
             row["drift_note"] = f"drives too short (longest {longest:.0f} m < 100 m)"
         return row
@@ -282,6 +283,10 @@ def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str], devki
         "ATE: evo APE translation after SE(3) Umeyama alignment; RPE: evo, consecutive frames (RMSE of each drive); "
         "t_rel / r_rel: KITTI odometry devkit drift over 100-800 m segments, averaged over the drives long enough "
         "(their number in the CSV)",
+        ("trained rows: one training run (one seed) per recipe, so their spread is across test drives only, not "
+         "across training seeds" if all(sum(r.label == recipe for r in results) <= 1 for recipe in RECIPES) else
+         "trained rows: each training run of a recipe is its own row (their spread across test drives; compare "
+         "the rows of one recipe for the spread across training runs)"),
         "thesis columns: the thesis's own figures (dcslam/report/thesis_tables.json); x where the thesis did not "
         "compute it; — where the thesis has no such row",
         f"SLAM settings of the rows (those of most rows; a row made otherwise says how in SLAM settings): "
