@@ -147,6 +147,8 @@ def table_5_1(runs: list[RunSummary], thesis: dict) -> Table:
                                **{k: run.best.get(k) for k in ("chamfer", "mse", "mae_mm", "rmse_mm")}, **theirs})
     table.notes.append("best checkpoint: lowest validation chamfer for chamfer runs, lowest validation MSE for MSE "
                        "runs (the model.pt each run keeps)")
+    table.notes.append(f"thesis columns: the thesis's own figures ({thesis.get('citation', 'thesis_tables.json')}); "
+                       "— where the thesis did not compute it ('x')")
     return table
 
 
