@@ -120,8 +120,8 @@ def slam_trajectory(ws: Workspace, layer: str, drive: str) -> Path:
 
 def slam_settings(ws: Workspace, layer: str, drive: str) -> dict:
     """The settings of the SLAM run behind ``slam/<layer>/<drive>.txt`` (:data:`RUN_SETTINGS`, from the summary
-    ``<drive>.json`` beside it; ``frames`` is the number of frames it ran), plus ``suspect``: whether the run
-    rejected steps. Empty when the summary is missing (a trajectory made elsewhere)."""
+    ``<drive>.json`` beside it; ``frames`` is the number asked for, 0 = all: a drive shorter than that runs fewer,
+    which its pose count shows), plus ``suspect``: whether the run rejected steps. Empty when the summary is missing (a trajectory made elsewhere)."""
     import json
 
     path = ws.slam / layer / f"{drive}.json"
@@ -131,7 +131,7 @@ def slam_settings(ws: Workspace, layer: str, drive: str) -> dict:
         record = json.loads(path.read_text())
     except json.JSONDecodeError:
         raise DcslamError(f"{path}: not valid JSON; rerun `dcslam slam --depth {layer} --force`") from None
-    settings = {**record.get("settings", {}), **{k: record[k] for k in ("frames", "beams") if k in record}}
+    settings = {**record.get("settings", {}), **({"beams": record["beams"]} if "beams" in record else {})}
     out = {k: settings[k] for k in RUN_SETTINGS if k in settings}
     out["suspect"] = bool(record.get("rejected_steps")) or bool(record.get("suspect"))
     return out
