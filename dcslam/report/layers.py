@@ -121,7 +121,8 @@ def slam_trajectory(ws: Workspace, layer: str, drive: str) -> Path:
 def slam_settings(ws: Workspace, layer: str, drive: str) -> dict:
     """The settings of the SLAM run behind ``slam/<layer>/<drive>.txt`` (:data:`RUN_SETTINGS`, from the summary
     ``<drive>.json`` beside it; ``frames`` is the number asked for, 0 = all: a drive shorter than that runs fewer,
-    which its pose count shows), plus ``suspect``: whether the run rejected steps. Empty when the summary is missing (a trajectory made elsewhere)."""
+    which its pose count shows), plus ``suspect``: whether the run rejected steps. Empty when the summary is
+    missing (a trajectory made elsewhere)."""
     import json
 
     path = ws.slam / layer / f"{drive}.json"

@@ -184,7 +184,7 @@ class Pipeline:
                 self.run(stage)
             return
         import multiprocessing
-        from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+        from concurrent.futures import ProcessPoolExecutor, as_completed
 
         context = multiprocessing.get_context("spawn")  # no fork of a process that has run torch
         with ProcessPoolExecutor(max_workers=min(jobs, len(todo)), mp_context=context,
@@ -194,18 +194,16 @@ class Pipeline:
                 self.log(f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} "
                          f"{' '.join(f'{k}={v}' for k, v in changed(stage.config).items())} (worker)".rstrip())
                 futures[pool.submit(_timed, stage.run, self.ws, stage.config)] = stage
-            done, pending = wait(futures, return_when=FIRST_EXCEPTION)
-            for future in pending:
-                future.cancel()
-            for future in done:
+            for future in as_completed(futures):  # each stamped as it finishes: an interrupt keeps finished ones
                 stage = futures[future]
                 try:
                     seconds = future.result()
                 except DcslamError as error:
+                    for other in futures:
+                        other.cancel()
                     raise DcslamError(f"stage {stage.name} failed ({error}); fix it and rerun: finished stages "
                                       "will be skipped") from None
                 self._done(stage, seconds)
-            wait(pending)
 
 
 def _one_thread() -> None:
