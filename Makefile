@@ -8,7 +8,8 @@ STAMP  := $(VENV)/.dcslam-installed
 PROFILE    ?= quick
 WORKSPACE  ?= workspace
 KITTI_ROOT ?=
-REPRO_ARGS  = --profile $(PROFILE) --workspace $(WORKSPACE) $(if $(KITTI_ROOT),--kitti $(KITTI_ROOT))
+JOBS       ?= $(shell nproc 2>/dev/null || echo 1)
+REPRO_ARGS  = --profile $(PROFILE) --workspace $(WORKSPACE) --jobs $(JOBS) $(if $(KITTI_ROOT),--kitti $(KITTI_ROOT))
 
 .PHONY: setup test bench clean reproduce-table-5-2 reproduce-table-5-1 demo-icl
 

@@ -12,56 +12,104 @@ import numpy as np
 
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import DepthErrors
-from dcslam.eval.trajectory import TrajectoryScores, pair_by_timestamps, score_trajectory
+from dcslam.eval.trajectory import (EVO_MAX_TIME_DIFF_S, Association, TrajectoryScores, associate_timestamps,
+                                    score_trajectory)
 from dcslam.workspace import LayerRef, Workspace, drive_file, find_layer, resolve_layer, select_drives
 
 __all__ = ["LayerRef", "TrajectoryPair", "drive_file", "find_layer", "load_pair", "resolve_layer",
-           "score_layer_depth", "score_layer_trajectories", "select_drives", "slam_trajectory"]
+           "score_layer_depth", "score_layer_trajectories", "select_drives", "slam_settings", "slam_trajectory"]
+
+#: The SLAM settings that make two trajectories comparable (``beams``: the sparse input's beam count, when known).
+RUN_SETTINGS = ("frames", "odometry", "mapper", "solver", "association", "voxel_size", "beams")
+
 
 def score_layer_depth(ws: Workspace, layer: LayerRef, drives: list[str], interpolate: bool = True,
-                      target: str = "dense") -> dict[str, list[DepthErrors | None]]:
+                      devkit_exact: bool = False, target: str = "dense") -> dict[str, list[DepthErrors | None]]:
     """Per-frame depth errors of a layer against each drive's depth of kind ``target`` (``dense`` or ``exact``):
     ``{drive: [errors per frame]}``."""
     from dcslam.eval.depth import score_drive
     from dcslam.progress import track
 
-    return {drive: score_drive(drive_file(ws, drive), layer.source(drive), interpolate, target=target)
+    return {drive: score_drive(drive_file(ws, drive), layer.source(drive), interpolate, devkit_exact, target=target)
             for drive in track(drives, f"depth {layer.name}")}
 
 
 @dataclass(frozen=True)
 class TrajectoryPair:
-    """An estimate and its reference, paired pose by pose: ``T_gt`` and ``T_est`` (N, 4, 4), ``timestamps`` (N,)."""
+    """An estimate and its reference, paired pose by pose: ``T_gt`` and ``T_est`` (N, 4, 4), ``timestamps`` (N,)
+    (the estimate's); ``association`` says how they were paired (``None``: by index)."""
 
     timestamps: np.ndarray
     T_gt: np.ndarray
     T_est: np.ndarray
+    association: Association | None = None
 
     def score(self) -> TrajectoryScores:
         return score_trajectory(self.T_gt, self.T_est)
 
+    def summary(self) -> str:
+        if self.association is None:
+            return f"{len(self.T_est)} poses paired by index"
+        return self.association.summary()
 
-def load_pair(est_path: Path | str, gt_path: Path | str) -> TrajectoryPair:
-    """Read an estimated TUM trajectory and its reference: a drive file (the estimate may cover the first frames
-    only; it is matched by timestamp) or another TUM file (same timestamps, same length)."""
+
+def _is_kitti_poses(path: Path) -> bool:
+    """A KITTI pose file has 12 numbers a line (a TUM file 8); the first non-empty line decides."""
+    with open(path) as f:
+        for line in f:
+            if line.strip() and not line.startswith("#"):
+                return len(line.split()) == 12
+    return False
+
+
+def _read_reference(gt_path: Path) -> tuple[np.ndarray | None, np.ndarray]:
+    from dcslam.io.kitti_poses import read_kitti_poses
     from dcslam.io.tum import read_tum
 
-    t_est, T_est = read_tum(est_path)
-    gt_path = Path(gt_path)
     if gt_path.suffix in (".h5", ".hdf5"):
         from dcslam.io.drive import DriveFile
 
         with DriveFile(gt_path) as drive:
-            t_gt, T_gt = drive.timestamps, drive.poses
-        allow_prefix = True
+            return drive.timestamps, drive.poses
+    if _is_kitti_poses(gt_path):
+        return None, read_kitti_poses(gt_path)
+    return read_tum(gt_path)
+
+
+def load_pair(est_path: Path | str, gt_path: Path | str,
+              max_time_diff: float = EVO_MAX_TIME_DIFF_S) -> TrajectoryPair:
+    """Read an estimated trajectory and its reference, and pair their poses.
+
+    The estimate is a TUM file or a KITTI pose file (12 numbers a line, no timestamps); the reference a drive file,
+    a TUM file or a KITTI pose file. Poses with timestamps on both sides are associated as evo does (nearest
+    timestamp within ``max_time_diff`` seconds; only the paired poses are scored); a KITTI pose file without
+    timestamps is paired by index with the reference's first poses (it takes the drive's timestamps).
+    """
+    from dcslam.io.kitti_poses import read_kitti_poses
+    from dcslam.io.tum import read_tum
+
+    est_path, gt_path = Path(est_path), Path(gt_path)
+    for path in (est_path, gt_path):
+        if not path.exists():
+            raise DcslamError(f"{path} not found")
+    if _is_kitti_poses(est_path):
+        t_est, T_est = None, read_kitti_poses(est_path)
     else:
-        t_gt, T_gt = read_tum(gt_path)
-        allow_prefix = False
+        t_est, T_est = read_tum(est_path)
+    t_gt, T_gt = _read_reference(gt_path)
+    if t_est is None or t_gt is None:
+        if len(T_est) > len(T_gt):
+            raise DcslamError(f"{est_path} has {len(T_est)} poses, its reference {gt_path} only {len(T_gt)}; "
+                              "without timestamps poses are paired by index")
+        n = len(T_est)
+        timestamps = t_gt[:n] if t_gt is not None else (t_est if t_est is not None else np.arange(n, dtype=float))
+        return TrajectoryPair(timestamps=timestamps, T_gt=T_gt[:n], T_est=T_est)
     try:
-        n = pair_by_timestamps(t_est, t_gt, allow_prefix=allow_prefix)
+        assoc = associate_timestamps(t_est, t_gt, max_time_diff)
     except DcslamError as error:
         raise DcslamError(f"{est_path} against {gt_path}: {error}") from None
-    return TrajectoryPair(timestamps=t_est, T_gt=T_gt[:n], T_est=T_est)
+    return TrajectoryPair(timestamps=t_est[assoc.est_indices], T_gt=T_gt[assoc.gt_indices],
+                          T_est=T_est[assoc.est_indices], association=assoc)
 
 
 def slam_trajectory(ws: Workspace, layer: str, drive: str) -> Path:
@@ -71,6 +119,28 @@ def slam_trajectory(ws: Workspace, layer: str, drive: str) -> Path:
     return path
 
 
-def score_layer_trajectories(ws: Workspace, layer: str, drives: list[str]) -> dict[str, TrajectoryPair]:
+def slam_settings(ws: Workspace, layer: str, drive: str) -> dict:
+    """The settings of the SLAM run behind ``slam/<layer>/<drive>.txt`` (:data:`RUN_SETTINGS`, from the summary
+    ``<drive>.json`` beside it; ``frames`` is the number asked for, 0 = all: a drive shorter than that runs fewer,
+    which its pose count shows), plus ``suspect``: whether the run rejected steps. Empty when the summary is
+    missing (a trajectory made elsewhere)."""
+    import json
+
+    path = ws.slam / layer / f"{drive}.json"
+    if not path.exists():
+        return {}
+    try:
+        record = json.loads(path.read_text())
+    except json.JSONDecodeError:
+        raise DcslamError(f"{path}: not valid JSON; rerun `dcslam slam --depth {layer} --force`") from None
+    settings = {**record.get("settings", {}), **({"beams": record["beams"]} if "beams" in record else {})}
+    out = {k: settings[k] for k in RUN_SETTINGS if k in settings}
+    out["suspect"] = bool(record.get("rejected_steps")) or bool(record.get("suspect"))
+    return out
+
+
+def score_layer_trajectories(ws: Workspace, layer: str, drives: list[str],
+                             max_time_diff: float = EVO_MAX_TIME_DIFF_S) -> dict[str, TrajectoryPair]:
     """The SLAM trajectories of a layer paired with the drives' ground truth: ``{drive: pair}``."""
-    return {drive: load_pair(slam_trajectory(ws, layer, drive), drive_file(ws, drive)) for drive in drives}
+    return {drive: load_pair(slam_trajectory(ws, layer, drive), drive_file(ws, drive), max_time_diff)
+            for drive in drives}

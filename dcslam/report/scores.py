@@ -14,8 +14,9 @@ from dcslam.errors import DcslamError
 from dcslam.eval.depth import METRICS, mean_errors
 from dcslam.report.layers import (TrajectoryPair, drive_file, resolve_layer, score_layer_depth)
 from dcslam.eval.maps import MapScores
-from dcslam.report.tables import (Column, LayerResult, Table, list_runs, table_5_1, table_5_2, table_5_2_results,
-                                thesis_figures)
+from dcslam.report.table_5_2 import FAILURE_THRESHOLD, LayerResult, table_5_2, table_5_2_results
+from dcslam.report.tables import Column, Table, list_runs, table_5_1, table_5_3, thesis_figures
+from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
 from dcslam.io.atomic import write_text_atomic
 from dcslam.workspace import Workspace
 
@@ -32,11 +33,11 @@ def check_outputs(paths: list[Path], force: bool) -> None:
 
 
 def depth_table(ws: Workspace, layer_name: str, drives: list[str], interpolate: bool = True,
-                target: str = "dense") -> Table:
+                devkit_exact: bool = False, target: str = "dense") -> Table:
     """Depth errors of a layer against the drives' ``target`` depth (``dense`` or ``exact``): one row per drive
     (mean over its frames) and a row ``all`` (mean over all frames)."""
     layer = resolve_layer(ws, layer_name)
-    per_drive = score_layer_depth(ws, layer, drives, interpolate, target)
+    per_drive = score_layer_depth(ws, layer, drives, interpolate, devkit_exact, target)
     columns = [Column("drive", "drive"), Column("frames", "frames"), Column("mae_mm", "MAE (mm)", "{:.1f}"),
                Column("rmse_mm", "RMSE (mm)", "{:.1f}"), Column("imae_per_km", "iMAE (1/km)", "{:.2f}"),
                Column("irmse_per_km", "iRMSE (1/km)", "{:.2f}"), Column("coverage", "coverage", "{:.3f}")]
@@ -49,8 +50,10 @@ def depth_table(ws: Workspace, layer_name: str, drives: list[str], interpolate: 
     overall = mean_errors(e for frames in per_drive.values() for e in frames)
     table.rows.append({"drive": "all", "frames": sum(len(f) for f in per_drive.values()),
                        **{m: getattr(overall, m) for m in METRICS}, "coverage": overall.coverage})
-    table.notes.append("KITTI devkit: holes of the prediction filled by background interpolation"
-                       if interpolate else "no interpolation: only pixels where the prediction has depth")
+    table.notes.append("exactly as the KITTI devkit (no departures)" if devkit_exact else
+                       "KITTI devkit (holes of the prediction filled by background interpolation) with dcslam's two "
+                       "departures (see --devkit-exact)" if interpolate else
+                       "no interpolation: only pixels where the prediction has depth")
     return table
 
 
@@ -64,6 +67,11 @@ def trajectory_table(pairs: dict[str, TrajectoryPair], title: str) -> Table:
     table = Table(title, [Column("trajectory", "trajectory")] + [Column(k, k) for k in keys], rows)
     table.notes.append("localisation: thesis accuracy (m + rad, acos argument clamped to [-1, 1]); "
                        "localisation_thesis_clamp: clamped to [0, 1] as the thesis's code did")
+    table.notes += [f"{name}: {pair.summary()}" for name, pair in pairs.items()]
+    for name, pair in pairs.items():
+        drift = pair.score().drift
+        if drift is not None and drift.overall is None:
+            table.notes.append(f"{name}: {drift.note}")
     return table
 
 
@@ -84,13 +92,29 @@ class Report:
     table_5_1: Table
     table_5_2: Table
     written: list[Path]
+    table_5_3: Table | None = None
+    per_drive: Table | None = None
+
+
+PER_DRIVE_KEYS = ("poses", "failed", "localisation", "ate_rmse_m", "rpe_rmse_m", "rpe_rmse_deg", "kitti_t_rel_percent",
+                  "kitti_r_rel_deg_per_100m", "path_m", "mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km",
+                  "frames", "odometry", "mapper", "solver", "association", "voxel_size", "beams", "pairing")
+
+
+def per_drive_table(results: list[LayerResult]) -> Table:
+    """Every figure of every row of Table 5.2 on every test drive (``results/table_5_2_per_drive.csv``)."""
+    columns = [Column("method", "method"), Column("layer", "layer"), Column("drive", "drive")] + [
+        Column(k, k) for k in PER_DRIVE_KEYS]
+    rows = [{"method": r.label, "layer": r.layer, "drive": drive, **values}
+            for r in results for drive, values in r.per_drive().items()]
+    return Table("Table 5.2 per drive", columns, rows)
 
 
 def _depth_example_rows(ws: Workspace, results: list[LayerResult], drive: str):
     """(rgb, rows) for the middle frame of ``drive``: one row per model layer that has depth."""
     from dcslam.io.drive import DriveFile, read_layer
 
-    models = [r for r in results if r.depth is not None and r.layer not in ("sparse", "dense")]
+    models = [r for r in results if r.depth and r.layer not in ("sparse", "dense")]
     if not models:
         return None, []
     with DriveFile(drive_file(ws, drive)) as d:
@@ -105,8 +129,11 @@ def _depth_example_rows(ws: Workspace, results: list[LayerResult], drive: str):
     return rgb, rows
 
 
-def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, force: bool = False) -> Report:
-    """Compute Tables 5.1 and 5.2 over ``drives`` and write them (Markdown + CSV) with the figures."""
+def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, force: bool = False,
+                 devkit_exact: bool = False, max_time_diff: float = EVO_MAX_TIME_DIFF_S,
+                 failure_threshold: float = FAILURE_THRESHOLD) -> Report:
+    """Compute Tables 5.1, 5.2 (with its per-drive table) and 5.3 over ``drives`` and write them (Markdown + CSV)
+    with the figures."""
     from dcslam.report.plots import plot_depth_examples, plot_trajectories
     from dcslam.io.drive import DriveFile
 
@@ -114,10 +141,11 @@ def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, 
     thesis = thesis_figures()
     runs = list_runs(ws)
     t51 = table_5_1(runs, thesis)
-    results = table_5_2_results(ws, runs, drives)
-    t52 = table_5_2(results, thesis, drives)
+    results = table_5_2_results(ws, runs, drives, devkit_exact, max_time_diff, failure_threshold)
+    t52 = table_5_2(results, thesis, drives, devkit_exact)
+    t53, per_drive = table_5_3(thesis), per_drive_table(results)
     rgb, examples = _depth_example_rows(ws, results, drives[0])
-    tables = {"table_5_1": t51, "table_5_2": t52}
+    tables = {"table_5_1": t51, "table_5_2": t52, "table_5_2_per_drive": per_drive, "table_5_3": t53}
     outputs = [out_dir / f"{name}.{ext}" for name in tables for ext in ("md", "csv")]
     plots = [out_dir / f"trajectories_{drive}.png" for drive in drives]
     examples_path = out_dir / "depth_examples.png"
@@ -134,5 +162,5 @@ def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, 
         written.append(plot_trajectories(path, T_gt, estimates, title=f"{drive}: top view", force=True))
     if examples:
         written.append(plot_depth_examples(examples_path, examples, rgb=rgb, force=True))
-    return Report(table_5_1=t51, table_5_2=t52, written=written)
+    return Report(table_5_1=t51, table_5_2=t52, written=written, table_5_3=t53, per_drive=per_drive)
 

@@ -13,8 +13,10 @@ redone on the next run. Outputs that exist but were not made by this pipeline (n
 stage's stamp: a run trained by hand, a layer filtered by hand) are never overwritten without ``force`` (``dcslam
 reproduce --force``); the error names the stage and the file. Training with several processes (``nproc``) still
 launches through torchrun.
-A profile chooses the scale: ``quick`` (the default, about half an hour on 2 CPU cores), ``smoke`` (a check that
-every stage runs) or ``thesis`` (the thesis's 15 / 4 / 5 drives of 200 frames, for a GPU).
+A profile chooses the scale: ``quick`` (the default: at least 4 test drives, about half an hour on 2 CPU cores),
+``smoke`` (a check that every stage runs) or ``thesis`` (the thesis's 15 / 4 / 5 drives of 200 frames, for a GPU).
+SLAM runs one stage per (layer, test drive); they are independent, so ``jobs`` > 1 runs them in that many worker
+processes with one torch thread each.
 """
 from __future__ import annotations
 
@@ -51,18 +53,26 @@ class Profile:
     slam_frames: int            # frames of each test drive fed to SLAM (the thesis scored 30)
     filters: dict[str, list[str]] = field(default_factory=dict)  # filter name → filter specs of `dcslam filter`
     description: str = ""
+    split: tuple[int, int, int] | None = None  # (train, val, test) drive counts; None: the thesis's proportion
+    slam: dict = field(default_factory=dict)    # SLAM settings other than the defaults (fields of SlamSettings)
+
+    def __post_init__(self) -> None:
+        if self.split is not None and (sum(self.split) != self.drives or min(self.split) < 1):
+            raise DcslamError(f"profile {self.name}: split {self.split} must be >= 1 drive each and add up to "
+                              f"{self.drives} drives")
 
 
 PROFILES = {
     "quick": Profile(
-        name="quick", drives=5, frames=42, train={"epochs": 2, "max_frames": 31, "scale": 0.5, "lr": 3e-3},
-        slam_frames=30, filters={"edges": ["edges"]},
-        description="5 generated drives of 42 frames (3 train / 1 val / 1 test), models trained 2 epochs at half "
-                    "resolution, SLAM on the first 30 frames, one outlier filter"),
+        name="quick", drives=8, frames=42, train={"epochs": 2, "max_frames": 31, "scale": 0.5, "lr": 3e-3},
+        slam_frames=30, filters={"edges": ["edges"]}, split=(3, 1, 4),
+        description="8 generated drives of 42 frames (3 train / 1 val / 4 test), models trained 2 epochs at half "
+                    "resolution, SLAM on the first 30 frames of each test drive, one outlier filter"),
     "smoke": Profile(
-        name="smoke", drives=3, frames=14, train={"epochs": 1, "max_frames": 2, "scale": 0.25},
-        slam_frames=3, filters={"edges": ["edges"]},
-        description="a check that every stage runs (3 drives of 14 frames, tiny training): numbers mean nothing"),
+        name="smoke", drives=3, frames=12, train={"epochs": 1, "max_frames": 2, "scale": 0.25},
+        slam_frames=2, filters={"edges": ["edges"]}, slam={"iterations": 3, "voxel_size": 0.2},
+        description="a check that every stage runs (3 drives of 12 frames, tiny training, SLAM over 2 frames with "
+                    "3 ICP iterations and a coarse map): numbers mean nothing"),
     "thesis": Profile(
         name="thesis", drives=24, frames=211, train={"epochs": 5, "max_frames": 200},
         slam_frames=30,
@@ -86,8 +96,12 @@ class ReproduceConfig:
     seed: int = option(0, help="Seed of the generated drives and of training.")
     force: bool = option(False, flags=("--force",), help="Overwrite outputs in the workspace that `dcslam "
                          "reproduce` did not make itself (runs trained, layers made by hand).")
+    jobs: int = option(1, min=1, help="Worker processes for the SLAM runs (one per layer and test drive, one torch "
+                                      "thread each); e.g. the number of CPU cores.")
 
     def __post_init__(self) -> None:
+        if self.jobs < 1:
+            raise DcslamError(f"--jobs must be >= 1, got {self.jobs}")
         if self.table not in TABLES:
             raise DcslamError(f"unknown table {self.table!r}; expected 5.1 or 5.2")
         if self.profile not in PROFILES:
@@ -167,11 +181,7 @@ class Pipeline:
         if self.up_to_date(stage):
             self.log(f"[skip] {stage.name}: up to date")
             return None
-        foreign = None if self.force else self.foreign_output(stage)
-        if foreign is not None:
-            raise DcslamError(f"stage {stage.name} would overwrite {foreign}, which `dcslam reproduce` did not make; "
-                              "move it away or pass --force to overwrite it")
-        write_json_atomic(self._stamp(stage), {**stage.record(), "complete": False})  # claims nothing until done
+        self._claim(stage)
         options = " ".join(f"{k}={v}" for k, v in changed(stage.config).items())
         self.log(f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} {options}".rstrip())
         start = time.perf_counter()
@@ -180,23 +190,103 @@ class Pipeline:
         except DcslamError as error:
             raise DcslamError(f"stage {stage.name} failed ({error}); fix it and rerun: finished stages will be "
                               "skipped") from None
-        self.timings[stage.name] = time.perf_counter() - start
-        write_json_atomic(self._stamp(stage), {**stage.record(), "complete": True,
-                                                "seconds": self.timings[stage.name]})
+        self._done(stage, time.perf_counter() - start)
         return result
+
+    def _claim(self, stage: Stage) -> None:
+        """Refuse outputs this pipeline did not make (unless ``force``); stamp ``stage`` as running."""
+        foreign = None if self.force else self.foreign_output(stage)
+        if foreign is not None:
+            raise DcslamError(f"stage {stage.name} would overwrite {foreign}, which `dcslam reproduce` did not make; "
+                              "move it away or pass --force to overwrite it")
+        write_json_atomic(self._stamp(stage), {**stage.record(), "complete": False})  # claims nothing until done
+
+    def _done(self, stage: Stage, seconds: float) -> None:
+        self.timings[stage.name] = seconds
+        write_json_atomic(self._stamp(stage), {**stage.record(), "complete": True, "seconds": seconds})
+
+    def run_all(self, stages: list[Stage], jobs: int = 1) -> None:
+        """Run independent ``stages`` (none reads another's outputs), in ``jobs`` worker processes when > 1."""
+        todo = []
+        for stage in stages:
+            if self.up_to_date(stage):
+                self.log(f"[skip] {stage.name}: up to date")
+            else:
+                todo.append(stage)
+        if jobs <= 1 or len(todo) <= 1:
+            for stage in todo:
+                self.run(stage)
+            return
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        context = multiprocessing.get_context("spawn")  # no fork of a process that has run torch
+        with ProcessPoolExecutor(max_workers=min(jobs, len(todo)), mp_context=context,
+                                 initializer=_one_thread) as pool:
+            futures = {}
+            for stage in todo:
+                self._claim(stage)
+                self.log(f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} "
+                         f"{' '.join(f'{k}={v}' for k, v in changed(stage.config).items())} (worker)".rstrip())
+                futures[pool.submit(_timed, stage.run, self.ws, stage.config)] = stage
+            for future in as_completed(futures):  # each stamped as it finishes: an interrupt keeps finished ones
+                stage = futures[future]
+                try:
+                    seconds = future.result()
+                except DcslamError as error:
+                    for other in futures:
+                        other.cancel()
+                    raise DcslamError(f"stage {stage.name} failed ({error}); fix it and rerun: finished stages "
+                                      "will be skipped") from None
+                self._done(stage, seconds)
+
+
+def _one_thread() -> None:
+    """Worker initializer: one torch (OpenMP) thread per process."""
+    import os
+
+    os.environ["OMP_NUM_THREADS"] = "1"
+    import torch
+
+    torch.set_num_threads(1)
+
+
+def _timed(run: Callable, ws: Workspace, config) -> float:
+    start = time.perf_counter()
+    run(ws, config, force=True)
+    return time.perf_counter() - start
 
 
 def run(ws: Workspace, config: ReproduceConfig, *, log: Callable[[str], None] = lambda line: None) -> Path:
     """Run the experiment at the profile's scale; return the Markdown file of the requested table."""
     return reproduce(ws, PROFILES[config.profile], table=config.table, kitti_root=config.kitti, seed=config.seed,
-                     log=log, force=config.force)
+                     log=log, force=config.force, jobs=config.jobs)
+
+
+def _profile_splits(ws: Workspace, kitti: Path, counts: tuple[int, int, int]) -> Path:
+    """Write the profile's split of the generated drives (sorted by name: train, then val, then test)."""
+    from dcslam.io.kitti import find_drives
+
+    names = sorted({d.name for d in find_drives(kitti)})
+    if len(names) != sum(counts):
+        raise DcslamError(f"{kitti}: {len(names)} drives, the profile splits {sum(counts)}; remove {kitti} and rerun")
+    n_train, n_val, _ = counts
+    path = ws.root / ".reproduce" / "splits.json"
+    import json
+
+    splits = {"train": names[:n_train], "val": names[n_train:n_train + n_val], "test": names[n_train + n_val:]}
+    if not path.exists() or json.loads(path.read_text()) != splits:
+        write_json_atomic(path, splits, force=True)
+    return path
 
 
 def reproduce(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_root: Path | None = None,
-              seed: int = 0, log: Callable[[str], None] = lambda line: None, force: bool = False) -> Path:
+              seed: int = 0, log: Callable[[str], None] = lambda line: None, force: bool = False,
+              jobs: int = 1) -> Path:
     """Run the experiment at ``profile``'s scale; return the Markdown file of the requested table.
 
-    ``force``: overwrite outputs this pipeline did not make (see :meth:`Pipeline.run`)."""
+    ``force``: overwrite outputs this pipeline did not make (see :meth:`Pipeline.run`); ``jobs``: worker processes
+    for the independent SLAM stages."""
     if table not in TABLES:
         raise DcslamError(f"unknown table {table!r}; expected 5.1 or 5.2")
     ws = workspace
@@ -208,9 +298,10 @@ def reproduce(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_
                        outputs=lambda: [ws.kitti / "SYNTHETIC"]))
     elif not kitti.is_dir():
         raise DcslamError(f"KITTI root {kitti} does not exist or is not a folder; pass --kitti DIR")
-    pipe.run(Stage("prepare-kitti", prepare.run, prepare.PrepareConfig(kitti=kitti),
+    split_file = _profile_splits(ws, kitti, profile.split) if kitti_root is None and profile.split else None
+    pipe.run(Stage("prepare-kitti", prepare.run, prepare.PrepareConfig(kitti=kitti, splits=split_file),
                    outputs=lambda: [ws.splits, *drives()],
-                   inputs=lambda: [p for p in (kitti / "SYNTHETIC",) if p.exists()]))
+                   inputs=lambda: [p for p in (kitti / "SYNTHETIC", split_file) if p is not None and p.exists()]))
     from dcslam.io.drive import read_splits
 
     splits = read_splits(ws.splits)
@@ -242,13 +333,16 @@ def reproduce(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_
             pipe.run(Stage(f"filter-{name}", filter_stage.run, config,
                            outputs=lambda made=made: made, inputs=lambda m=layers[run_name][0]: m))
             layers[name] = (made, f"filtered/{name}")
-    slam_outputs = []
+    slam_outputs, slam_stages = [], []
     for layer, (files, reference) in layers.items():
-        made = [ws.slam / layer / f"{p.stem}.json" for p in test]
-        slam_outputs += made
-        config = slam.SlamStageConfig(depth=reference, odometry="icp", frames=profile.slam_frames)
-        pipe.run(Stage(f"slam-{layer}", slam.run, config, outputs=lambda made=made: made,
-                       inputs=lambda files=files: files))
+        for drive, source in zip(test, files):
+            made = [ws.slam / layer / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt")]
+            slam_outputs += made
+            config = slam.SlamStageConfig(**{"odometry": "icp", **profile.slam}, depth=reference,
+                                          drive=[drive.stem], frames=profile.slam_frames)
+            slam_stages.append(Stage(f"slam-{layer}-{drive.stem}", slam.run, config, outputs=lambda made=made: made,
+                                     inputs=lambda d=drive, s=source: [d, s]))
+    pipe.run_all(slam_stages, jobs)
     return _tables(pipe, ws, "5.2", inputs=slam_outputs + [ws.runs / r / "metrics.jsonl" for r in RECIPES])
 
 

@@ -8,10 +8,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dcslam.errors import DcslamError
+from dcslam.eval.depth import DEPARTURES_TEXT
+from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
 from dcslam.stages.config import option
 from dcslam.workspace import Workspace
 
 DRIVE_HELP = "Drive name (repeatable); default: the test split of splits.json."
+MAX_TIME_DIFF_HELP = ("Largest timestamp difference (seconds) at which an estimated pose is paired with a reference "
+                      "pose, as evo's --t_max_diff (default evo's 0.01); only the paired poses are scored.")
+FAILURE_HELP = ("A drive counts as a SLAM failure when its run rejected steps or its thesis localisation error "
+                "exceeds this (m + rad).")
 OUT_HELP = "CSV file to write (default under results/)."
 
 
@@ -70,10 +76,13 @@ class ScoreDepthConfig:
                          help="Reference depth: dense (annotated) or exact (noise-free; generated drives only).")
     raw: bool = option(False, flags=("--raw",), help="No devkit interpolation: score only the pixels where the "
                                                      "layer has depth.")
+    devkit_exact: bool = option(False, flags=("--devkit-exact",), help=DEPARTURES_TEXT)
 
     def __post_init__(self) -> None:
         if not self.layer:
             raise DcslamError("give --layer NAME (sparse, dense, a run or filter name, or a folder of layer files)")
+        if self.raw and self.devkit_exact:
+            raise DcslamError("--raw and --devkit-exact cannot be combined: the devkit always interpolates")
 
 
 def run_depth(ws: Workspace, config: ScoreDepthConfig, *, force: bool = False) -> ScoreResult:
@@ -84,7 +93,7 @@ def run_depth(ws: Workspace, config: ScoreDepthConfig, *, force: bool = False) -
     out = config.out or ws.results / f"depth_{_slug(Path(config.layer).name)}{suffix}.csv"
     check_outputs([out], force)
     table = depth_table(ws, config.layer, select_drives(ws, config.drive), interpolate=not config.raw,
-                        target=config.target)
+                        devkit_exact=config.devkit_exact, target=config.target)
     return _write("score-depth", config, table, out)
 
 
@@ -92,11 +101,12 @@ def run_depth(ws: Workspace, config: ScoreDepthConfig, *, force: bool = False) -
 class ScoreTrajectoryConfig:
     """Options of ``dcslam score trajectory``."""
 
-    est: Path | None = option(None, help="Estimated trajectory (TUM).")
-    gt: Path | None = option(None, help="Reference: a drive file (.h5) or a TUM file.")
+    est: Path | None = option(None, help="Estimated trajectory: TUM, or a KITTI pose file (paired by index).")
+    gt: Path | None = option(None, help="Reference: a drive file (.h5), a TUM file or a KITTI pose file.")
     layer: str | None = option(None, help="Score slam/<layer>/<drive>.txt against the drive files.")
     drive: list[str] = option(default_factory=list, help=DRIVE_HELP)
     out: Path | None = option(None, help=OUT_HELP)
+    max_time_diff: float = option(EVO_MAX_TIME_DIFF_S, min=0.0, help=MAX_TIME_DIFF_HELP)
 
 
 def run_trajectory(ws: Workspace, config: ScoreTrajectoryConfig, *, force: bool = False) -> ScoreResult:
@@ -108,9 +118,9 @@ def run_trajectory(ws: Workspace, config: ScoreTrajectoryConfig, *, force: bool 
     name, out = _file_or_layer_output(ws, "trajectory", config.est, config.gt, config.layer, config.out, force,
                                       "give either --est X.txt --gt REFERENCE, or --layer NAME")
     if config.layer:
-        pairs = score_layer_trajectories(ws, config.layer, select_drives(ws, config.drive))
+        pairs = score_layer_trajectories(ws, config.layer, select_drives(ws, config.drive), config.max_time_diff)
     else:
-        pairs = {config.est.stem: load_pair(config.est, config.gt)}
+        pairs = {config.est.stem: load_pair(config.est, config.gt, config.max_time_diff)}
     table = trajectory_table(pairs, f"trajectory errors of {name}")
     brief = Table(table.title, [c for c in table.columns if c.key in ("trajectory", *TRAJECTORY_SHOWN)],
                   table.rows, table.notes)
@@ -151,6 +161,9 @@ class ScoreTablesConfig:
 
     drive: list[str] = option(default_factory=list, help=DRIVE_HELP)
     out_dir: Path | None = option(None, help="Output folder (default: <workspace>/results).")
+    devkit_exact: bool = option(False, flags=("--devkit-exact",), help=DEPARTURES_TEXT)
+    max_time_diff: float = option(EVO_MAX_TIME_DIFF_S, min=0.0, help=MAX_TIME_DIFF_HELP)
+    failure_threshold: float = option(1.0, min=0.0, help=FAILURE_HELP)
 
 
 def run_tables(ws: Workspace, config: ScoreTablesConfig, *, force: bool = False):
@@ -161,7 +174,9 @@ def run_tables(ws: Workspace, config: ScoreTablesConfig, *, force: bool = False)
     from dcslam.io.atomic import write_json_atomic
     from dcslam.workspace import select_drives, stage_config
 
-    report = build_report(ws, select_drives(ws, config.drive), out_dir=config.out_dir, force=force)
+    report = build_report(ws, select_drives(ws, config.drive), out_dir=config.out_dir, force=force,
+                          devkit_exact=config.devkit_exact, max_time_diff=config.max_time_diff,
+                          failure_threshold=config.failure_threshold)
     write_json_atomic(report.written[0].parent / "score-tables.json", stage_config("score-tables", to_dict(config)),
                       force=True)
     return report

@@ -1,5 +1,6 @@
 """``dcslam slam``: dense SLAM over drive files, writing per drive ``<out>/<drive>.txt`` (TUM trajectory, readable
-by evo), ``<out>/<drive>.ply`` (the map with normals and colours) and ``<out>/<drive>.json`` (frames, points, seconds
+by evo), ``<out>/<drive>.kitti.txt`` (the same poses as a KITTI 3x4 pose file, for the odometry devkit),
+``<out>/<drive>.ply`` (the map with normals and colours) and ``<out>/<drive>.json`` (frames, points, seconds
 per frame, rejected steps, drift against the drive's ground truth, and the configuration that ran), ``<out>`` being
 ``slam/<layer>/`` by default.
 
@@ -179,7 +180,8 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
 
 
 def output_paths(out_dir: Path, name: str) -> dict[str, Path]:
-    return {"trajectory": out_dir / f"{name}.txt", "map": out_dir / f"{name}.ply", "summary": out_dir / f"{name}.json"}
+    return {"trajectory": out_dir / f"{name}.txt", "kitti_poses": out_dir / f"{name}.kitti.txt",
+            "map": out_dir / f"{name}.ply", "summary": out_dir / f"{name}.json"}
 
 
 def check_outputs(out_dir: Path, name: str, force: bool) -> None:
@@ -190,6 +192,7 @@ def check_outputs(out_dir: Path, name: str, force: bool) -> None:
 
 
 def write_outputs(run: DriveRun, out_dir: Path, force: bool = False) -> dict[str, Path]:
+    from dcslam.io.kitti_poses import write_kitti_poses
     from dcslam.io.ply import write_ply
     from dcslam.io.tum import write_tum
     from dcslam.io.atomic import write_json_atomic
@@ -201,6 +204,7 @@ def write_outputs(run: DriveRun, out_dir: Path, force: bool = False) -> dict[str
     if len(timestamps) > 1 and np.any(np.diff(timestamps) <= 0):
         timestamps = np.arange(len(timestamps), dtype=np.float64) * 0.1
     write_tum(paths["trajectory"], timestamps, run.T_world_cam, force=force)
+    write_kitti_poses(paths["kitti_poses"], run.T_world_cam, force=force)
     pm = run.map
     write_ply(paths["map"], pm.points.numpy(), pm.normals.numpy(), pm.colors.clamp(0, 1).numpy(), force=force)
     record = stage_config("slam", run.settings)

@@ -8,7 +8,8 @@ from typer.testing import CliRunner
 
 from dcslam.cli import app
 from dcslam.io.drive import DriveFrame, DriveWriter, Layer, write_layer
-from dcslam.io.tum import write_tum
+from dcslam.io.kitti_poses import write_kitti_poses
+from dcslam.io.tum import read_tum, write_tum
 
 K = np.array([[20.0, 0, 12], [0, 20.0, 8], [0, 0, 1]])
 H, W, N = 16, 24, 4
@@ -95,6 +96,24 @@ def test_score_depth(ws):
     assert again.exit_code == 1 and "--force" in again.output
 
 
+def test_score_depth_devkit_exact(ws):
+    """--devkit-exact scores predictions below 0.1 m as the devkit does (dcslam's default counts them as holes)."""
+    depth = np.full((N, H, W), 10.0, np.float32)
+    depth[:, :, ::2] = 0.05
+    for name in ("d0", "d1"):
+        write_layer(ws / "predictions" / "tiny" / f"{name}.h5", Layer(depth=depth, drive=name, made_by="test"))
+    ours = invoke("score", "depth", "-w", ws, "--layer", "tiny", "--out", ws / "ours.csv")
+    exact = invoke("score", "depth", "-w", ws, "--layer", "tiny", "--out", ws / "exact.csv", "--devkit-exact")
+    assert ours.exit_code == 0 and exact.exit_code == 0, ours.output + exact.output
+    ours, exact = read_csv(ws / "ours.csv")[-1], read_csv(ws / "exact.csv")[-1]
+    # 0.05 m against 2-30 m: inverse errors of about 20 /m = 20000 /km on half the pixels
+    assert float(exact["imae_per_km"]) > 5000 > float(ours["imae_per_km"])
+    assert json.loads((ws / "exact.json").read_text())["settings"]["devkit_exact"] is True
+    both = invoke("score", "depth", "-w", ws, "--layer", "tiny", "--raw", "--devkit-exact", "--out", ws / "no.csv")
+    assert both.exit_code == 1 and "cannot be combined" in both.output and not (ws / "no.csv").exists()
+    assert "--devkit-exact" in invoke("score", "depth", "--help").output
+
+
 def test_score_trajectory_layer_and_files(ws):
     result = invoke("score", "trajectory", "-w", ws, "--layer", "sparse")
     assert result.exit_code == 0, result.output
@@ -109,11 +128,43 @@ def test_score_trajectory_layer_and_files(ws):
     assert result.exit_code == 0 and float(read_csv(ws / "t.csv")[0]["ate_rmse"]) == pytest.approx(np.sqrt(5 / 3))
 
 
-def test_score_trajectory_bad_input(ws, tmp_path):
+def test_score_trajectory_associates_within_the_time_tolerance(ws, tmp_path):
+    """Poses are paired as evo pairs them: nearest timestamp within --max-time-diff (default 10 ms); only the
+    paired poses are scored and the pairing is reported."""
+    ref = ws / "slam" / "dense" / "d0.txt"
+    t_ref, _ = read_tum(ref)
     short = tmp_path / "short.txt"
-    write_tum(short, 10 + 0.1 * np.arange(2), gt_poses(2))
-    result = invoke("score", "trajectory", "-w", ws, "--est", short, "--gt", ws / "slam" / "dense" / "d0.txt")
-    assert result.exit_code == 1 and "different lengths" in result.output
+    write_tum(short, t_ref[:2] + 0.004, gt_poses(2))  # two poses, 4 ms late: both paired
+    result = invoke("score", "trajectory", "-w", ws, "--est", short, "--gt", ref, "--out", ws / "a.csv")
+    assert result.exit_code == 0, result.output
+    assert read_csv(ws / "a.csv")[0]["poses"] == "2"
+    assert "2 of 2 estimated poses paired with 3 reference poses (max. time difference 10 ms)" in result.output
+    late = tmp_path / "late.txt"
+    write_tum(late, t_ref + 0.02, gt_poses(3))  # 20 ms late: nothing pairs at 10 ms …
+    result = invoke("score", "trajectory", "-w", ws, "--est", late, "--gt", ref, "--out", ws / "b.csv")
+    assert result.exit_code == 1 and "within 10 ms" in result.output and not (ws / "b.csv").exists()
+    result = invoke("score", "trajectory", "-w", ws, "--est", late, "--gt", ref, "--out", ws / "b.csv",
+                    "--max-time-diff", "0.03")  # … everything at 30 ms
+    assert result.exit_code == 0, result.output
+    assert read_csv(ws / "b.csv")[0]["poses"] == "3"
+
+
+def test_score_trajectory_reads_kitti_pose_files(ws, tmp_path):
+    """A KITTI pose file (no timestamps) is paired by index with the reference's first poses."""
+    est = tmp_path / "est.kitti.txt"
+    _, T_sparse = read_tum(ws / "slam" / "sparse" / "d0.txt")
+    write_kitti_poses(est, T_sparse)
+    result = invoke("score", "trajectory", "-w", ws, "--est", est, "--gt", ws / "slam" / "dense" / "d0.txt",
+                    "--out", ws / "k.csv")
+    assert result.exit_code == 0, result.output
+    assert float(read_csv(ws / "k.csv")[0]["ate_rmse"]) == pytest.approx(np.sqrt(5 / 3))
+    too_long = tmp_path / "long.kitti.txt"
+    write_kitti_poses(too_long, np.concatenate([T_sparse, T_sparse]))
+    result = invoke("score", "trajectory", "-w", ws, "--est", too_long, "--gt", ws / "slam" / "dense" / "d0.txt")
+    assert result.exit_code == 1 and "paired by index" in result.output
+
+
+def test_score_trajectory_bad_input(ws, tmp_path):
     unsorted = tmp_path / "unsorted.txt"
     unsorted.write_text("10.2 0 0 0 0 0 0 1\n10.1 0 0 0 0 0 0 1\n")
     result = invoke("score", "trajectory", "-w", ws, "--est", unsorted, "--gt", ws / "drives" / "d0.h5")
@@ -167,10 +218,47 @@ def test_score_tables(ws):
     assert float(t52["MSE dense mask + best filter"]["localisation"]) < float(t52["MSE dense mask"]["localisation"])
     assert "dcslam predict" in t52["IP-Basic"]["missing"]
     assert float(t52["MSE dense mask"]["thesis_localisation"]) == 10.29    # the thesis's figure, thesis_tables.json
-    assert "| MSE dense mask | mse-dense |" in (results / "table_5_2.md").read_text()
+    assert "| MSE dense mask | mse-dense | 2 | 0 |" in (results / "table_5_2.md").read_text()
+    # spread over the two drives: both drift the same, so std 0; failures counted beyond 1 m + rad
+    assert t52["sparse depth"]["localisation_std"] == "0.0" and t52["MSE dense mask"]["failures"] == "0"
+    assert float(t52["sparse depth"]["localisation_median"]) == pytest.approx(1.0)
+    assert t52["MSE dense mask"]["vs_sparse"] == "differs"
+    assert t52["dense depth"]["drives"] == "2" and "too short" in t52["dense depth"]["notes"]
+    per_drive = read_csv(results / "table_5_2_per_drive.csv")
+    assert {(r["layer"], r["drive"]) for r in per_drive} >= {("sparse", "d0"), ("sparse", "d1"), ("dense", "d1")}
+    sparse_d0 = next(r for r in per_drive if r["layer"] == "sparse" and r["drive"] == "d0")
+    assert float(sparse_d0["localisation"]) == pytest.approx(1.0)
+    mse_d0 = next(r for r in per_drive if r["layer"] == "mse-dense" and r["drive"] == "d0")
+    assert mse_d0["failed"] == "False" and float(mse_d0["localisation"]) == pytest.approx(0.5)
+    assert "3 of 3 estimated poses paired" in sparse_d0["pairing"]
+    assert "| testing | 540 | 1810 |" in (results / "table_5_3.md").read_text()   # the authors' figures
+    assert "Table 5.3" in result.output
     again = invoke("score", "tables", "-w", ws)
     assert again.exit_code == 1 and "--force" in again.output
     assert invoke("score", "tables", "-w", ws, "--force").exit_code == 0
+
+
+def _write_summary(ws, layer, drive, frames, rejected=()):
+    record = {"stage": "slam", "settings": {"odometry": "icp", "mapper": "pointfusion", "frames": frames},
+              "frames": frames, "rejected_steps": [{"frame": i, "reason": "test"} for i in rejected]}
+    (ws / "slam" / layer / f"{drive}.json").write_text(json.dumps(record))
+
+
+def test_tables_show_rows_made_with_other_settings_and_refuse_mixed_rows(ws):
+    for layer in ("sparse", "dense", "mse-dense", "mse-dense+range"):
+        for drive in ("d0", "d1"):
+            _write_summary(ws, layer, drive, 3, rejected=[2] if (layer, drive) == ("dense", "d1") else [])
+    _write_summary(ws, "mse-dense", "d0", 5)
+    _write_summary(ws, "mse-dense", "d1", 5)
+    result = invoke("score", "tables", "-w", ws)
+    assert result.exit_code == 0, result.output
+    t52 = {r["method"]: r for r in read_csv(ws / "results" / "table_5_2.csv")}
+    assert t52["MSE dense mask"]["slam_settings"] == "differs: frames=5"
+    assert t52["sparse depth"]["slam_settings"] == "as the others"
+    assert t52["dense depth"]["failures"] == "1"             # a run that rejected a step is a failure
+    _write_summary(ws, "mse-dense", "d1", 3)                 # one row, two settings: refused
+    result = invoke("score", "tables", "-w", ws, "--force")
+    assert result.exit_code == 1 and "mixes SLAM runs made with frames=5 (d0) and frames=3 (d1)" in result.output
 
 
 def test_tables_refuse_a_run_without_validation(ws):

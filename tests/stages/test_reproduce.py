@@ -10,7 +10,7 @@ from dcslam.cli import app
 from dcslam.errors import DcslamError
 from dcslam import __version__
 from dcslam.stages.config import code_version
-from dcslam.stages.reproduce import PROFILES, Pipeline, Stage, reproduce
+from dcslam.stages.reproduce import PROFILES, Pipeline, Profile, Stage, reproduce
 from dcslam.stages.slam import SlamStageConfig
 from dcslam.workspace import Workspace
 
@@ -98,22 +98,68 @@ def test_unknown_profile_and_table_fail_with_exit_code(tmp_path):
 
 
 def test_smoke_profile_runs_every_stage_and_writes_the_tables(tmp_path):
-    """The whole experiment on a few tiny generated drives: every stage, then a rerun that skips them all."""
+    """The whole experiment on a few tiny generated drives: every stage, then a rerun that skips them all (the worker
+    processes of --jobs are tested on their own, below)."""
+    import csv
+
     result = runner.invoke(app, ["reproduce", "--profile", "smoke", "--workspace", str(tmp_path)])
     assert result.exit_code == 0, result.output
     results = tmp_path / "results"
-    for name in ("table_5_1.md", "table_5_1.csv", "table_5_2.md", "table_5_2.csv", "depth_examples.png"):
+    for name in ("table_5_1.md", "table_5_1.csv", "table_5_2.md", "table_5_2.csv", "table_5_2_per_drive.csv",
+                 "table_5_3.md", "depth_examples.png"):
         assert (results / name).stat().st_size > 0, name
     assert list(results.glob("trajectories_*.png"))
     table = (results / "table_5_2.md").read_text()
     assert "Table 5.2" in result.stdout
+    test_drive = json.loads((tmp_path / "drives" / "splits.json").read_text())["test"][0]
     for layer in ("chamfer-1", "chamfer-8", "mse-sparse", "mse-dense", "sparse", "dense", "ip-basic-fast",
                   "mse-dense+edges"):
         assert f"| {layer} |" in table, layer
-        assert list((tmp_path / "slam" / layer).glob("*.txt")), layer
-    rows = [line for line in table.splitlines() if line.startswith("| ") and not line.startswith(("| method", "| ---"))]
-    assert len(rows) == 11 and all(row.rstrip(" |").endswith("—") for row in rows)  # no row lacks its inputs
+        for suffix in (".txt", ".kitti.txt", ".json"):
+            assert (tmp_path / "slam" / layer / f"{test_drive}{suffix}").exists(), (layer, suffix)
+    with open(results / "table_5_2.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 11 and not any(row["missing"] for row in rows)  # no row lacks its inputs
+    assert {row["slam_settings"] for row in rows} == {"as the others"}  # every row from the same SLAM settings
+    assert all(row["drives"] == "1" for row in rows)
 
     again = runner.invoke(app, ["reproduce", "--profile", "smoke", "--workspace", str(tmp_path)])
     assert again.exit_code == 0, again.output
     assert "[run]" not in again.stderr and again.stderr.count("[skip]") >= 20
+
+
+def test_quick_profile_has_four_test_drives_and_profiles_check_their_split():
+    assert PROFILES["quick"].split[2] >= 4 and sum(PROFILES["quick"].split) == PROFILES["quick"].drives
+    assert PROFILES["thesis"].split is None and PROFILES["thesis"].drives == 24  # the thesis's 15 / 4 / 5
+    with pytest.raises(DcslamError, match="add up to"):
+        Profile(name="bad", drives=5, frames=20, train={}, slam_frames=5, split=(3, 1, 4))
+
+
+def test_independent_slam_stages_run_in_worker_processes(tmp_path):
+    """run_all with jobs > 1: each stage runs in a worker, its stamp is written, a failure names the stage."""
+    ws = Workspace(tmp_path)
+    made = [tmp_path / f"out{i}.txt" for i in range(3)]
+    stages = [Stage(f"touch-{i}", _touch, SlamStageConfig(frames=i + 1, out=path), outputs=lambda p=path: [p])
+              for i, path in enumerate(made)]
+    lines = []
+    pipe = Pipeline(ws, log=lines.append)
+    pipe.run_all(stages, jobs=2)
+    assert all(p.read_text() == "1" for p in made)
+    assert sorted(pipe.timings) == ["touch-0", "touch-1", "touch-2"]
+    assert all((tmp_path / ".reproduce" / f"touch-{i}.json").exists() for i in range(3))
+    pipe.run_all(stages, jobs=2)
+    assert sum("[skip]" in line for line in lines) == 3
+    failing = Stage("fail", _touch, SlamStageConfig(frames=99, out=tmp_path / "never"), outputs=lambda: [])
+    with pytest.raises(DcslamError, match="stage fail failed \\(no luck\\)"):
+        pipe.run_all([failing, Stage("touch-0", _touch, SlamStageConfig(frames=5, out=made[0]),
+                                     outputs=lambda: [made[0]])], jobs=2)
+    assert not (tmp_path / ".reproduce" / "fail.json").exists()
+
+
+def _touch(ws, config, *, force=False):
+    """A stage for the worker test (module level, so a spawned worker can import it)."""
+    import torch
+
+    if config.frames == 99:
+        raise DcslamError("no luck")
+    config.out.write_text(str(torch.get_num_threads()))

@@ -1,7 +1,11 @@
 """The slam stage: run() on a tiny workspace returns per-drive summaries and writes the configuration it ran."""
 import json
 
+import numpy as np
 import pytest
+
+from dcslam.io.kitti_poses import read_kitti_poses
+from dcslam.io.tum import read_tum
 
 from dcslam.errors import DcslamError
 from dcslam.stages.slam import SlamStageConfig, run
@@ -12,7 +16,10 @@ def test_gt_slam_over_the_test_drive_writes_outputs_and_config(ws):
     results = run(ws, config)
     assert [r.drive for r in results] == ["drive_d"] and results[0].summary["frames"] == 2
     out = ws.slam / "dense"
-    assert {p.name for p in out.iterdir()} == {"drive_d.txt", "drive_d.ply", "drive_d.json"}
+    assert {p.name for p in out.iterdir()} == {"drive_d.txt", "drive_d.kitti.txt", "drive_d.ply", "drive_d.json"}
+    _, T_tum = read_tum(out / "drive_d.txt")
+    T_kitti = read_kitti_poses(out / "drive_d.kitti.txt")
+    assert T_kitti.shape == (2, 4, 4) and np.allclose(T_kitti, T_tum, atol=1e-9)
     settings = json.loads((out / "drive_d.json").read_text())["settings"]
     assert settings["odometry"] == "gt" and settings["voxel_size"] == 0.1 and settings["frames"] == 2
     assert settings["source"] == "dense"

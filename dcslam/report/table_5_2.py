@@ -1,0 +1,294 @@
+"""Table 5.2 of the thesis over the test drives, with the spread that makes its rows comparable.
+
+For the four trained recipes, sparse and dense depth without a model, and beyond the thesis IP-Basic and each model
+after its best filter (the filtered layer of that model with the lowest localisation accuracy): the thesis's
+localisation accuracy, MAE / RMSE / iMAE / iRMSE (KITTI devkit, see :data:`dcslam.eval.depth.DEPARTURES_TEXT`),
+ATE / RPE (evo) and KITTI drift, each as the mean over the test drives with its spread (:mod:`dcslam.report.spread`),
+the median localisation, the failure count and whether the row differs from sparse depth beyond the spread. Every
+row carries the settings of the SLAM runs behind it. Every number of ours is computed here from files; a row whose
+inputs are missing is kept, with its values empty and a note naming what is missing.
+"""
+from __future__ import annotations
+
+import functools
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from dcslam.errors import DcslamError
+from dcslam.eval.depth import DepthErrors, mean_errors
+from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
+from dcslam.report.layers import (TrajectoryPair, find_layer, score_layer_depth, score_layer_trajectories,
+                                  slam_settings)
+from dcslam.report.spread import differs, spread
+from dcslam.report.tables import IP_BASIC, RECIPES, Column, RunSummary, Table
+from dcslam.workspace import Workspace
+
+#: A drive's SLAM counts as failed above this thesis localisation error (m + rad) over its frames.
+FAILURE_THRESHOLD = 1.0
+DEPTH_KEYS = ("mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km")
+DRIFT_KEYS = ("kitti_t_rel_percent", "kitti_r_rel_deg_per_100m")
+SPREAD_COLUMNS = [Column("localisation", "localisation", "{:.4f}"), Column("mae_mm", "MAE (mm)", "{:.1f}"),
+                  Column("rmse_mm", "RMSE (mm)", "{:.1f}"), Column("imae_per_km", "iMAE (1/km)", "{:.2f}"),
+                  Column("irmse_per_km", "iRMSE (1/km)", "{:.2f}"), Column("ate_rmse_m", "ATE (m)", "{:.3f}"),
+                  Column("rpe_rmse_m", "RPE (m)", "{:.3f}"), Column("rpe_rmse_deg", "RPE (°)", "{:.3f}"),
+                  Column("kitti_t_rel_percent", "t_rel (%)", "{:.2f}"),
+                  Column("kitti_r_rel_deg_per_100m", "r_rel (°/100 m)", "{:.3f}")]
+SPREAD_KEYS = tuple(c.key for c in SPREAD_COLUMNS)
+TABLE_5_2_COLUMNS = [
+    Column("method", "method"), Column("layer", "layer"), Column("drives", "drives"), Column("failures", "failed"),
+    Column("localisation_text", "localisation accuracy"), Column("localisation_median_text", "median"),
+    Column("thesis_localisation_text", "thesis"), Column("vs_sparse", "vs sparse"),
+    Column("mae_mm_text", "MAE (mm)"), Column("thesis_mae_text", "thesis MAE"),
+    Column("rmse_mm_text", "RMSE (mm)"), Column("thesis_rmse_text", "thesis RMSE"),
+    Column("imae_per_km_text", "iMAE (1/km)"), Column("irmse_per_km_text", "iRMSE (1/km)"),
+    Column("ate_rmse_m_text", "ATE RMSE (m)"), Column("rpe_rmse_m_text", "RPE RMSE (m)"),
+    Column("rpe_rmse_deg_text", "RPE RMSE (°)"), Column("kitti_t_rel_percent_text", "t_rel (%)"),
+    Column("kitti_r_rel_deg_per_100m_text", "r_rel (°/100 m)"), Column("slam_settings", "SLAM settings"),
+    Column("notes", "why —")]
+
+
+@dataclass
+class LayerResult:
+    """Scores of one depth layer over the test drives (empty where its inputs are missing): ``depth`` maps each
+    drive to its mean depth errors, ``pairs`` to its trajectory, ``settings`` to the settings of its SLAM run
+    (:func:`dcslam.report.layers.slam_settings`)."""
+
+    label: str
+    layer: str
+    depth: dict[str, DepthErrors] = field(default_factory=dict)
+    pairs: dict[str, TrajectoryPair] = field(default_factory=dict)
+    settings: dict[str, dict] = field(default_factory=dict)
+    missing: list[str] = field(default_factory=list)
+    failure_threshold: float = FAILURE_THRESHOLD
+
+    @functools.cached_property
+    def scores(self) -> dict:
+        """:class:`~dcslam.eval.trajectory.TrajectoryScores` of each drive."""
+        return {drive: p.score() for drive, p in self.pairs.items()}
+
+    @property
+    def localisation(self) -> float | None:
+        if not self.pairs:
+            return None
+        return sum(s.localisation for s in self.scores.values()) / len(self.scores)
+
+    def failed(self, drive: str) -> bool:
+        """A drive's SLAM failed: its run was flagged suspect, or its localisation error is beyond the threshold."""
+        return bool(self.settings.get(drive, {}).get("suspect")) or \
+            self.scores[drive].localisation > self.failure_threshold
+
+    def run_settings(self) -> dict:
+        """The SLAM settings shared by every drive of this row; fails when its drives were run differently."""
+        found = {}
+        for drive, settings in self.settings.items():
+            for key, value in settings.items():
+                if key == "suspect":
+                    continue
+                if key in found and found[key][1] != value:
+                    raise DcslamError(f"row {self.label} ({self.layer}) mixes SLAM runs made with {key}="
+                                      f"{found[key][1]} ({found[key][0]}) and {key}={value} ({drive}); rerun "
+                                      f"`dcslam slam --depth {self.layer} --force` on every test drive")
+                found.setdefault(key, (drive, value))
+        return {k: v for k, (_, v) in found.items()}
+
+    def per_drive(self) -> dict[str, dict]:
+        """Every figure of each drive: ``{drive: {metric: value}}`` (the per-drive CSV's rows)."""
+        rows = {}
+        for drive in sorted(set(self.depth) | set(self.pairs)):
+            row = {}
+            if drive in self.depth:
+                row.update({m: getattr(self.depth[drive], m) for m in DEPTH_KEYS})
+            if drive in self.pairs:
+                score = self.scores[drive]
+                drift = score.drift.overall if score.drift is not None else None
+                row.update(poses=score.poses, localisation=score.localisation,
+                           ate_rmse_m=None if score.ate_aligned is None else score.ate_aligned.rmse,
+                           rpe_rmse_m=None if score.rpe_trans_m is None else score.rpe_trans_m.rmse,
+                           rpe_rmse_deg=None if score.rpe_rot_deg is None else score.rpe_rot_deg.rmse,
+                           kitti_t_rel_percent=None if drift is None else drift.t_rel_percent,
+                           kitti_r_rel_deg_per_100m=None if drift is None else drift.r_rel_deg_per_100m,
+                           path_m=None if score.drift is None else score.drift.path_length_m,
+                           failed=self.failed(drive), pairing=self.pairs[drive].summary(),
+                           **{k: v for k, v in self.settings.get(drive, {}).items() if k != "suspect"})
+            rows[drive] = row
+        return rows
+
+    def row(self, reference: "LayerResult | None" = None) -> dict:
+        """The row of Table 5.2: for each figure its mean over drives (``<metric>``) and spread (``<metric>_std``,
+        ``_ci_low``, ``_ci_high``, ``_median``, and ``<metric>_text``: mean ± 95 % half-width); ``failures``; and
+        ``vs_<reference>``: whether its localisation differs from ``reference``'s beyond the spread (paired by
+        drive)."""
+        row = {"method": self.label, "layer": self.layer, "missing": "; ".join(self.missing) or None}
+        per_drive = self.per_drive()
+        for key in SPREAD_KEYS:
+            values = [r[key] for r in per_drive.values() if r.get(key) is not None]
+            if not values:
+                continue
+            if key in DRIFT_KEYS:
+                row[f"{key}_drives"] = len(values)
+            elif len(values) != len(per_drive):
+                continue  # a figure some drives lack (e.g. aligned ATE of a straight line) is not averaged
+            fmt = next(c.fmt for c in SPREAD_COLUMNS if c.key == key)
+            sp = spread(values)
+            row.update({key: sp.mean, f"{key}_std": sp.std, f"{key}_ci_low": sp.ci_low,
+                        f"{key}_ci_high": sp.ci_high, f"{key}_median": sp.median, f"{key}_text": sp.text(fmt)})
+        if self.pairs:
+            row["drives"] = len(self.pairs)
+            row["failures"] = sum(self.failed(d) for d in self.pairs)
+            row["localisation_median_text"] = f"{row['localisation_median']:.4f}"
+            if reference is self:
+                row["vs_sparse"] = "reference"
+            elif reference is not None and reference.pairs:
+                common = [d for d in self.pairs if d in reference.pairs]
+                verdict = differs([self.scores[d].localisation for d in common],
+                                  [reference.scores[d].localisation for d in common])
+                row["vs_sparse"] = {None: "one drive", True: "differs", False: "within spread"}[verdict]
+        if self.pairs and not any(f"{k}_drives" in row for k in DRIFT_KEYS):
+            longest = max(r.get("path_m") or 0.0 for r in per_drive.values())
+            row["drift_note"] = f"drives too short (longest {longest:.0f} m < 100 m)"
+        return row
+
+
+def _depth_per_drive(per_frame: dict[str, list]) -> dict[str, DepthErrors]:
+    return {drive: mean_errors(frames) for drive, frames in per_frame.items()}
+
+
+def score_layer(ws: Workspace, label: str, layer_name: str, drives: list[str], devkit_exact: bool = False,
+                max_time_diff: float = EVO_MAX_TIME_DIFF_S,
+                failure_threshold: float = FAILURE_THRESHOLD) -> LayerResult:
+    """Depth and trajectory scores of a layer over ``drives``; missing inputs are recorded, bad ones fail."""
+    result = LayerResult(label=label, layer=layer_name, failure_threshold=failure_threshold)
+    layer = find_layer(ws, layer_name)
+    if layer is None:
+        result.missing.append(f"no layer {layer_name!r} (dcslam predict / filter)")
+    else:
+        absent = [d for d in drives if layer.folder is not None and not Path(layer.source(d)).exists()]
+        if absent:
+            result.missing.append(f"depth of {len(absent)} test drive(s) in {layer.folder}")
+        else:
+            result.depth = _depth_per_drive(score_layer_depth(ws, layer, drives, devkit_exact=devkit_exact))
+    absent = [d for d in drives if not (ws.slam / layer_name / f"{d}.txt").exists()]
+    if absent:
+        result.missing.append(f"slam/{layer_name}/ for {len(absent)} test drive(s) (dcslam slam)")
+    else:
+        result.pairs = score_layer_trajectories(ws, layer_name, drives, max_time_diff)
+        result.settings = {d: slam_settings(ws, layer_name, d) for d in drives}
+    return result
+
+
+def filters_of(ws: Workspace, source_layer: str) -> list[str]:
+    """Names of the filtered layers made from ``source_layer`` (by their ``config.json``)."""
+    names = []
+    if ws.filtered.is_dir():
+        for folder in sorted(ws.filtered.iterdir()):
+            config = folder / "config.json"
+            if config.exists():
+                try:
+                    settings = json.loads(config.read_text()).get("settings", {})
+                except json.JSONDecodeError:
+                    raise DcslamError(f"{config}: not valid JSON") from None
+                if settings.get("source_layer") == source_layer:
+                    names.append(folder.name)
+    return names
+
+
+def table_5_2_results(ws: Workspace, runs: list[RunSummary], drives: list[str], devkit_exact: bool = False,
+                      max_time_diff: float = EVO_MAX_TIME_DIFF_S,
+                      failure_threshold: float = FAILURE_THRESHOLD) -> list[LayerResult]:
+    """Every row of Table 5.2 as a :class:`LayerResult` (models, no model, IP-Basic, models after best filter)."""
+    def score(label, name):
+        return score_layer(ws, label, name, drives, devkit_exact, max_time_diff, failure_threshold)
+
+    results = []
+    for recipe in RECIPES:
+        ours = [r for r in runs if r.recipe == recipe]
+        if not ours:
+            results.append(LayerResult(label=recipe, layer="—", missing=[f"no run trained as {recipe}"]))
+        results += [score(recipe, run.name) for run in ours]
+    results.append(score("sparse depth", "sparse"))
+    results.append(score("dense depth", "dense"))
+    found = [name for name in IP_BASIC if find_layer(ws, name) is not None]
+    results += [score("IP-Basic", name) for name in found] or [
+        LayerResult(label="IP-Basic", layer="—", missing=[f"no layer {' or '.join(IP_BASIC)} (dcslam predict)"])]
+    for run in runs:
+        candidates = [score(f"{run.recipe} + best filter", name) for name in filters_of(ws, run.name)]
+        scored = [c for c in candidates if c.localisation is not None and c.depth]
+        if scored:
+            results.append(min(scored, key=lambda c: c.localisation))
+        else:
+            what = "filtered layers with slam results" if candidates else "filtered layer"
+            results.append(LayerResult(label=f"{run.recipe} + best filter", layer="—",
+                                       missing=[f"no {what} of {run.name} (dcslam filter, dcslam slam)"]))
+    return results
+
+
+def _most_common_settings(rows: list[dict]) -> dict:
+    """For each setting, the value most rows were made with (the first row's on a tie)."""
+    common = {}
+    for key in sorted(set().union(*rows)) if rows else []:
+        values = [repr(r.get(key)) for r in rows]
+        best = max(values, key=values.count)
+        common[key] = next(r.get(key) for r in rows if repr(r.get(key)) == best)
+    return {k: v for k, v in common.items() if v is not None}
+
+
+def _settings_text(settings: dict) -> str:
+    return ", ".join(f"{k}={settings[k]}" for k in sorted(settings))
+
+
+def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str], devkit_exact: bool = False) -> Table:
+    """Table 5.2: one row per result, each figure as mean ± the 95 % t-interval's half-width over the test drives,
+    with the median localisation, the failure count and whether the row differs from sparse depth beyond the
+    spread; the CSV holds every mean, std, interval and median. Rows whose SLAM runs were made with other settings
+    than the others show the difference in ``SLAM settings``; a row whose drives were run differently fails."""
+    figures = thesis.get("table_5_2", {}).get("rows", {})
+    table = Table(f"Table 5.2 — {len(drives)} test drive(s) ({', '.join(drives)})", TABLE_5_2_COLUMNS)
+    table.csv_columns = [Column(k, k) for k in ("method", "layer", "drives", "failures", "vs_sparse")] + [
+        Column(f"{c.key}{suffix}", "") for c in SPREAD_COLUMNS
+        for suffix in ("", "_std", "_ci_low", "_ci_high", "_median")] + [
+        Column(f"{k}_drives", "") for k in DRIFT_KEYS] + [
+        Column(f"thesis_{k}", "") for k in ("localisation", "mae", "rmse")] + [
+        Column("slam_settings", ""), Column("missing", ""), Column("notes", "")]
+    reference = next((r for r in results if r.layer == "sparse"), None)
+    settings = {id(r): r.run_settings() for r in results if r.pairs}
+    common = _most_common_settings(list(settings.values()))
+    for result in results:
+        theirs = figures.get(result.label, {})
+        row = {**result.row(reference), **{f"thesis_{k}": v for k, v in theirs.items()}}
+        for k in ("localisation", "mae", "rmse"):
+            row.setdefault(f"thesis_{k}_text", "x" if k in theirs and theirs[k] is None else
+                           (None if theirs.get(k) is None else f"{theirs[k]:g}"))
+        if id(result) in settings:
+            own = {k: settings[id(result)].get(k) for k in set(common) | set(settings[id(result)])
+                   if common.get(k) != settings[id(result)].get(k)}
+            row["slam_settings"] = "as the others" if not own else "differs: " + _settings_text(own)
+        notes = [n for n in (row.get("missing"), row.get("drift_note")) if n]
+        if result.pairs and row.get("ate_rmse_m") is None:
+            notes.append("aligned ATE undefined on some drive (degenerate positions)")
+        row["notes"] = "; ".join(notes) or None
+        table.rows.append(row)
+    table.notes += [
+        "localisation accuracy: the thesis's metric, mean over poses of ‖t_X‖ + acos((tr R_X − 1)/2), "
+        "X = T_gt⁻¹ T_est (m + rad); lower is better. Every figure of ours: mean over the test drives ± the half-"
+        "width of its 95 % t-interval (the CSV holds std, interval and median)",
+        f"failed: drives whose SLAM run rejected steps or whose localisation error exceeds "
+        f"{(results[0].failure_threshold if results else FAILURE_THRESHOLD):g} (they stay in the means); "
+        "vs sparse: whether the localisation differs from sparse depth's beyond the spread (paired t-interval of the "
+        "per-drive differences, 95 %)",
+        ("MAE, RMSE, iMAE, iRMSE: exactly as the KITTI devkit" if devkit_exact else
+         "MAE, RMSE, iMAE, iRMSE: KITTI devkit with two departures (predictions below 0.1 m are holes; pixels the "
+         "devkit cannot interpolate are left out; --devkit-exact removes both)") +
+        ", per image, averaged over each drive's images, then over the drives",
+        "ATE: evo APE translation after SE(3) Umeyama alignment; RPE: evo, consecutive frames (RMSE of each drive); "
+        "t_rel / r_rel: KITTI odometry devkit drift over 100-800 m segments, averaged over the drives long enough "
+        "(their number in the CSV)",
+        ("trained rows: one training run (one seed) per recipe, so their spread is across test drives only, not "
+         "across training seeds" if all(sum(r.label == recipe for r in results) <= 1 for recipe in RECIPES) else
+         "trained rows: each training run of a recipe is its own row (their spread across test drives; compare "
+         "the rows of one recipe for the spread across training runs)"),
+        "thesis columns: the thesis's own figures (dcslam/report/thesis_tables.json); x where the thesis did not "
+        "compute it; — where the thesis has no such row",
+        f"SLAM settings of the rows (those of most rows; a row made otherwise says how in SLAM settings): "
+        f"{_settings_text(common) or 'none recorded'}"]
+    return table
