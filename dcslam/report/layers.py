@@ -92,6 +92,8 @@ def load_pair(est_path: Path | str, gt_path: Path | str,
     for path in (est_path, gt_path):
         if not path.exists():
             raise DcslamError(f"{path} not found")
+    if est_path.is_dir():
+        raise DcslamError(f"trajectory file {est_path} is a folder; pass a TUM trajectory file or a KITTI pose file")
     if _is_kitti_poses(est_path):
         t_est, T_est = None, read_kitti_poses(est_path)
     else:
