@@ -22,6 +22,24 @@ def _pyplot():
     return plt
 
 
+def trajectory_styles(T_gt: np.ndarray, estimates: dict[str, np.ndarray]) -> list[dict]:
+    """Matplotlib styles, one per estimate, that never repeat: 10 colours × 4 line styles, and a trajectory that
+    barely moves (a failed SLAM: path shorter than 2 % of the truth's) drawn as a large hollow marker at its
+    position, labelled "(static)", so that it cannot hide under the start marker. Shapes: T_gt (N, 4, 4)."""
+    colours = [f"C{i}" for i in range(10)]
+    dashes = ["-", "--", "-.", ":"]
+    truth_m = float(np.linalg.norm(np.diff(np.asarray(T_gt)[:, :3, 3], axis=0), axis=1).sum())
+    styles = []
+    for i, (name, T) in enumerate(estimates.items()):
+        T = np.asarray(T)
+        path_m = float(np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1).sum()) if len(T) > 1 else 0.0
+        style = {"color": colours[i % 10], "linestyle": dashes[(i // 10) % 4], "label": name}
+        if path_m < 0.02 * max(truth_m, 1e-9):
+            style.update(label=f"{name} (static)", marker="o", ms=11, mfc="none", mew=2)
+        styles.append(style)
+    return styles
+
+
 def plot_trajectories(path: Path | str, T_gt: np.ndarray, estimates: dict[str, np.ndarray], title: str = "",
                       force: bool = False) -> Path:
     """Top view (x right, z forward, in the world = first camera frame) of the true trajectory and estimates.
@@ -33,11 +51,11 @@ def plot_trajectories(path: Path | str, T_gt: np.ndarray, estimates: dict[str, n
         raise DcslamError(f"ground-truth poses have shape {T_gt.shape}, expected (N, 4, 4)")
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 6))
-    ax.plot(T_gt[:, 0, 3], T_gt[:, 2, 3], "k--", lw=2, label="ground truth")
-    for name, T in estimates.items():
+    ax.plot(T_gt[0, 0, 3], T_gt[0, 2, 3], "ko", ms=4, zorder=1)  # the start, beneath everything
+    ax.plot(T_gt[:, 0, 3], T_gt[:, 2, 3], "k--", lw=2, label="ground truth", zorder=2)
+    for (name, T), style in zip(estimates.items(), trajectory_styles(T_gt, estimates)):
         T = np.asarray(T)
-        ax.plot(T[:, 0, 3], T[:, 2, 3], lw=1.2, label=name)
-    ax.plot(T_gt[0, 0, 3], T_gt[0, 2, 3], "ko", ms=4)
+        ax.plot(T[:, 0, 3], T[:, 2, 3], lw=1.2, zorder=3, **style)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("z (m)")
     ax.set_aspect("equal", adjustable="datalim")

@@ -42,3 +42,18 @@ def test_depth_examples_dilate_the_input_and_share_the_error_range(tmp_path, mon
     assert len(errors) == 2 and errors[0].get_clim() == errors[1].get_clim() == (0, 3.0)
     monkeypatch.undo()
     plt.close(figures[0])
+
+
+def test_trajectory_styles_never_repeat_and_a_static_trajectory_is_marked(tmp_path):
+    T_gt = np.tile(np.eye(4), (20, 1, 1))
+    T_gt[:, 2, 3] = np.arange(20.0)  # 19 m straight ahead
+    moving = {f"method {i}": T_gt + 0.01 * i for i in range(23)}
+    failed = np.tile(np.eye(4), (20, 1, 1))  # never left the start
+    estimates = {**moving, "failed": failed}
+    styles = plots.trajectory_styles(T_gt, estimates)
+    pairs = [(s["color"], s["linestyle"]) for s in styles]
+    assert len(set(pairs)) == len(pairs) == 24
+    assert styles[-1]["label"] == "failed (static)" and styles[-1]["marker"] == "o"
+    assert all("marker" not in s and "(static)" not in s["label"] for s in styles[:-1])
+    out = plots.plot_trajectories(tmp_path / "t.png", T_gt, estimates)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
