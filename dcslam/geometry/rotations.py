@@ -94,3 +94,17 @@ def look_rotation(forward: np.ndarray, roll: np.ndarray) -> np.ndarray:
     y = c * y0 + s * np.cross(z, y0)
     x = np.cross(y, z)
     return np.stack([x, y, z], axis=2)
+
+
+def nearest_rotation(R: np.ndarray) -> np.ndarray:
+    """The rotation matrices nearest (Frobenius) to ``R``: ``U diag(1, 1, det(U Vᵀ)) Vᵀ`` from its SVD. Poses
+    composed in float32 drift off SO(3) by ~1e-4 over tens of frames; this puts them back before they are written.
+    Shapes: (..., 3, 3) -> (..., 3, 3) float64."""
+    R = np.asarray(R, dtype=np.float64)
+    if R.shape[-2:] != (3, 3):
+        raise ValueError(f"rotations have shape {R.shape}, expected (..., 3, 3)")
+    U, _, Vt = np.linalg.svd(R)
+    d = np.sign(np.linalg.det(U @ Vt))
+    U = U.copy()
+    U[..., :, 2] *= d[..., None]
+    return U @ Vt

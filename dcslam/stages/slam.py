@@ -127,6 +127,14 @@ class DriveRun:
     seconds: float
     settings: dict = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        from dcslam.geometry.rotations import nearest_rotation
+
+        # poses composed in float32 leave SO(3) by ~1e-4 over a drive: written and scored as the nearest rotations
+        T = np.array(self.T_world_cam, dtype=np.float64)
+        T[:, :3, :3] = nearest_rotation(T[:, :3, :3])
+        self.T_world_cam = T
+
     def summary(self) -> dict:
         import torch
 

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from dcslam.geometry.rotations import (look_rotation, quaternion_to_rotation, rotation_from_rpy, rotation_to_quaternion,
-                                       rpy_from_rotation, slerp)
+from dcslam.geometry.rotations import (look_rotation, nearest_rotation, quaternion_to_rotation, rotation_from_rpy,
+                                       rotation_to_quaternion, rpy_from_rotation, slerp)
 
 
 class TestRollPitchYaw:
@@ -73,3 +73,16 @@ class TestLookRotation:
         assert R[0, :, 1] == pytest.approx([0, 0, 1])  # level camera: image y is the world's up
         rolled = look_rotation(forward[:1], np.array([np.pi / 2]))
         assert rolled[0, :, 2] == pytest.approx(R[0, :, 2]) and abs(rolled[0, 2, 1]) < 1e-12
+
+
+def test_nearest_rotation_projects_drifted_matrices_back_onto_so3():
+    rng = np.random.default_rng(3)
+    R = rotation_from_rpy(rng.uniform(-3, 3, 5), rng.uniform(-1.5, 1.5, 5), rng.uniform(-3, 3, 5))
+    drifted = R + 1e-4 * rng.standard_normal(R.shape)
+    fixed = nearest_rotation(drifted)
+    assert np.allclose(fixed @ np.swapaxes(fixed, -1, -2), np.eye(3), atol=1e-12)
+    assert np.allclose(np.linalg.det(fixed), 1.0, atol=1e-12)
+    assert np.abs(fixed - R).max() < 5e-4                      # a small correction, not another rotation
+    assert np.allclose(nearest_rotation(R), R, atol=1e-12)     # rotations stay as they are
+    with pytest.raises(ValueError, match="expected"):
+        nearest_rotation(np.eye(4))

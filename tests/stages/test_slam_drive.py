@@ -31,3 +31,18 @@ def test_summary_carries_health_and_the_whole_map(tmp_path):
     written = write_outputs(run, tmp_path / "out")
     assert json.loads(written["summary"].read_text())["health"] == json.loads(json.dumps(health))
     assert torch.isfinite(torch.from_numpy(run.T_world_cam)).all()
+
+
+def test_float32_drift_off_so3_is_projected_before_writing(tmp_path):
+    """A trajectory whose rotations left SO(3) by 1e-4 (float32 composition over a drive) is written as the nearest
+    rotations: the KITTI pose file, which checks orthonormality, accepts it."""
+    from dcslam.io.kitti_poses import read_kitti_poses
+    from dcslam.slam.pointmap import PointMap
+    from dcslam.stages.slam import DriveRun
+
+    T = street_trajectory(N, step=0.5).double().numpy()
+    T[-1, :3, :3] *= 1.0001
+    run = DriveRun("drifted", T, 0.1 * np.arange(N), T.copy(), PointMap.empty(), [], 1.0)
+    written = write_outputs(run, tmp_path)
+    back = read_kitti_poses(written["kitti_poses"])
+    assert np.abs(back - street_trajectory(N, step=0.5).double().numpy()).max() < 1e-6
