@@ -172,13 +172,19 @@ def scan_lidar(scene: Scene, grid: LidarGrid, T_world_velo: np.ndarray, t: float
 def project_points(points_cam: np.ndarray, K: np.ndarray, width: int, height: int) -> np.ndarray:
     """Points (N, 3) in the camera frame → a depth image (H, W) float32 keeping the nearest point per pixel (no
     occlusion reasoning beyond that: points hidden from the camera still land where no nearer point does)."""
+    return _zbuffer(*_pixels(points_cam, K, width, height), height, width)
+
+
+def _pixels(points_cam: np.ndarray, K: np.ndarray, width: int, height: int):
+    """Points (N, 3) in the camera frame -> pixel columns u, rows v (int64) and depths z of those more than 0.1 m
+    ahead that land inside the image."""
     z = points_cam[:, 2]
     front = z > 0.1
     p, z = points_cam[front], z[front]
     u = np.rint(K[0, 0] * p[:, 0] / z + K[0, 2]).astype(np.int64)
     v = np.rint(K[1, 1] * p[:, 1] / z + K[1, 2]).astype(np.int64)
     inside = (u >= 0) & (u < width) & (v >= 0) & (v < height)
-    return _zbuffer(u[inside], v[inside], z[inside], height, width)
+    return u[inside], v[inside], z[inside]
 
 
 def _zbuffer(u: np.ndarray, v: np.ndarray, z: np.ndarray, height: int, width: int) -> np.ndarray:
@@ -211,13 +217,7 @@ def consistent_groundtruth(points_cam: np.ndarray, depth_true: np.ndarray, K: np
     answer; ``valid`` (H, W) bool (see :func:`stereo_valid`) plays that part when given.
     """
     H, W = depth_true.shape
-    z = points_cam[:, 2]
-    front = z > 0.1
-    p, z = points_cam[front], z[front]
-    u = np.rint(K[0, 0] * p[:, 0] / z + K[0, 2]).astype(np.int64)
-    v = np.rint(K[1, 1] * p[:, 1] / z + K[1, 2]).astype(np.int64)
-    inside = (u >= 0) & (u < W) & (v >= 0) & (v < H)
-    u, v, z = u[inside], v[inside], z[inside]
+    u, v, z = _pixels(points_cam, K, W, H)
     valid_depth = depth_true > 0
     slack = np.zeros_like(depth_true)
     for axis in (0, 1):
