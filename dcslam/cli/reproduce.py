@@ -32,4 +32,6 @@ def report(result) -> None:
 
 reproduce_command = stage_command(app, "reproduce", reproduce.ReproduceConfig, run, report, help=HELP, force=False,
                                   examples=("dcslam reproduce --profile smoke -w /tmp/check    # a few minutes",
-                                            "dcslam reproduce --table 5.1 --kitti /data/kitti"))
+                                            "dcslam reproduce --table 5.1 --kitti /data/kitti",
+                                            "dcslam reproduce --print-config    # every stage's settings, as TOML"),
+                                  describe=reproduce.stage_configs_toml)

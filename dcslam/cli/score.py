@@ -36,6 +36,8 @@ def report(result) -> None:
 def report_tables(report) -> None:
     print_table(report.table_5_1)
     print_table(report.table_5_2)
+    if report.table_5_2_long is not None:
+        print_table(report.table_5_2_long)
     if report.table_5_3 is not None:
         print_table(report.table_5_3)
     summary(f"wrote {len(report.written)} file(s) in {report.written[0].parent}")
