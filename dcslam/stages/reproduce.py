@@ -141,7 +141,7 @@ def _mtime(paths: list[Path]) -> tuple[float, float]:
 class Pipeline:
     """Runs stages in order in this process, skipping those whose outputs are up to date."""
 
-    planning = False  # True for a pipeline that only lists its stages
+    planning = False  # True for a pipeline that only lists its stages (then ``splits`` is the split it plans with)
 
     def __init__(self, workspace: Workspace, log: Callable[[str], None] = lambda line: None, force: bool = False):
         self.ws = workspace
@@ -274,6 +274,13 @@ def run(ws: Workspace, config: ReproduceConfig, *, log: Callable[[str], None] = 
                      log=log, force=config.force, jobs=config.jobs)
 
 
+def split_by_counts(names: list[str], counts: tuple[int, int, int]) -> dict[str, list[str]]:
+    """The profile's split of drive ``names`` (sorted): the first ``counts[0]`` train, then val, then test."""
+    n_train, n_val, _ = counts
+    names = sorted(names)
+    return {"train": names[:n_train], "val": names[n_train:n_train + n_val], "test": names[n_train + n_val:]}
+
+
 def _split_file(ws: Workspace) -> Path:
     return ws.root / ".reproduce" / "splits.json"
 
@@ -285,11 +292,10 @@ def _profile_splits(ws: Workspace, kitti: Path, counts: tuple[int, int, int]) ->
     names = sorted({d.name for d in find_drives(kitti)})
     if len(names) != sum(counts):
         raise DcslamError(f"{kitti}: {len(names)} drives, the profile splits {sum(counts)}; remove {kitti} and rerun")
-    n_train, n_val, _ = counts
     path = _split_file(ws)
     import json
 
-    splits = {"train": names[:n_train], "val": names[n_train:n_train + n_val], "test": names[n_train + n_val:]}
+    splits = split_by_counts(names, counts)
     if not path.exists() or json.loads(path.read_text()) != splits:
         write_json_atomic(path, splits, force=True)
     return path
@@ -302,66 +308,11 @@ def reproduce(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_
 
     ``force``: overwrite outputs this pipeline did not make (see :meth:`Pipeline.run`); ``jobs``: worker processes
     for the independent SLAM stages."""
-    return _compose(Pipeline(workspace, log, force=force), profile, table, kitti_root, seed, jobs)
+    return compose(Pipeline(workspace, log, force=force), profile, table, kitti_root, seed, jobs)
 
 
-class _Listing(Pipeline):
-    """A pipeline that runs nothing and keeps the stages it is given, in order (``--print-config``)."""
-
-    planning = True
-
-    def __init__(self, workspace: Workspace):
-        super().__init__(workspace)
-        self.stages: list[Stage] = []
-
-    def run(self, stage: Stage):
-        self.stages.append(stage)
-
-    def run_all(self, stages: list[Stage], jobs: int = 1) -> None:
-        self.stages += stages
-
-
-def planned_stages(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_root: Path | None = None,
-                   seed: int = 0) -> list[Stage]:
-    """The stages :func:`reproduce` would run, in order, with their configurations; nothing is run or written.
-
-    Before ``prepare-kitti`` has run, the test drives are those it will choose: the generated drives' names and the
-    profile's split, or for a KITTI root the workspace's ``splits.json`` if there is one, else the thesis's split."""
-    pipe = _Listing(workspace)
-    _compose(pipe, profile, table, kitti_root, seed)
-    return pipe.stages
-
-
-def stage_configs_toml(workspace: Workspace, config: ReproduceConfig) -> str:
-    """Every stage's configuration as TOML tables ``[stages."<stage>"]``, in the order they run."""
-    from dcslam.stages.config import to_toml
-
-    stages = planned_stages(workspace, PROFILES[config.profile], config.table, config.kitti, config.seed)
-    parts = [f"# the {len(stages)} stages of profile {config.profile}, in order (a stage is skipped when its outputs "
-             "are up to date)"]
-    for stage in stages:
-        body = to_toml(stage.config, f"{stage.run.__module__}.{stage.run.__name__}")
-        parts.append(f'[stages."{stage.name}"]\n{body}')
-    return "\n".join(parts)
-
-
-def _planned_splits(ws: Workspace, profile: Profile, kitti_root: Path | None) -> dict[str, list[str]]:
-    """The split ``prepare-kitti`` will write (see :func:`planned_stages`)."""
-    from dcslam.io.drive import read_splits
-    from dcslam.stages.prepare import THESIS_SPLITS, proportional_splits
-    from dcslam.synth.street.generate import drive_name
-
-    if kitti_root is not None:
-        return read_splits(ws.splits) if ws.splits.exists() else THESIS_SPLITS
-    names = sorted(drive_name(i) for i in range(profile.drives))
-    if profile.split is None:
-        return proportional_splits(names)
-    n_train, n_val, _ = profile.split
-    return {"train": names[:n_train], "val": names[n_train:n_train + n_val], "test": names[n_train + n_val:]}
-
-
-def _compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | None, seed: int,
-             jobs: int = 1) -> Path:
+def compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | None, seed: int,
+            jobs: int = 1) -> Path:
     """Hand every stage of the experiment to ``pipe`` in order; return the Markdown file of ``table``."""
     if table not in TABLES:
         raise DcslamError(f"unknown table {table!r}; expected 5.1 or 5.2")
@@ -381,7 +332,7 @@ def _compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | No
                    inputs=lambda: [p for p in (kitti / "SYNTHETIC", split_file) if p is not None and p.exists()]))
     from dcslam.io.drive import read_splits
 
-    splits = _planned_splits(ws, profile, kitti_root) if pipe.planning else read_splits(ws.splits)
+    splits = pipe.splits if pipe.planning else read_splits(ws.splits)
     test = [ws.drives / f"{name}.h5" for name in splits["test"]]
     learn = [ws.drives / f"{name}.h5" for name in splits["train"] + splits["val"]]
 

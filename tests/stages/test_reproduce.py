@@ -10,7 +10,8 @@ from dcslam.cli import app
 from dcslam.errors import DcslamError
 from dcslam import __version__
 from dcslam.stages.config import code_version
-from dcslam.stages.reproduce import PROFILES, Pipeline, Profile, Stage, planned_stages, reproduce
+from dcslam.stages.reproduce import PROFILES, Pipeline, Profile, Stage, reproduce
+from dcslam.stages.reproduce_plan import planned_stages
 from dcslam.stages.slam import SlamStageConfig
 from dcslam.workspace import Workspace
 
