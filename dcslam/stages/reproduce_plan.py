@@ -48,13 +48,27 @@ def planned_stages(workspace: Workspace, profile: Profile, table: str = "5.2", k
 
 
 def stage_configs_toml(workspace: Workspace, config: ReproduceConfig) -> str:
-    """Every stage's configuration as TOML tables ``[stages."<stage>"]``, in the order they run."""
+    """Every stage's configuration as TOML tables ``[stages."<stage>"]``, in the order they run, each line commented
+    out (``#>`` + the TOML line), so that what ``--print-config`` prints stays a ``--config`` file of ``dcslam
+    reproduce``; :func:`read_stage_configs` reads them back."""
     from dcslam.stages.config import to_toml
 
     stages = planned_stages(workspace, PROFILES[config.profile], config.table, config.kitti, config.seed)
-    parts = [f"# the {len(stages)} stages of profile {config.profile}, in order (a stage is skipped when its outputs "
-             "are up to date)"]
+    lines = [f"# the {len(stages)} stages this runs, in order, with their configurations (informative: a stage is "
+             "skipped when its outputs are up to date; each line below is TOML after '#> ')"]
     for stage in stages:
         body = to_toml(stage.config, f"{stage.run.__module__}.{stage.run.__name__}")
-        parts.append(f'[stages."{stage.name}"]\n{body}')
-    return "\n".join(parts)
+        lines += [f"{STAGE_PREFIX}", f'{STAGE_PREFIX}[stages."{stage.name}"]']
+        lines += [f"{STAGE_PREFIX}{line}" for line in body.splitlines()]
+    return "\n".join(lines) + "\n"
+
+
+STAGE_PREFIX = "#> "
+
+
+def read_stage_configs(text: str) -> dict[str, dict]:
+    """The stage configurations in what ``--print-config`` printed: ``{stage name: {option: value}}``."""
+    import tomllib
+
+    body = "\n".join(line[len(STAGE_PREFIX):] for line in text.splitlines() if line.startswith(STAGE_PREFIX.rstrip()))
+    return tomllib.loads(body).get("stages", {})
