@@ -322,7 +322,7 @@ def compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | Non
     if kitti_root is None:
         pipe.run(Stage("synth", synth.run, synth.SynthConfig(drives=profile.drives, frames=profile.frames, seed=seed),
                        outputs=lambda: [ws.kitti / "SYNTHETIC"]))
-    elif not kitti.is_dir():
+    elif not kitti.is_dir() and not pipe.planning:  # a plan may name a root that is not mounted here
         raise DcslamError(f"KITTI root {kitti} does not exist or is not a folder; pass --kitti DIR")
     split_file = None
     if kitti_root is None and profile.split:
