@@ -87,3 +87,35 @@ def test_layers_found_in_slam_long_sparse_dense_ip_basic_first(tmp_path):
     runs = [RunSummary(name="mse-dense", recipe="MSE dense mask", selected_by="mse", best={}, validations=1)]
     assert [layer_label(n, runs) for n in ("sparse", "ip-basic-fast", "mse-dense", "other")] == [
         "sparse depth", "IP-Basic", "MSE dense mask", "other"]
+
+
+def test_results_read_from_slam_long_and_build_report_prints_the_table(tmp_path):
+    """Trajectories written under slam-long/ (the ground truth itself for sparse, shifted for dense) are scored
+    against the drive files; build_report then writes the table after Table 5.2 and its CSVs."""
+    from dcslam.io.drive import DriveFile
+    from dcslam.io.tum import write_tum
+    from dcslam.report.scores import build_report
+    from dcslam.report.table_5_2_long import table_5_2_long_results
+    from dcslam.workspace import Workspace
+    from tests.fixtures.depth import write_workspace
+
+    ws = Workspace(write_workspace(tmp_path))
+    with DriveFile(ws.drives / "drive_d.h5") as drive:
+        stamps, T_gt = drive.timestamps, drive.poses
+    shifted = T_gt.copy()
+    shifted[:, 0, 3] += 0.5
+    for layer, T in (("dense", shifted), ("sparse", T_gt)):
+        write_tum(ws.slam_long / layer / "drive_d.txt", stamps, T)
+    (ws.slam_long / "ip-basic-fast").mkdir()  # no trajectory: not a row
+
+    results = table_5_2_long_results(ws, [], ["drive_d"])
+    assert [(r.label, r.layer) for r in results] == [("sparse depth", "sparse"), ("dense depth", "dense")]
+    assert results[0].localisation == pytest.approx(0.0, abs=1e-6)
+    assert results[1].localisation == pytest.approx(0.5, abs=1e-6)
+
+    report = build_report(ws, ["drive_d"])
+    assert report.table_5_2_long is not None and len(report.table_5_2_long.rows) == 2
+    markdown = (ws.results / "table_5_2.md").read_text()
+    assert markdown.index("### Table 5.2 —") < markdown.index("### Table 5.2, whole drives")
+    per_drive = list(csv.DictReader(io.StringIO((ws.results / "table_5_2_long_per_drive.csv").read_text())))
+    assert [(r["layer"], r["drive"]) for r in per_drive] == [("sparse", "drive_d"), ("dense", "drive_d")]
