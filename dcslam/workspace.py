@@ -9,6 +9,7 @@ Every command reads and writes plain files under one folder (default ``./workspa
     predictions/<run>/     depth layers written by ``dcslam predict``
     filtered/<name>/       depth layers written by ``dcslam filter``
     slam/<layer>/          trajectories, maps and summaries written by ``dcslam slam``
+    slam-long/<layer>/     the same over whole test drives (``dcslam reproduce``'s long-drive table)
     results/               tables and plots written by ``dcslam score``
 
 Nothing is overwritten without ``force``; every file is written under a temporary name in its final folder and
@@ -48,6 +49,8 @@ class Workspace:
     predictions = property(lambda self: self.root / "predictions", doc="Prediction layers, one folder per run.")
     filtered = property(lambda self: self.root / "filtered", doc="Filtered layers, one folder per filter chain.")
     slam = property(lambda self: self.root / "slam", doc="SLAM outputs, one folder per layer.")
+    slam_long = property(lambda self: self.root / "slam-long",
+                         doc="SLAM over whole drives (Table 5.2's long-drive table), one folder per layer.")
     results = property(lambda self: self.root / "results", doc="Scores, tables and plots.")
 
 

@@ -83,11 +83,12 @@ def _plain(value):
 
 def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, report: Callable[[object], None],
                   *, help: str, force: bool = True, prepare: Callable | None = None,
-                  examples: tuple[str, ...] = ()) -> Callable:
+                  examples: tuple[str, ...] = (), describe: Callable | None = None) -> Callable:
     """Register ``name`` on ``parent``: options → ``config_cls`` → ``run(workspace, config, force=)`` → ``report``.
 
     ``prepare(config, workspace)`` (optional) may return a changed configuration before it is printed or run.
-    ``examples``: command lines shown at the end of ``--help``.
+    ``examples``: command lines shown at the end of ``--help``. ``describe(workspace, config)`` (optional): more
+    TOML that ``--print-config`` prints after the configuration (e.g. the configurations of the stages it runs).
     """
     from dcslam.stages.config import options_of
 
@@ -111,7 +112,8 @@ def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, rep
         if prepare is not None:
             config = prepare(config, ws)
         if kwargs.get("print_config"):
-            summary(to_toml(config, f"dcslam {name} configuration"))
+            text = to_toml(config, f"dcslam {name} configuration")
+            summary(text if describe is None else text + "\n" + describe(ws, config))
             return None
         result = run(ws, config, force=kwargs.get("force", False)) if force else run(ws, config)
         report(result)

@@ -8,6 +8,7 @@ import typer
 from dcslam.cli.app import app, summary
 from dcslam.cli.options import stage_command
 from dcslam.stages import reproduce
+from dcslam.stages.reproduce_plan import stage_configs_toml
 
 HELP = ("Run the thesis's experiment end to end — synth (or a KITTI root), prepare-kitti, train the four recipes, "
         "predict, filter, slam, score — and print Table 5.2 (or 5.1). Stages whose outputs are up to date (same "
@@ -32,4 +33,6 @@ def report(result) -> None:
 
 reproduce_command = stage_command(app, "reproduce", reproduce.ReproduceConfig, run, report, help=HELP, force=False,
                                   examples=("dcslam reproduce --profile smoke -w /tmp/check    # a few minutes",
-                                            "dcslam reproduce --table 5.1 --kitti /data/kitti"))
+                                            "dcslam reproduce --table 5.1 --kitti /data/kitti",
+                                            "dcslam reproduce --print-config    # every stage's settings, as TOML"),
+                                  describe=stage_configs_toml)

@@ -114,21 +114,22 @@ def load_pair(est_path: Path | str, gt_path: Path | str,
                           T_est=T_est[assoc.est_indices], association=assoc)
 
 
-def slam_trajectory(ws: Workspace, layer: str, drive: str) -> Path:
-    path = ws.slam / layer / f"{drive}.txt"
+def slam_trajectory(ws: Workspace, layer: str, drive: str, root: Path | None = None) -> Path:
+    """``<root>/<layer>/<drive>.txt``, ``root`` being ``slam/`` unless given (e.g. ``slam-long/``)."""
+    path = (ws.slam if root is None else root) / layer / f"{drive}.txt"
     if not path.exists():
         raise DcslamError(f"trajectory {path} not found; run `dcslam slam --depth {layer}` first")
     return path
 
 
-def slam_settings(ws: Workspace, layer: str, drive: str) -> dict:
+def slam_settings(ws: Workspace, layer: str, drive: str, root: Path | None = None) -> dict:
     """The settings of the SLAM run behind ``slam/<layer>/<drive>.txt`` (:data:`RUN_SETTINGS`, from the summary
     ``<drive>.json`` beside it; ``frames`` is the number asked for, 0 = all: a drive shorter than that runs fewer,
     which its pose count shows), plus ``suspect``: whether the run rejected steps. Empty when the summary is
-    missing (a trajectory made elsewhere)."""
+    missing (a trajectory made elsewhere). ``root``: the folder of the layers' SLAM outputs (default ``slam/``)."""
     import json
 
-    path = ws.slam / layer / f"{drive}.json"
+    path = (ws.slam if root is None else root) / layer / f"{drive}.json"
     if not path.exists():
         return {}
     try:
@@ -142,7 +143,9 @@ def slam_settings(ws: Workspace, layer: str, drive: str) -> dict:
 
 
 def score_layer_trajectories(ws: Workspace, layer: str, drives: list[str],
-                             max_time_diff: float = EVO_MAX_TIME_DIFF_S) -> dict[str, TrajectoryPair]:
-    """The SLAM trajectories of a layer paired with the drives' ground truth: ``{drive: pair}``."""
-    return {drive: load_pair(slam_trajectory(ws, layer, drive), drive_file(ws, drive), max_time_diff)
+                             max_time_diff: float = EVO_MAX_TIME_DIFF_S,
+                             root: Path | None = None) -> dict[str, TrajectoryPair]:
+    """The SLAM trajectories of a layer (under ``root``, default ``slam/``) paired with the drives' ground truth:
+    ``{drive: pair}``."""
+    return {drive: load_pair(slam_trajectory(ws, layer, drive, root), drive_file(ws, drive), max_time_diff)
             for drive in drives}

@@ -15,6 +15,7 @@ from dcslam.eval.depth import METRICS, mean_errors
 from dcslam.report.layers import (TrajectoryPair, drive_file, resolve_layer, score_layer_depth)
 from dcslam.eval.maps import MapScores
 from dcslam.report.table_5_2 import FAILURE_THRESHOLD, LayerResult, table_5_2, table_5_2_results
+from dcslam.report.table_5_2_long import table_5_2_long, table_5_2_long_results
 from dcslam.report.tables import Column, Table, list_runs, table_5_1, table_5_3, thesis_figures
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
 from dcslam.io.atomic import write_text_atomic
@@ -94,6 +95,7 @@ class Report:
     written: list[Path]
     table_5_3: Table | None = None
     per_drive: Table | None = None
+    table_5_2_long: Table | None = None  # SLAM over whole drives (slam-long/), when there is any
 
 
 PER_DRIVE_KEYS = ("poses", "failed", "localisation", "ate_rmse_m", "rpe_rmse_m", "rpe_rmse_deg", "kitti_t_rel_percent",
@@ -132,7 +134,8 @@ def _depth_example_rows(ws: Workspace, results: list[LayerResult], drive: str):
 def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, force: bool = False,
                  devkit_exact: bool = False, max_time_diff: float = EVO_MAX_TIME_DIFF_S,
                  failure_threshold: float = FAILURE_THRESHOLD) -> Report:
-    """Compute Tables 5.1, 5.2 (with its per-drive table) and 5.3 over ``drives`` and write them (Markdown + CSV)
+    """Compute Tables 5.1, 5.2 (with its per-drive table), 5.2 over whole drives (when ``slam-long/`` holds SLAM runs;
+    its Markdown follows Table 5.2's in ``table_5_2.md``) and 5.3 over ``drives`` and write them (Markdown + CSV)
     with the figures."""
     from dcslam.report.plots import plot_depth_examples, plot_trajectories
     from dcslam.io.drive import DriveFile
@@ -146,6 +149,10 @@ def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, 
     t53, per_drive = table_5_3(thesis), per_drive_table(results)
     rgb, examples = _depth_example_rows(ws, results, drives[0])
     tables = {"table_5_1": t51, "table_5_2": t52, "table_5_2_per_drive": per_drive, "table_5_3": t53}
+    long_results = table_5_2_long_results(ws, runs, drives, max_time_diff)
+    t52_long = table_5_2_long(long_results, drives) if long_results else None
+    if t52_long is not None:  # printed after Table 5.2 in its Markdown file; CSVs of its own
+        tables.update(table_5_2_long=t52_long, table_5_2_long_per_drive=per_drive_table(long_results))
     outputs = [out_dir / f"{name}.{ext}" for name in tables for ext in ("md", "csv")]
     plots = [out_dir / f"trajectories_{drive}.png" for drive in drives]
     examples_path = out_dir / "depth_examples.png"
@@ -153,7 +160,10 @@ def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, 
 
     written = []
     for name, table in tables.items():
-        written.append(write_text_atomic(out_dir / f"{name}.md", table.to_markdown(), force=True))
+        markdown = table.to_markdown()
+        if name == "table_5_2" and t52_long is not None:
+            markdown += "\n" + t52_long.to_markdown()
+        written.append(write_text_atomic(out_dir / f"{name}.md", markdown, force=True))
         written.append(write_text_atomic(out_dir / f"{name}.csv", table.to_csv(), force=True))
     for drive, path in zip(drives, plots):
         with DriveFile(drive_file(ws, drive)) as d:
@@ -162,5 +172,6 @@ def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, 
         written.append(plot_trajectories(path, T_gt, estimates, title=f"{drive}: top view", force=True))
     if examples:
         written.append(plot_depth_examples(examples_path, examples, rgb=rgb, force=True))
-    return Report(table_5_1=t51, table_5_2=t52, written=written, table_5_3=t53, per_drive=per_drive)
+    return Report(table_5_1=t51, table_5_2=t52, written=written, table_5_3=t53, per_drive=per_drive,
+                  table_5_2_long=t52_long)
 

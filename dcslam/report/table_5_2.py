@@ -155,25 +155,27 @@ def _depth_per_drive(per_frame: dict[str, list]) -> dict[str, DepthErrors]:
 
 
 def score_layer(ws: Workspace, label: str, layer_name: str, drives: list[str], devkit_exact: bool = False,
-                max_time_diff: float = EVO_MAX_TIME_DIFF_S,
-                failure_threshold: float = FAILURE_THRESHOLD) -> LayerResult:
-    """Depth and trajectory scores of a layer over ``drives``; missing inputs are recorded, bad ones fail."""
+                max_time_diff: float = EVO_MAX_TIME_DIFF_S, failure_threshold: float = FAILURE_THRESHOLD,
+                slam_root: Path | None = None, depth: bool = True) -> LayerResult:
+    """Depth (unless not ``depth``) and trajectory scores of a layer over ``drives``, its SLAM outputs under
+    ``slam_root`` (default ``slam/``); missing inputs are recorded, bad ones fail."""
     result = LayerResult(label=label, layer=layer_name, failure_threshold=failure_threshold)
-    layer = find_layer(ws, layer_name)
-    if layer is None:
+    layer = find_layer(ws, layer_name) if depth else None
+    if layer is None and depth:
         result.missing.append(f"no layer {layer_name!r} (dcslam predict / filter)")
-    else:
+    elif depth:
         absent = [d for d in drives if layer.folder is not None and not Path(layer.source(d)).exists()]
         if absent:
             result.missing.append(f"depth of {len(absent)} test drive(s) in {layer.folder}")
         else:
             result.depth = _depth_per_drive(score_layer_depth(ws, layer, drives, devkit_exact=devkit_exact))
-    absent = [d for d in drives if not (ws.slam / layer_name / f"{d}.txt").exists()]
+    root = ws.slam if slam_root is None else slam_root
+    absent = [d for d in drives if not (root / layer_name / f"{d}.txt").exists()]
     if absent:
-        result.missing.append(f"slam/{layer_name}/ for {len(absent)} test drive(s) (dcslam slam)")
+        result.missing.append(f"{root.name}/{layer_name}/ for {len(absent)} test drive(s) (dcslam slam)")
     else:
-        result.pairs = score_layer_trajectories(ws, layer_name, drives, max_time_diff)
-        result.settings = {d: slam_settings(ws, layer_name, d) for d in drives}
+        result.pairs = score_layer_trajectories(ws, layer_name, drives, max_time_diff, root)
+        result.settings = {d: slam_settings(ws, layer_name, d, root) for d in drives}
     return result
 
 
@@ -223,7 +225,7 @@ def table_5_2_results(ws: Workspace, runs: list[RunSummary], drives: list[str], 
     return results
 
 
-def _most_common_settings(rows: list[dict]) -> dict:
+def most_common_settings(rows: list[dict]) -> dict:
     """For each setting, the value most rows were made with (the first row's on a tie)."""
     common = {}
     for key in sorted(set().union(*rows)) if rows else []:
@@ -233,8 +235,21 @@ def _most_common_settings(rows: list[dict]) -> dict:
     return {k: v for k, v in common.items() if v is not None}
 
 
-def _settings_text(settings: dict) -> str:
+def settings_text(settings: dict) -> str:
     return ", ".join(f"{k}={settings[k]}" for k in sorted(settings))
+
+
+def annotate(row: dict, result: LayerResult, settings: dict | None, common: dict) -> dict:
+    """Complete a table row of ``result``: ``slam_settings`` (how its SLAM ``settings`` differ from the ``common``
+    ones; absent without settings) and ``notes`` (what is missing, why there is no drift or aligned ATE)."""
+    if settings is not None:
+        own = {k: settings.get(k) for k in set(common) | set(settings) if common.get(k) != settings.get(k)}
+        row["slam_settings"] = "as the others" if not own else "differs: " + settings_text(own)
+    notes = [n for n in (row.get("missing"), row.get("drift_note")) if n]
+    if result.pairs and row.get("ate_rmse_m") is None:
+        notes.append("aligned ATE undefined on some drive (degenerate positions)")
+    row["notes"] = "; ".join(notes) or None
+    return row
 
 
 def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str], devkit_exact: bool = False) -> Table:
@@ -252,22 +267,14 @@ def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str], devki
         Column("slam_settings", ""), Column("missing", ""), Column("notes", "")]
     reference = next((r for r in results if r.layer == "sparse"), None)
     settings = {id(r): r.run_settings() for r in results if r.pairs}
-    common = _most_common_settings(list(settings.values()))
+    common = most_common_settings(list(settings.values()))
     for result in results:
         theirs = figures.get(result.label, {})
         row = {**result.row(reference), **{f"thesis_{k}": v for k, v in theirs.items()}}
         for k in ("localisation", "mae", "rmse"):
             row.setdefault(f"thesis_{k}_text", "x" if k in theirs and theirs[k] is None else
                            (None if theirs.get(k) is None else f"{theirs[k]:g}"))
-        if id(result) in settings:
-            own = {k: settings[id(result)].get(k) for k in set(common) | set(settings[id(result)])
-                   if common.get(k) != settings[id(result)].get(k)}
-            row["slam_settings"] = "as the others" if not own else "differs: " + _settings_text(own)
-        notes = [n for n in (row.get("missing"), row.get("drift_note")) if n]
-        if result.pairs and row.get("ate_rmse_m") is None:
-            notes.append("aligned ATE undefined on some drive (degenerate positions)")
-        row["notes"] = "; ".join(notes) or None
-        table.rows.append(row)
+        table.rows.append(annotate(row, result, settings.get(id(result)), common))
     table.notes += [
         "localisation accuracy: the thesis's metric, mean over poses of ‖t_X‖ + acos((tr R_X − 1)/2), "
         "X = T_gt⁻¹ T_est (m + rad); lower is better. Every figure of ours: mean over the test drives ± the half-"
@@ -290,5 +297,5 @@ def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str], devki
         "thesis columns: the thesis's own figures (dcslam/report/thesis_tables.json); x where the thesis did not "
         "compute it; — where the thesis has no such row",
         f"SLAM settings of the rows (those of most rows; a row made otherwise says how in SLAM settings): "
-        f"{_settings_text(common) or 'none recorded'}"]
+        f"{settings_text(common) or 'none recorded'}"]
     return table

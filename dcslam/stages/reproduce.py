@@ -3,8 +3,8 @@
 The experiment composes the other stages' configurations and runs them in this process::
 
     synth (unless a KITTI root is given) → prepare-kitti → train × 4 recipes → predict (4 runs + IP-Basic)
-    → filter (each model's predictions) → slam (sparse, dense, every prediction and filtered layer)
-    → score tables
+    → filter (each model's predictions) → slam (sparse, dense, every prediction and filtered layer; and the
+    profile's ``long_layers`` over whole test drives, into ``slam-long/``) → score tables
 
 A stage is skipped when its outputs exist, are newer than its inputs, and were made with the same configuration by
 the same dcslam (version and a hash of its sources, recorded in ``<workspace>/.reproduce/<stage>.json``), so a rerun
@@ -55,22 +55,29 @@ class Profile:
     description: str = ""
     split: tuple[int, int, int] | None = None  # (train, val, test) drive counts; None: the thesis's proportion
     slam: dict = field(default_factory=dict)    # SLAM settings other than the defaults (fields of SlamSettings)
+    long_layers: tuple[str, ...] = ()           # layers also run by SLAM over whole test drives (slam-long/)
 
     def __post_init__(self) -> None:
         if self.split is not None and (sum(self.split) != self.drives or min(self.split) < 1):
             raise DcslamError(f"profile {self.name}: split {self.split} must be >= 1 drive each and add up to "
                               f"{self.drives} drives")
+        unknown = [layer for layer in self.long_layers if layer not in ("sparse", "dense", IP_BASIC, *RECIPES)]
+        if unknown:
+            raise DcslamError(f"profile {self.name}: long_layers {unknown} are not sparse, dense, {IP_BASIC} or a "
+                              f"recipe ({', '.join(RECIPES)})")
 
 
 PROFILES = {
     "quick": Profile(
         name="quick", drives=8, frames=42, train={"epochs": 2, "max_frames": 31, "scale": 0.5, "lr": 3e-3},
-        slam_frames=30, filters={"edges": ["edges"]}, split=(3, 1, 4),
+        slam_frames=30, filters={"edges": ["edges"]}, split=(3, 1, 4), long_layers=("sparse", "dense", IP_BASIC),
         description="8 generated drives of 42 frames (3 train / 1 val / 4 test), models trained 2 epochs at half "
-                    "resolution, SLAM on the first 30 frames of each test drive, one outlier filter"),
+                    "resolution, SLAM on the first 30 frames of each test drive, one outlier filter; sparse, dense "
+                    "and IP-Basic also over whole test drives (32 frames: too short for KITTI drift)"),
     "smoke": Profile(
         name="smoke", drives=3, frames=12, train={"epochs": 1, "max_frames": 2, "scale": 0.25},
         slam_frames=2, filters={"edges": ["edges"]}, slam={"iterations": 3, "voxel_size": 0.2},
+        long_layers=("sparse", "dense", IP_BASIC),
         description="a check that every stage runs (3 drives of 12 frames, tiny training, SLAM over 2 frames with "
                     "3 ICP iterations and a coarse map): numbers mean nothing"),
     "thesis": Profile(
@@ -78,7 +85,9 @@ PROFILES = {
         slam_frames=30,
         filters={"thesis-range": ["thesis-range"], "thesis-bilateral": ["thesis-bilateral"], "edges": ["edges"],
                  "outlier": ["outlier"], "hidden": ["hidden"]},
-        description="the thesis's scale: 15 / 4 / 5 drives, 200 frames per drive, full resolution (use a GPU)"),
+        long_layers=("sparse", "dense", IP_BASIC, *RECIPES),
+        description="the thesis's scale: 15 / 4 / 5 drives, 200 frames per drive, full resolution (use a GPU); "
+                    "sparse, dense, IP-Basic and the four models also over whole test drives (about 200 m)"),
 }
 TABLES = ("5.2", "5.1")
 
@@ -131,6 +140,8 @@ def _mtime(paths: list[Path]) -> tuple[float, float]:
 
 class Pipeline:
     """Runs stages in order in this process, skipping those whose outputs are up to date."""
+
+    planning = False  # True for a pipeline that only lists its stages (then ``splits`` is the split it plans with)
 
     def __init__(self, workspace: Workspace, log: Callable[[str], None] = lambda line: None, force: bool = False):
         self.ws = workspace
@@ -263,6 +274,17 @@ def run(ws: Workspace, config: ReproduceConfig, *, log: Callable[[str], None] = 
                      log=log, force=config.force, jobs=config.jobs)
 
 
+def split_by_counts(names: list[str], counts: tuple[int, int, int]) -> dict[str, list[str]]:
+    """The profile's split of drive ``names`` (sorted): the first ``counts[0]`` train, then val, then test."""
+    n_train, n_val, _ = counts
+    names = sorted(names)
+    return {"train": names[:n_train], "val": names[n_train:n_train + n_val], "test": names[n_train + n_val:]}
+
+
+def _split_file(ws: Workspace) -> Path:
+    return ws.root / ".reproduce" / "splits.json"
+
+
 def _profile_splits(ws: Workspace, kitti: Path, counts: tuple[int, int, int]) -> Path:
     """Write the profile's split of the generated drives (sorted by name: train, then val, then test)."""
     from dcslam.io.kitti import find_drives
@@ -270,11 +292,10 @@ def _profile_splits(ws: Workspace, kitti: Path, counts: tuple[int, int, int]) ->
     names = sorted({d.name for d in find_drives(kitti)})
     if len(names) != sum(counts):
         raise DcslamError(f"{kitti}: {len(names)} drives, the profile splits {sum(counts)}; remove {kitti} and rerun")
-    n_train, n_val, _ = counts
-    path = ws.root / ".reproduce" / "splits.json"
+    path = _split_file(ws)
     import json
 
-    splits = {"train": names[:n_train], "val": names[n_train:n_train + n_val], "test": names[n_train + n_val:]}
+    splits = split_by_counts(names, counts)
     if not path.exists() or json.loads(path.read_text()) != splits:
         write_json_atomic(path, splits, force=True)
     return path
@@ -287,24 +308,31 @@ def reproduce(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_
 
     ``force``: overwrite outputs this pipeline did not make (see :meth:`Pipeline.run`); ``jobs``: worker processes
     for the independent SLAM stages."""
+    return compose(Pipeline(workspace, log, force=force), profile, table, kitti_root, seed, jobs)
+
+
+def compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | None, seed: int,
+            jobs: int = 1) -> Path:
+    """Hand every stage of the experiment to ``pipe`` in order; return the Markdown file of ``table``."""
     if table not in TABLES:
         raise DcslamError(f"unknown table {table!r}; expected 5.1 or 5.2")
-    ws = workspace
-    pipe = Pipeline(ws, log, force=force)
+    ws = pipe.ws
     kitti = Path(kitti_root) if kitti_root else ws.kitti
     drives = lambda: sorted(ws.drives.glob("*.h5"))  # noqa: E731
     if kitti_root is None:
         pipe.run(Stage("synth", synth.run, synth.SynthConfig(drives=profile.drives, frames=profile.frames, seed=seed),
                        outputs=lambda: [ws.kitti / "SYNTHETIC"]))
-    elif not kitti.is_dir():
+    elif not kitti.is_dir() and not pipe.planning:  # a plan may name a root that is not mounted here
         raise DcslamError(f"KITTI root {kitti} does not exist or is not a folder; pass --kitti DIR")
-    split_file = _profile_splits(ws, kitti, profile.split) if kitti_root is None and profile.split else None
+    split_file = None
+    if kitti_root is None and profile.split:
+        split_file = _split_file(ws) if pipe.planning else _profile_splits(ws, kitti, profile.split)
     pipe.run(Stage("prepare-kitti", prepare.run, prepare.PrepareConfig(kitti=kitti, splits=split_file),
                    outputs=lambda: [ws.splits, *drives()],
                    inputs=lambda: [p for p in (kitti / "SYNTHETIC", split_file) if p is not None and p.exists()]))
     from dcslam.io.drive import read_splits
 
-    splits = read_splits(ws.splits)
+    splits = pipe.splits if pipe.planning else read_splits(ws.splits)
     test = [ws.drives / f"{name}.h5" for name in splits["test"]]
     learn = [ws.drives / f"{name}.h5" for name in splits["train"] + splits["val"]]
 
@@ -333,17 +361,25 @@ def reproduce(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_
             pipe.run(Stage(f"filter-{name}", filter_stage.run, config,
                            outputs=lambda made=made: made, inputs=lambda m=layers[run_name][0]: m))
             layers[name] = (made, f"filtered/{name}")
-    slam_outputs, slam_stages = [], []
-    for layer, (files, reference) in layers.items():
-        for drive, source in zip(test, files):
-            made = [ws.slam / layer / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt")]
-            slam_outputs += made
-            config = slam.SlamStageConfig(**{"odometry": "icp", **profile.slam}, depth=reference,
-                                          drive=[drive.stem], frames=profile.slam_frames)
-            slam_stages.append(Stage(f"slam-{layer}-{drive.stem}", slam.run, config, outputs=lambda made=made: made,
-                                     inputs=lambda d=drive, s=source: [d, s]))
+    slam_stages = [_slam_stage(ws, profile, layer, reference, drive, source)
+                   for layer, (files, reference) in layers.items() for drive, source in zip(test, files)]
+    slam_stages += [_slam_stage(ws, profile, layer, layers[layer][1], drive, source, whole=True)
+                    for layer in profile.long_layers for drive, source in zip(test, layers[layer][0])]
+    slam_outputs = [path for stage in slam_stages for path in stage.outputs()]
     pipe.run_all(slam_stages, jobs)
     return _tables(pipe, ws, "5.2", inputs=slam_outputs + [ws.runs / r / "metrics.jsonl" for r in RECIPES])
+
+
+def _slam_stage(ws: Workspace, profile: Profile, layer: str, reference: str, drive: Path, source,
+                whole: bool = False) -> Stage:
+    """SLAM of ``layer`` (depth ``reference``) over one test drive: its first ``profile.slam_frames`` frames into
+    ``slam/<layer>/`` (Table 5.2), or with ``whole`` every frame into ``slam-long/<layer>/`` (its long-drive table)."""
+    out = (ws.slam_long if whole else ws.slam) / layer
+    config = slam.SlamStageConfig(**{"odometry": "icp", **profile.slam}, depth=reference, drive=[drive.stem],
+                                  frames=0 if whole else profile.slam_frames, out=out if whole else None)
+    made = [out / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt")]
+    return Stage(f"{'slam-long' if whole else 'slam'}-{layer}-{drive.stem}", slam.run, config,
+                 outputs=lambda: made, inputs=lambda: [drive, source])
 
 
 def _tables(pipe: Pipeline, ws: Workspace, table: str, inputs: list[Path]) -> Path:

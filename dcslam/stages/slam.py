@@ -168,6 +168,7 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
         n = len(drive) if not frames else min(frames, len(drive))
         if n < 1:
             raise DcslamError(f"{drive_path}: no frames")
+        check_timestamps(drive.timestamps[:n], str(drive_path))  # before any work, not after it
         depth_all = load_depth(drive, depth_source)[:n]
         K = torch.from_numpy(drive.K).float().to(device)
         T_gt = drive.poses[:n]
@@ -199,7 +200,30 @@ def check_outputs(out_dir: Path, name: str, force: bool) -> None:
             raise DcslamError(f"{path} exists; pass --force to overwrite it")
 
 
+def check_timestamps(timestamps: np.ndarray, where: str) -> np.ndarray:
+    """``timestamps`` (N,) as float64 seconds, or a :class:`DcslamError` when they are not finite and strictly
+    increasing: a trajectory is paired with its reference by time, so invented stamps would pair the wrong poses."""
+    t = np.asarray(timestamps, dtype=np.float64)
+    if t.ndim != 1:
+        raise DcslamError(f"{where}: timestamps of shape {t.shape}, expected (N,)")
+    bad = np.flatnonzero(~np.isfinite(t))
+    if len(bad):
+        raise DcslamError(f"{where}: timestamp of frame {bad[0]} is not finite; rebuild the drive file "
+                          "(dcslam prepare-kitti --force)")
+    steps = np.flatnonzero(np.diff(t) <= 0)
+    if len(steps):
+        i = int(steps[0]) + 1
+        raise DcslamError(f"{where}: timestamps are not strictly increasing (frame {i} at {t[i]:.6f} s after frame "
+                          f"{i - 1} at {t[i - 1]:.6f} s{f', and {len(steps) - 1} more' if len(steps) > 1 else ''}); "
+                          "the trajectory could not be paired with its reference by time: fix the source's "
+                          "timestamps (image_02/timestamps.txt for KITTI) and rebuild the drive file "
+                          "(dcslam prepare-kitti --force)")
+    return t
+
+
 def write_outputs(run: DriveRun, out_dir: Path, force: bool = False) -> dict[str, Path]:
+    """Write ``run``'s trajectory (TUM with the drive's own timestamps, and KITTI poses), map and summary; fails
+    before writing anything when the timestamps are not strictly increasing (:func:`check_timestamps`)."""
     from dcslam.io.kitti_poses import write_kitti_poses
     from dcslam.io.ply import write_ply
     from dcslam.io.tum import write_tum
@@ -208,9 +232,7 @@ def write_outputs(run: DriveRun, out_dir: Path, force: bool = False) -> dict[str
 
     paths = output_paths(out_dir, run.name)
     check_outputs(out_dir, run.name, force)
-    timestamps = run.timestamps.astype(np.float64)
-    if len(timestamps) > 1 and np.any(np.diff(timestamps) <= 0):
-        timestamps = np.arange(len(timestamps), dtype=np.float64) * 0.1
+    timestamps = check_timestamps(run.timestamps, run.name)
     write_tum(paths["trajectory"], timestamps, run.T_world_cam, force=force)
     write_kitti_poses(paths["kitti_poses"], run.T_world_cam, force=force)
     pm = run.map

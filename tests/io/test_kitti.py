@@ -9,6 +9,7 @@ from dcslam.errors import DcslamError
 from dcslam.io import kitti
 from dcslam.io.kitti_oxts import (OxtsPacket, mercator_to_lat_lon_alt, mercator_xyz, parse_oxts_line,
                                   write_oxts_dataformat)
+from tests.fixtures.kitti import velodyne_raw_agreement
 
 SAMPLE = Path(__file__).parents[1] / "data" / "kitti-sample"
 DATE_DIR = SAMPLE / "raw" / "2011_09_26"
@@ -155,14 +156,17 @@ class TestProjectVelodyne:
         projected = kitti.project_velodyne(points, calib)
         reference = kitti.read_depth_png(DEPTH / "velodyne_raw" / "image_02" / "0000000005.png")
         assert projected.shape == reference.shape == (375, 1242)
-        ys, xs = np.nonzero(reference)
-        hit = np.zeros(len(ys), bool)
-        for dy in range(-2, 3):
-            for dx in range(-2, 3):
-                near = projected[np.clip(ys + dy, 0, 374), np.clip(xs + dx, 0, 1241)]
-                hit |= (near > 0) & (np.abs(near - reference[ys, xs]) <= 0.02 * reference[ys, xs])
-        assert hit.mean() >= 0.95
-        assert abs(int((projected > 0).sum()) - len(ys)) < 0.02 * len(ys)
+        assert velodyne_raw_agreement(projected, reference) >= 0.95
+        measured = int((reference > 0).sum())
+        assert abs(int((projected > 0).sum()) - measured) < 0.02 * measured
+
+    def test_agreement_check_tells_a_shift_from_a_scale(self):
+        """The shared check accepts the reference moved by 2 pixels and refuses it 3 % farther."""
+        reference = kitti.read_depth_png(DEPTH / "velodyne_raw" / "image_02" / "0000000005.png")
+        assert velodyne_raw_agreement(np.roll(reference, 2, axis=1), reference) >= 0.99
+        assert velodyne_raw_agreement(reference * 1.03, reference) < 0.5
+        with pytest.raises(ValueError, match="one shape"):
+            velodyne_raw_agreement(reference[:10], reference)
 
     def test_known_point_and_nearest_wins(self, calib):
         T_velo_cam2 = np.linalg.inv(calib.T_cam2_velo)

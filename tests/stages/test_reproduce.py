@@ -11,6 +11,7 @@ from dcslam.errors import DcslamError
 from dcslam import __version__
 from dcslam.stages.config import code_version
 from dcslam.stages.reproduce import PROFILES, Pipeline, Profile, Stage, reproduce
+from dcslam.stages.reproduce_plan import planned_stages, read_stage_configs
 from dcslam.stages.slam import SlamStageConfig
 from dcslam.workspace import Workspace
 
@@ -122,6 +123,16 @@ def test_smoke_profile_runs_every_stage_and_writes_the_tables(tmp_path):
     assert len(rows) == 11 and not any(row["missing"] for row in rows)  # no row lacks its inputs
     assert {row["slam_settings"] for row in rows} == {"as the others"}  # every row from the same SLAM settings
     assert all(row["drives"] == "1" for row in rows)
+    for layer in PROFILES["smoke"].long_layers:  # and SLAM over the whole test drives, in the long-drive table
+        summary = json.loads((tmp_path / "slam-long" / layer / f"{test_drive}.json").read_text())
+        assert summary["frames"] == 12 - 10 and summary["settings"]["frames"] == 0, layer
+    with open(results / "table_5_2_long.csv") as f:
+        long_rows = list(csv.DictReader(f))
+    assert [row["layer"] for row in long_rows] == ["sparse", "dense", "ip-basic-fast"]
+    assert all("drives too short" in row["notes"] for row in long_rows)
+    assert "Table 5.2, whole drives" in table and (results / "table_5_2_long_per_drive.csv").exists()
+    ran = {p.stem for p in (tmp_path / ".reproduce").glob("*.json")} - {"splits"}
+    assert ran == {stage.name for stage in planned_stages(Workspace(tmp_path), PROFILES["smoke"])}  # --print-config
 
     again = runner.invoke(app, ["reproduce", "--profile", "smoke", "--workspace", str(tmp_path)])
     assert again.exit_code == 0, again.output
@@ -163,3 +174,32 @@ def _touch(ws, config, *, force=False):
     if config.frames == 99:
         raise DcslamError("no luck")
     config.out.write_text(str(torch.get_num_threads()))
+
+
+def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(tmp_path):
+    import tomllib
+
+    ws = tmp_path / "ws"
+    result = runner.invoke(app, ["reproduce", "--print-config", "--workspace", str(ws)])
+    assert result.exit_code == 0, result.output
+    printed = tomllib.loads(result.stdout)  # still a --config file of reproduce: the stages are comments
+    assert printed == {"table": "5.2", "profile": "quick", "seed": 0, "force": False, "jobs": 1}
+    assert not ws.exists()  # nothing run, nothing written
+    stages = read_stage_configs(result.stdout)
+    names = list(stages)
+    assert names[:2] == ["synth", "prepare-kitti"] and names[-1] == "score-tables"
+    assert stages["synth"]["drives"] == 8 and stages["synth"]["frames"] == 42
+    assert stages["train-chamfer-8"]["map_frames"] == 8 and stages["train-mse-sparse"]["mask"] == "sparse"
+    test = [f"2011_09_26_drive_{n}_sync" for n in (1004, 1005, 1006, 1007)]  # the profile's split: 3 / 1 / 4
+    short = {n: c for n, c in stages.items() if n.startswith("slam-") and not n.startswith("slam-long-")}
+    whole = {n: c for n, c in stages.items() if n.startswith("slam-long-")}
+    assert len(short) == 11 * 4 and len(whole) == 3 * 4
+    assert {c["drive"][0] for c in short.values()} == set(test)
+    assert {c["frames"] for c in short.values()} == {30} and {c["frames"] for c in whole.values()} == {0}
+    assert stages["slam-long-ip-basic-fast-2011_09_26_drive_1004_sync"]["out"] == str(ws / "slam-long" / "ip-basic-fast")
+    assert stages["slam-mse-dense+edges-2011_09_26_drive_1007_sync"]["depth"] == "filtered/mse-dense+edges"
+
+    thesis = read_stage_configs(runner.invoke(app, ["reproduce", "--profile", "thesis", "--table", "5.1",
+                                                    "--print-config", "--workspace", str(ws)]).stdout)
+    assert list(thesis)[-1] == "score-tables" and not any(n.startswith("slam") for n in thesis)
+    assert thesis["train-mse-dense"]["max_frames"] == 200

@@ -46,3 +46,44 @@ def test_float32_drift_off_so3_is_projected_before_writing(tmp_path):
     written = write_outputs(run, tmp_path)
     back = read_kitti_poses(written["kitti_poses"])
     assert np.abs(back - street_trajectory(N, step=0.5).double().numpy()).max() < 1e-6
+
+
+def test_non_increasing_timestamps_fail_before_anything_is_written(tmp_path):
+    """Time association pairs a trajectory with its reference by timestamp: a drive whose stamps repeat or go back
+    is an error naming the frame, not a trajectory silently restamped at 10 Hz."""
+    import pytest
+
+    from dcslam.errors import DcslamError
+    from dcslam.slam.pointmap import PointMap
+    from dcslam.stages.slam import DriveRun, check_timestamps
+
+    T = street_trajectory(N, step=0.5).double().numpy()
+    stamps = np.array([0.0, 0.1, 0.1, 0.3])
+    run = DriveRun("repeated", T, stamps, T.copy(), PointMap.empty(), [], 1.0)
+    with pytest.raises(DcslamError, match=r"repeated: timestamps are not strictly increasing \(frame 2 at 0.100000"):
+        write_outputs(run, tmp_path / "out")
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+    with pytest.raises(DcslamError, match="frame 1 is not finite"):
+        check_timestamps(np.array([0.0, np.nan]), "x")
+    assert check_timestamps(np.array([1, 2, 5]), "x").dtype == np.float64  # increasing stamps kept as they are
+
+    path = tmp_path / "backwards.h5"
+    K = kitti_K(H, W)
+    with DriveWriter(path, K.double().numpy(), H, W, source="synthetic", date="2011_09_26", drive="backwards",
+                     split="test") as writer:
+        for i, t in enumerate([0.2, 0.1, 0.3]):
+            writer.append(DriveFrame(np.zeros((H, W, 3), np.uint8), np.zeros((H, W), np.float32),
+                                     np.ones((H, W), np.float32), T[i], t, i))
+    with pytest.raises(DcslamError, match="backwards.h5: timestamps are not strictly increasing"):
+        run_drive(path, "dense", build_slam(SlamSettings()))
+
+
+def test_real_timestamps_are_written_to_the_tum_file(tmp_path):
+    from dcslam.io.tum import read_tum
+    from dcslam.slam.pointmap import PointMap
+    from dcslam.stages.slam import DriveRun
+
+    T = street_trajectory(N, step=0.5).double().numpy()
+    stamps = 1317000000.0 + np.array([0.0, 0.103, 0.207, 0.31])  # KITTI-like: not exactly 10 Hz
+    written = write_outputs(DriveRun("real", T, stamps, T.copy(), PointMap.empty(), [], 1.0), tmp_path)
+    assert np.allclose(read_tum(written["trajectory"])[0], stamps, atol=1e-6, rtol=0)

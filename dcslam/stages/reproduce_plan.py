@@ -1,0 +1,74 @@
+"""What ``dcslam reproduce`` would run, without running it: the stages in order with their configurations
+(``dcslam reproduce --print-config`` prints them as TOML)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from dcslam.stages.reproduce import PROFILES, Pipeline, Profile, ReproduceConfig, Stage, compose, split_by_counts
+from dcslam.workspace import Workspace
+
+
+class _Listing(Pipeline):
+    """A pipeline that runs nothing and keeps the stages it is given, in order."""
+
+    planning = True
+
+    def __init__(self, workspace: Workspace, splits: dict[str, list[str]]):
+        super().__init__(workspace)
+        self.splits = splits
+        self.stages: list[Stage] = []
+
+    def run(self, stage: Stage):
+        self.stages.append(stage)
+
+    def run_all(self, stages: list[Stage], jobs: int = 1) -> None:
+        self.stages += stages
+
+
+def planned_splits(ws: Workspace, profile: Profile, kitti_root: Path | None = None) -> dict[str, list[str]]:
+    """The split ``prepare-kitti`` will write: for generated drives their names split as the profile says (or in the
+    thesis's proportion); for a KITTI root the workspace's ``splits.json`` if there is one, else the thesis's."""
+    from dcslam.io.drive import read_splits
+    from dcslam.stages.prepare import THESIS_SPLITS, proportional_splits
+    from dcslam.synth.street.generate import drive_name
+
+    if kitti_root is not None:
+        return read_splits(ws.splits) if ws.splits.exists() else THESIS_SPLITS
+    names = sorted(drive_name(i) for i in range(profile.drives))
+    return proportional_splits(names) if profile.split is None else split_by_counts(names, profile.split)
+
+
+def planned_stages(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_root: Path | None = None,
+                   seed: int = 0) -> list[Stage]:
+    """The stages :func:`dcslam.stages.reproduce.reproduce` would run, in order, with their configurations (test
+    drives from :func:`planned_splits`); nothing is run or written."""
+    pipe = _Listing(workspace, planned_splits(workspace, profile, kitti_root))
+    compose(pipe, profile, table, kitti_root, seed)
+    return pipe.stages
+
+
+def stage_configs_toml(workspace: Workspace, config: ReproduceConfig) -> str:
+    """Every stage's configuration as TOML tables ``[stages."<stage>"]``, in the order they run, each line commented
+    out (``#>`` + the TOML line), so that what ``--print-config`` prints stays a ``--config`` file of ``dcslam
+    reproduce``; :func:`read_stage_configs` reads them back."""
+    from dcslam.stages.config import to_toml
+
+    stages = planned_stages(workspace, PROFILES[config.profile], config.table, config.kitti, config.seed)
+    lines = [f"# the {len(stages)} stages this runs, in order, with their configurations (informative: a stage is "
+             "skipped when its outputs are up to date; each line below is TOML after '#> ')"]
+    for stage in stages:
+        body = to_toml(stage.config, f"{stage.run.__module__}.{stage.run.__name__}")
+        lines += [f"{STAGE_PREFIX}", f'{STAGE_PREFIX}[stages."{stage.name}"]']
+        lines += [f"{STAGE_PREFIX}{line}" for line in body.splitlines()]
+    return "\n".join(lines) + "\n"
+
+
+STAGE_PREFIX = "#> "
+
+
+def read_stage_configs(text: str) -> dict[str, dict]:
+    """The stage configurations in what ``--print-config`` printed: ``{stage name: {option: value}}``."""
+    import tomllib
+
+    body = "\n".join(line[len(STAGE_PREFIX):] for line in text.splitlines() if line.startswith(STAGE_PREFIX.rstrip()))
+    return tomllib.loads(body).get("stages", {})
