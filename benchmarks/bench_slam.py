@@ -5,9 +5,11 @@
    at full KITTI size, Open3D's point-to-plane ICP on the same depth, and KISS-ICP on the 360 degree Velodyne scans
    (skipped, with a line saying so, when ``kiss-icp`` is not installed: ``pip install -e .[bench]``). For each:
    ATE, RPE, final drift %, frames/s, and dcslam's flagged steps.
-2. Peak memory (process RSS) and local-map size at frames 200 and 1,000 of a long analytic street drive
-   (``dcslam.slam.scene``) with LiDAR-like sparse depth: with the local map and without the archive for the map file
-   (``--keep-global-map`` keeps it) they must be flat within 10 %.
+2. Peak memory (process RSS, each run in a fresh process) and local-map size at frames 200, 400, ..., 1,000 of a
+   long analytic street drive (``dcslam.slam.scene``) with LiDAR-like sparse depth at full size, with the default
+   settings (the points leaving the 50-frame local map archived in a temporary file for the map file) and with the
+   archive off; they must be flat within 10 %. ``--long-dense`` adds a dense run at ``--dense-scale`` of the size
+   (every pixel is ray-cast: about 2 s a frame at full size).
 
 Figures depend on the machine and its load: read them next to the machine line that ``benchmarks/run_all.py``
 prints. Run with ``OMP_NUM_THREADS=1`` on a shared machine (the script sets torch to one thread unless
@@ -94,7 +96,7 @@ def _rss_mb() -> float:
 
 def memory(args) -> None:
     """Each memory run in a fresh child process, so that its peak is the SLAM's own and not the accuracy runs'."""
-    runs = [("sparse", False), ("sparse", True)] + ([("dense", False)] if args.long_dense else [])
+    runs = [("sparse", True), ("sparse", False)] + ([("dense", False)] if args.long_dense else [])
     for kind, keep in runs:
         cmd = [sys.executable, __file__, "--memory-child", kind, "--long-frames", str(args.long_frames),
                "--threads", str(args.threads), "--device", args.device, "--dense-scale", str(args.dense_scale)]
@@ -121,7 +123,7 @@ def memory_child(args) -> None:
           + (" (LiDAR-like: every 4th row and column)" if kind == "sparse" else "")
           + f", dcslam defaults but keep_global_map={settings.keep_global_map} (local map "
           f"{settings.local_map_frames} frames), {args.threads} thread(s), fresh process", flush=True)
-    print("  frame   local map points   map MB   archived points   archive MB   RSS MB   peak RSS MB   "
+    print("  frame   local map points   map MB   archived points   archive file MB   RSS MB   peak RSS MB   "
           "s/frame (SLAM, last 50)", flush=True)
     times, peaks = [], {}
     for i in range(n):
@@ -130,11 +132,10 @@ def memory_child(args) -> None:
         slam.step(depth, K.to(args.device))
         times.append(time.perf_counter() - start)
         if i + 1 in marks:
-            archived = sum(len(p) for p in slam.mapper.archived)
-            archive_mb = sum(p.nbytes() for p in slam.mapper.archived) / 2 ** 20
+            archived, archive_mb = len(slam.mapper.archived), slam.mapper.archived.nbytes / 2 ** 20
             peaks[i + 1] = peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
             print(f"  {i + 1:5d}   {len(slam.map):16d}   {slam.map.nbytes() / 2 ** 20:6.1f}   {archived:15d}   "
-                  f"{archive_mb:10.1f}   {_rss_mb():6.0f}   {peak:11.0f}   {np.mean(times[-50:]):.3f}", flush=True)
+                  f"{archive_mb:15.1f}   {_rss_mb():6.0f}   {peak:11.0f}   {np.mean(times[-50:]):.3f}", flush=True)
     first, last = peaks[marks[0]], peaks[marks[-1]]
     print(f"  peak RSS frame {marks[0]} -> {marks[-1]}: {first:.0f} -> {last:.0f} MB "
           f"({100 * (last / first - 1):+.1f} %, {'' if last <= 1.1 * first else 'NOT '}flat within 10 %)", flush=True)
