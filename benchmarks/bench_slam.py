@@ -5,9 +5,11 @@
    at full KITTI size, Open3D's point-to-plane ICP on the same depth, and KISS-ICP on the 360 degree Velodyne scans
    (skipped, with a line saying so, when ``kiss-icp`` is not installed: ``pip install -e .[bench]``). For each:
    ATE, RPE, final drift %, frames/s, and dcslam's flagged steps.
-2. Peak memory (process RSS) and local-map size at frames 200 and 1,000 of a long analytic street drive
-   (``dcslam.slam.scene``) with LiDAR-like sparse depth: with the local map and without the archive for the map file
-   (``--keep-global-map`` keeps it) they must be flat within 10 %.
+2. Peak memory (process RSS, each run in a fresh process) and local-map size at frames 200, 400, ..., 1,000 of a
+   long analytic street drive (``dcslam.slam.scene``) with LiDAR-like sparse depth at full size, with the default
+   settings (the points leaving the 50-frame local map archived in a temporary file for the map file) and with the
+   archive off; they must be flat within 10 %. ``--long-dense`` adds a dense run at ``--dense-scale`` of the size
+   (every pixel is ray-cast: about 2 s a frame at full size).
 
 Figures depend on the machine and its load: read them next to the machine line that ``benchmarks/run_all.py``
 prints. Run with ``OMP_NUM_THREADS=1`` on a shared machine (the script sets torch to one thread unless
@@ -57,7 +59,7 @@ def _line(label: str, rows: list[DriveScore], flags: bool = True) -> str:
     ate = np.array([r.ate_m for r in rows])
     text = (f"  {label:<28} ATE {ate.mean():6.3f} m (max {ate.max():6.3f})  RPE {np.mean([r.rpe_m for r in rows]):.3f}"
             f" m  drift {np.mean([r.drift_pct for r in rows]):6.2f} %  {np.median([r.fps for r in rows]):6.2f} "
-            f"frames/s")
+            f"frames/s wall, {np.median([r.cpu_fps for r in rows]):6.2f} per CPU-second")
     if flags:
         text += (f"  flagged steps {sum(r.degraded + r.rejected for r in rows)}, suspect drives "
                  f"{sum(r.suspect for r in rows)}/{len(rows)}")
@@ -85,7 +87,7 @@ def side_by_side(args) -> None:
 
 
 def _rss_mb() -> float:
-    """Resident memory now (Linux /proc; the peak also counts the analytic renderer's temporary buffers)."""
+    """Resident memory of this process now (Linux /proc)."""
     try:
         return int(open("/proc/self/statm").read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
     except OSError:
@@ -93,32 +95,50 @@ def _rss_mb() -> float:
 
 
 def memory(args) -> None:
+    """Each memory run in a fresh child process, so that its peak is the SLAM's own and not the accuracy runs'."""
+    runs = [("sparse", True), ("sparse", False)] + ([("dense", False)] if args.long_dense else [])
+    for kind, keep in runs:
+        cmd = [sys.executable, __file__, "--memory-child", kind, "--long-frames", str(args.long_frames),
+               "--threads", str(args.threads), "--device", args.device, "--dense-scale", str(args.dense_scale)]
+        if subprocess.call(cmd + (["--keep-global-map"] if keep else [])) != 0:
+            raise SystemExit(f"memory run ({kind}, keep_global_map={keep}) failed")
+
+
+def memory_child(args) -> None:
+    """One long drive in this process: RSS now and the peak so far (ru_maxrss) at frames 200, 400, ... ."""
     from dcslam.slam.config import SlamSettings, build_slam
     from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
 
+    kind, n = args.memory_child, args.long_frames
     H, W = 375, 1242
-    n = args.long_frames
+    if kind == "dense":                                    # every pixel ray-cast: reduced size to stay affordable
+        H, W = round(H * args.dense_scale), round(W * args.dense_scale)
     scene, K = StreetScene(0, length=n + 60.0), kitti_K(H, W)
     T = street_trajectory(n, step=1.0)
-    mask = lidar_mask(H, W, row_step=4, col_step=4)
+    mask = lidar_mask(H, W, row_step=4, col_step=4) if kind == "sparse" else None
     settings = SlamSettings(keep_global_map=args.keep_global_map)
     slam = build_slam(settings)
     marks = sorted({min(200, n), n} | set(range(200, n, 200)))
-    print(f"memory: analytic street drive, {n} frames of 1 m, {W} x {H} sparse depth, dcslam defaults with "
-          f"keep_global_map={settings.keep_global_map} (local map {settings.local_map_frames} frames)", flush=True)
-    print("  frame   local map points   map MB   archived points   RSS MB   peak MB   s/frame (last 50)  "
-          "(peak includes the scene renderer's full-image buffers)", flush=True)
-    times = []
+    print(f"memory: analytic street drive (dcslam.slam.scene), {n} frames of 1 m, {W} x {H} {kind} depth"
+          + (" (LiDAR-like: every 4th row and column)" if kind == "sparse" else "")
+          + f", dcslam defaults but keep_global_map={settings.keep_global_map} (local map "
+          f"{settings.local_map_frames} frames), {args.threads} thread(s), fresh process", flush=True)
+    print("  frame   local map points   map MB   archived points   archive file MB   RSS MB   peak RSS MB   "
+          "s/frame (SLAM, last 50)", flush=True)
+    times, peaks = [], {}
     for i in range(n):
-        depth = (scene.render(T[i], K, H, W).float() * mask).to(args.device)[None, None]
+        depth = scene.render(T[i], K, H, W, mask=mask).float().to(args.device)[None, None]
         start = time.perf_counter()
         slam.step(depth, K.to(args.device))
         times.append(time.perf_counter() - start)
         if i + 1 in marks:
-            archived = sum(len(p) for p in slam.mapper.archived)
-            peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-            print(f"  {i + 1:5d}   {len(slam.map):16d}   {slam.map.nbytes() / 2 ** 20:8.1f}   {archived:15d}   "
-                  f"{_rss_mb():6.0f}   {peak:7.0f}   {np.mean(times[-50:]):.3f}", flush=True)
+            archived, archive_mb = len(slam.mapper.archived), slam.mapper.archived.nbytes / 2 ** 20
+            peaks[i + 1] = peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+            print(f"  {i + 1:5d}   {len(slam.map):16d}   {slam.map.nbytes() / 2 ** 20:6.1f}   {archived:15d}   "
+                  f"{archive_mb:15.1f}   {_rss_mb():6.0f}   {peak:11.0f}   {np.mean(times[-50:]):.3f}", flush=True)
+    first, last = peaks[marks[0]], peaks[marks[-1]]
+    print(f"  peak RSS frame {marks[0]} -> {marks[-1]}: {first:.0f} -> {last:.0f} MB "
+          f"({100 * (last / first - 1):+.1f} %, {'' if last <= 1.1 * first else 'NOT '}flat within 10 %)", flush=True)
 
 
 def main() -> None:
@@ -131,11 +151,16 @@ def main() -> None:
                         help="memory run keeps the archive for the map file (grows with the street seen)")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--device", default="cpu")
+    parser.add_argument("--long-dense", action="store_true", help="also a dense memory run (slow: every pixel cast)")
+    parser.add_argument("--dense-scale", type=float, default=1 / 3, help="image scale of the dense memory run")
+    parser.add_argument("--memory-child", choices=("sparse", "dense"), help=argparse.SUPPRESS)
     parser.add_argument("--skip", choices=("accuracy", "memory"), action="append", default=[])
     args, _ = parser.parse_known_args()
     import torch
 
     torch.set_num_threads(args.threads)
+    if args.memory_child:
+        return memory_child(args)
     if "accuracy" not in args.skip:
         side_by_side(args)
     if "memory" not in args.skip:

@@ -45,14 +45,14 @@ def run_kiss_icp(kitti_root: Path, drive_path: Path, frames: int | None = None) 
     config.data.deskew = False
     odometry = KissICP(config)
     poses = []
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     for scan in scans:
         odometry.register_frame(scan, np.zeros(len(scan)))
         poses.append(odometry.last_pose.copy())
-    seconds = time.perf_counter() - start
+    seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu_start
     T_velo0_velo = np.stack(poses)
     T_est = T_gt[0] @ T_cam_velo @ T_velo0_velo @ np.linalg.inv(T_cam_velo)
-    return score(name, "velodyne 360", T_gt, T_est, seconds)
+    return score(name, "velodyne 360", T_gt, T_est, seconds, cpu_seconds=cpu_seconds)
 
 
 def run_open3d(drive_path: Path, depth: str, frames: int | None = None, gate: float = 1.0,
@@ -70,7 +70,7 @@ def run_open3d(drive_path: Path, depth: str, frames: int | None = None, gate: fl
     H, W = depth_all.shape[1:]
     v, u = np.mgrid[0:H, 0:W]
     rays = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones((H, W))], -1)
-    start = time.perf_counter()
+    start, cpu_start = time.perf_counter(), time.process_time()
     clouds = []
     for d in depth_all:
         ok = (d > 0.1) & (d < 80)
@@ -84,5 +84,5 @@ def run_open3d(drive_path: Path, depth: str, frames: int | None = None, gate: fl
                                       reg.ICPConvergenceCriteria(1e-6, 1e-6, iterations))
         delta = np.asarray(result.transformation)          # T_prev_cur, also the next prediction
         poses.append(poses[-1] @ delta)
-    seconds = time.perf_counter() - start
-    return score(name, f"{depth} (Open3D)", T_gt, np.stack(poses), seconds)
+    seconds, cpu_seconds = time.perf_counter() - start, time.process_time() - cpu_start
+    return score(name, f"{depth} (Open3D)", T_gt, np.stack(poses), seconds, cpu_seconds=cpu_seconds)

@@ -29,10 +29,10 @@ from slam_drives import markdown_table, parse_settings, run_dcslam  # noqa: E402
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("drives", type=Path, help="folder of prepared drive files (.h5)")
-    parser.add_argument("--depth", default="sparse", help="sparse, dense or a layer file")
+    parser.add_argument("--depth", default="sparse",
+                        help="sparse, sparse@<beams> (prepare-kitti --beams), dense, exact or a layer file")
     parser.add_argument("--frames", type=int, default=0, help="frames per drive (0 = all)")
     parser.add_argument("--max-drives", type=int, default=0)
-    parser.add_argument("--beams-keep", type=int, default=1, help="keep every k-th LiDAR line (sparse only)")
     parser.add_argument("--variant", action="append", default=None, help="key=value;... (repeatable)")
     parser.add_argument("--steps", type=Path, help="write every step's evidence (JSON lines) to this file")
     parser.add_argument("--markdown", type=Path, help="append per-drive tables to this file")
@@ -43,8 +43,7 @@ def main() -> None:
     paths = sorted(args.drives.glob("*.h5"))[:args.max_drives or None]
     if not paths:
         raise SystemExit(f"no drive files in {args.drives}: run `dcslam prepare-kitti` first")
-    print(f"{len(paths)} drives x {args.frames or 'all'} frames, depth {args.depth}"
-          + (f", every {args.beams_keep}th LiDAR line" if args.beams_keep > 1 else ""), flush=True)
+    print(f"{len(paths)} drives x {args.frames or 'all'} frames, depth {args.depth}", flush=True)
     if args.markdown and not args.markdown.exists():
         import os
         import platform
@@ -60,7 +59,7 @@ def main() -> None:
     for variant in args.variant or [""]:
         settings = parse_settings(variant)
         steps = [] if args.steps else None
-        rows = [run_dcslam(p, args.depth, settings, args.frames, args.beams_keep, steps=steps) for p in paths]
+        rows = [run_dcslam(p, args.depth, settings, args.frames, steps=steps) for p in paths]
         if args.steps:
             with open(args.steps, "a") as f:
                 for step in steps:
@@ -70,7 +69,8 @@ def main() -> None:
         print(f"{variant or 'defaults':55s} ATE mean {ate.mean():6.3f} max {ate.max():6.3f}  "
               f"final>0.5m {len(bad)} (flagged {sum(r.suspect for r in bad)})  "
               f"false flags {sum(r.suspect for r in rows if r.final_m <= 0.5)}  "
-              f"fps {np.median([r.fps for r in rows]):5.2f}  per drive " + " ".join(f"{a:.2f}" for a in ate),
+              f"fps {np.median([r.fps for r in rows]):5.2f} (CPU {np.median([r.cpu_fps for r in rows]):5.2f})  "
+              f"per drive " + " ".join(f"{a:.2f}" for a in ate),
               flush=True)
         if args.markdown:
             with open(args.markdown, "a") as f:

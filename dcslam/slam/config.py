@@ -55,8 +55,8 @@ class SlamSettings:
         "help": "Odometry and fusion use the points seen in the last N frames (0 = the whole map); older points "
                 "are archived for the map file, so time and memory per frame stay flat.", "min": 0})
     keep_global_map: bool = field(default=True, metadata={
-        "help": "Keep the points that leave the local map (on the CPU) so the whole map can be written; off: memory "
-                "stays flat however long the drive."})
+        "help": "Keep the points that leave the local map (in a temporary file, read back when the map is written) "
+                "so the whole map can be written; off: they are dropped."})
     normal_search: int = field(default=0, metadata={
         "help": "Pixels searched along rows and columns for normal neighbours; 0 = from the depth's density.",
         "min": 0})

@@ -15,6 +15,21 @@ from dcslam.geometry.normals import vertex_normals
 #: beams needed 32 and 64 px); on 8 seed-2026 drives x 40 frames (64 beams) 32 px tracked as 8 px did. Since normals
 #: are found by sorting the valid pixels, the search costs nothing more.
 SPARSE_NORMAL_SEARCH = 32
+#: Valid-pixel fraction down to which :data:`SPARSE_NORMAL_SEARCH` reaches the next scan line: 16 of the 64 beams
+#: (1.0-1.1 % of a 1242 x 375 frame on seed-2026 drives). Sparser depth searches proportionally further (8 beams,
+#: 0.53-0.57 %: 56-60 px), as scan lines are proportionally further apart.
+SPARSE_REFERENCE_FRACTION = 0.01
+
+
+def normal_search_for(fraction: float) -> int:
+    """Pixels to search for normal neighbours in depth of which ``fraction`` of the pixels are valid: 1 for dense
+    depth (above 30 %), :data:`SPARSE_NORMAL_SEARCH` down to :data:`SPARSE_REFERENCE_FRACTION`, proportionally more
+    below it (at most 256)."""
+    if fraction > 0.3:
+        return 1
+    if fraction <= 0:
+        return SPARSE_NORMAL_SEARCH
+    return min(256, max(SPARSE_NORMAL_SEARCH, round(SPARSE_NORMAL_SEARCH * SPARSE_REFERENCE_FRACTION / fraction)))
 
 
 @dataclass(frozen=True)
@@ -22,8 +37,8 @@ class FrameSettings:
     """How a depth image becomes surfels.
 
     normal_search: pixels searched for the nearest valid neighbour when taking normals (1 for dense depth; 0 means
-        choose from the fraction of valid pixels: 1 above 30 %, else :data:`SPARSE_NORMAL_SEARCH` for LiDAR-like
-        sparse depth, whose scan lines are a few pixels apart near the car and tens of pixels far away).
+        choose from the fraction of valid pixels, :func:`normal_search_for`: LiDAR-like sparse depth has scan lines a
+        few pixels apart near the car and tens of pixels far away, further the fewer the beams).
     max_relative_gap: neighbours beyond this relative depth difference are across an edge (not used for normals).
     min_depth, max_depth: measurements outside [min_depth, max_depth] metres are ignored.
     """
@@ -70,7 +85,7 @@ def prepare_frame(depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None
     depth = torch.where(in_range, depth, torch.zeros((), dtype=depth.dtype, device=depth.device))
     search = settings.normal_search
     if search <= 0:
-        search = 1 if float(in_range.float().mean()) > 0.3 else SPARSE_NORMAL_SEARCH
+        search = normal_search_for(float(in_range.float().mean()))
     vertex = backproject(depth, K)
     normal, ok = vertex_normals(vertex, in_range, search=search, max_relative_gap=settings.max_relative_gap)
     if rgb is not None:

@@ -12,6 +12,7 @@ import torch
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_K, project
 from dcslam.geometry.se3 import inverse, transform_points
+from dcslam.slam.archive import MapArchive
 
 _KEY_BITS = 21
 _KEY_OFFSET = 1 << (_KEY_BITS - 1)
@@ -224,8 +225,8 @@ class Mapper:
 
     A local map (``window`` > 0 frames) keeps only points updated in the last ``window`` frames for odometry and
     fusion, so that memory and time per frame stay flat however far the car drives; older points move, detached,
-    to an archive on the CPU (``archive=True``, so :meth:`global_map` can still be written at the end) or are
-    dropped (``archive=False``: memory bounded by the window alone).
+    to a :class:`~dcslam.slam.archive.MapArchive` in a temporary file (``archive=True``, so :meth:`global_map`
+    can still be written at the end, at the cost of reading it back then) or are dropped (``archive=False``).
     """
 
     splat: int = 1
@@ -235,7 +236,9 @@ class Mapper:
     def reset(self) -> None:
         self.map: PointMap | None = None
         self.frames = 0
-        self.archived: list[PointMap] = []
+        if getattr(self, "archived", None) is not None:
+            self.archived.clear()
+        self.archived = MapArchive()
 
     def _slide(self, pm: PointMap) -> PointMap:
         if self.window <= 0:
@@ -244,18 +247,14 @@ class Mapper:
         if not bool(old.any()):
             return pm
         if self.archive:
-            self.archived.append(pm.select(old).detach().to("cpu"))
+            self.archived.append(pm.select(old))
         return pm.select(~old)
 
     def global_map(self) -> PointMap | None:
-        """The local map and everything archived from it (detached, on the CPU); the map itself without a
-        window."""
-        if self.map is None or not self.archived:
+        """The archived points and the local map (detached, on the CPU); the map itself without a window."""
+        if self.map is None or len(self.archived) == 0:
             return self.map
-        pm = self.map.detach().to("cpu")
-        for part in self.archived:
-            pm = part.cat(pm)
-        return pm
+        return self.archived.read().cat(self.map.detach().to("cpu"))
 
     def model(self, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> ModelView | None:
         """The map rendered into a camera (what frame-to-model odometry aligns to); None while the map is empty."""

@@ -2,7 +2,7 @@ import pytest
 import torch
 
 from dcslam.errors import DcslamError
-from dcslam.slam.frame import SPARSE_NORMAL_SEARCH, FrameSettings, prepare_frame
+from dcslam.slam.frame import SPARSE_NORMAL_SEARCH, FrameSettings, normal_search_for, prepare_frame
 from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
 
 H, W = 64, 208
@@ -21,6 +21,23 @@ def test_sparse_scan_lines_get_normals_by_default(street):
     narrow = prepare_frame(sparse, K, settings=FrameSettings(normal_search=8))
     assert SPARSE_NORMAL_SEARCH >= 12
     assert int(auto.valid.sum()) > 0.8 * int((sparse > 0).sum()) and not narrow.valid.any()
+
+
+def test_normal_search_follows_density():
+    assert normal_search_for(0.5) == 1
+    assert normal_search_for(0.04) == normal_search_for(0.01) == SPARSE_NORMAL_SEARCH   # 64 ... 16 beams
+    assert 56 <= normal_search_for(0.0055) <= 60                                        # 8 beams: twice as far
+    assert normal_search_for(1e-6) == 256 and normal_search_for(0.0) == SPARSE_NORMAL_SEARCH
+
+
+def test_very_sparse_scan_lines_get_normals_by_default(street):
+    depth, K = street
+    mask = lidar_mask(H, W, row_step=40, col_step=6)             # lines 40 px apart: beyond the 32 px search
+    sparse = depth * mask
+    assert float((sparse > 0).float().mean()) < 0.01
+    auto = prepare_frame(sparse, K)
+    fixed = prepare_frame(sparse, K, settings=FrameSettings(normal_search=SPARSE_NORMAL_SEARCH))
+    assert int(auto.valid.sum()) > 0.5 * int((sparse > 0).sum()) and not fixed.valid.any()
 
 
 def test_depth_range_and_shapes(street):

@@ -100,14 +100,16 @@ class TestSummarise:
         assert s["suspect"] and "rejected" in s["reasons"][0] and s["flagged_steps"][0]["frame"] == 3
 
     def test_degraded_fraction(self):
-        reports = [_report(i, "degraded" if i <= 2 else "accepted") for i in range(21)]
+        reports = [_report(i, "degraded" if i in (1, 3) else "accepted") for i in range(21)]
         assert not summarise(reports)["suspect"]
         assert summarise(reports, HealthRules(max_degraded_fraction=0.05))["suspect"]
 
     def test_a_streak_of_degraded_steps(self):
         streak = [_report(i, "degraded" if i in (20, 21, 22) else "accepted") for i in range(41)]
+        pair = [_report(i, "degraded" if i in (1, 2) else "accepted") for i in range(41)]   # 16-beam drive 1007
         apart = [_report(i, "degraded" if i in (5, 20, 35) else "accepted") for i in range(41)]
         assert summarise(streak)["suspect"] and "consecutive" in summarise(streak)["reasons"][0]
+        assert summarise(pair)["suspect"] and "2 consecutive" in summarise(pair)["reasons"][0]
         assert not summarise(apart)["suspect"]
 
     def test_empty(self):

@@ -64,4 +64,4 @@ def test_local_map_stays_bounded_and_global_map_keeps_everything():
 def test_local_map_without_archive_drops_old_points():
     mapper = ICPSLAM(voxel_size=0.2, window=3, archive=False)
     _drive(12, mapper)
-    assert mapper.archived == [] and len(mapper.global_map()) == len(mapper.map)
+    assert len(mapper.archived) == 0 and len(mapper.global_map()) == len(mapper.map)

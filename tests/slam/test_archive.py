@@ -1,0 +1,58 @@
+"""The map archive: points that leave the local map round-trip through its temporary file unchanged."""
+from dataclasses import fields
+
+import pytest
+import torch
+
+from dcslam.errors import DcslamError
+from dcslam.slam.archive import MapArchive
+from dcslam.slam.pointmap import PointMap
+
+
+def _points(n: int, dtype: torch.dtype, seed: int) -> PointMap:
+    g = torch.Generator().manual_seed(seed)
+    f3 = lambda: torch.randn(n, 3, generator=g, dtype=dtype)  # noqa: E731
+    f1 = lambda: torch.rand(n, generator=g, dtype=dtype)  # noqa: E731
+    i1 = lambda: torch.randint(0, 1 << 62, (n,), generator=g)  # noqa: E731
+    return PointMap(f3(), f3(), f3(), f1(), f1(), i1(), i1(), i1())
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_parts_read_back_exactly_in_append_order(dtype):
+    parts = [_points(n, dtype, seed) for seed, n in enumerate((5, 0, 17, 1))]
+    archive = MapArchive()
+    for part in parts:
+        archive.append(part)
+    assert len(archive) == 23
+    assert archive.nbytes == 23 * (9 + 2) * torch.empty(0, dtype=dtype).element_size() + 23 * 3 * 8
+    out = archive.read()
+    for f in fields(PointMap):
+        expected = torch.cat([getattr(p, f.name) for p in parts])
+        assert getattr(out, f.name).dtype == expected.dtype
+        assert torch.equal(getattr(out, f.name), expected), f.name
+
+
+def test_empty_and_cleared_archives_read_none():
+    archive = MapArchive()
+    assert archive.read() is None and len(archive) == 0
+    archive.append(_points(4, torch.float32, 0))
+    archive.clear()
+    assert archive.read() is None and len(archive) == 0
+
+
+def test_archived_points_carry_no_graph():
+    pm = _points(6, torch.float64, 1)
+    pm = pm.with_(points=pm.points.clone().requires_grad_())
+    archive = MapArchive()
+    archive.append(pm.with_(points=pm.points * 2))
+    out = archive.read()
+    assert not out.points.requires_grad
+    assert torch.equal(out.points, 2 * pm.points.detach())
+
+
+def test_truncated_archive_file_is_refused():
+    archive = MapArchive()
+    archive.append(_points(8, torch.float32, 2))
+    archive._file.truncate(100)
+    with pytest.raises(DcslamError, match="truncated"):
+        archive.read()
