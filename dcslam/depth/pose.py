@@ -7,7 +7,8 @@ estimates so far, detached; zero motion for the second frame, as :class:`dcslam.
 point-to-plane ICP with the differentiable Levenberg-Marquardt, then fused at the estimate. The loss is the mean
 over consecutive pairs of ``translation_weight * |t_E| + rotation_weight * angle(R_E)``, where
 ``E = (T_gt_{i-1}^-1 T_gt_i)^-1 (T_est_{i-1}^-1 T_est_i)`` (the thesis's localisation error of the step, metres +
-radians). The gradient reaches the depth through the source points, their normals and the map points.
+radians). The gradient reaches the depth through the source points, their normals and the map points, and the
+per-pixel weights (a network's confidence), when given, through ICP's residual weights and fusion's merges.
 
 Cost on a CPU: :class:`TruncatedSolver` keeps the graph of the last ``k`` LM iterations only, and ``max_sources``
 aligns a random subset of the valid pixels (besides the odometry's own ``source_voxel`` thinning).
@@ -150,13 +151,7 @@ class PoseLoss:
     def _frame(self, depth: torch.Tensor, K: torch.Tensor, weight: torch.Tensor | None):
         from dcslam.slam.frame import prepare_frame
 
-        if weight is None:
-            return prepare_frame(depth, K, settings=self.frame_settings)
-        try:
-            return prepare_frame(depth, K, settings=self.frame_settings, weight=weight)
-        except TypeError:
-            raise DcslamError("per-pixel ICP weights need dcslam.slam.frame.prepare_frame(..., weight=...), which "
-                              "this dcslam lacks; train without confidence weights") from None
+        return prepare_frame(depth, K, settings=self.frame_settings, weight=weight)
 
     def _sources(self, frame):
         """The frame with at most ``max_sources`` valid pixels kept (at random), for the alignment only."""

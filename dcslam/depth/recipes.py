@@ -8,6 +8,7 @@ from __future__ import annotations
 
 LOSSES = ("mse", "chamfer", "pose")
 MASKS = ("sparse", "dense")
+POSE_WEIGHTS = ("confidence", "none")  # per-pixel ICP weights of the pose loss: the network's confidence, or none
 
 
 def check_pose_options(config) -> None:
@@ -21,6 +22,8 @@ def check_pose_options(config) -> None:
                  "pose_source_voxel"):
         if not 0 <= getattr(config, name) < float("inf"):
             raise DcslamError(f"--{name.replace('_', '-')} must be a number >= 0, got {getattr(config, name)}")
+    if config.pose_weights not in POSE_WEIGHTS:
+        raise DcslamError(f"unknown --pose-weights {config.pose_weights!r}; expected one of {', '.join(POSE_WEIGHTS)}")
     for name in ("pose_iterations", "pose_grad_iterations", "pose_max_sources"):
         if getattr(config, name) < (1 if name == "pose_iterations" else 0):
             raise DcslamError(f"--{name.replace('_', '-')} must be >= {1 if name == 'pose_iterations' else 0}, "

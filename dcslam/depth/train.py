@@ -69,6 +69,7 @@ class TrainConfig:
     pose_grad_iterations: int = 0
     pose_max_sources: int = 0
     pose_source_voxel: float = 0.2
+    pose_weights: str = "confidence"
     init: str = ""
 
     def check(self) -> None:
@@ -151,6 +152,17 @@ def run_model(model, batch):
     return model(batch.sparse, mask) if batch.rgb is None else model(batch.sparse, mask, batch.rgb)
 
 
+def run_model_with_confidence(model, batch, use_confidence: bool = True):
+    """(prediction (B, 1, h, w), confidence (B, 1, h, w) in [0, 1] or None): the confidence of networks that give
+    one (``forward_with_confidence``, e.g. nconv) when ``use_confidence``, else None."""
+    if not use_confidence or not hasattr(model, "forward_with_confidence"):
+        return run_model(model, batch), None
+    mask = (batch.sparse > 0).to(batch.sparse.dtype)
+    args = (batch.sparse, mask) if batch.rgb is None else (batch.sparse, mask, batch.rgb)
+    pred, confidence = model.forward_with_confidence(*args)
+    return pred, confidence.clamp(0.0, 1.0)
+
+
 def pose_loss_of(config: TrainConfig):
     """The :class:`dcslam.depth.pose.PoseLoss` of a configuration."""
     from dcslam.depth.pose import PoseLoss, PoseLossSettings, default_odometry
@@ -173,12 +185,13 @@ class Objective:
         self.weights = {"pose": config.pose_weight, "mse": config.mse_weight, "chamfer": config.chamfer_weight}
         self.parts: dict = {}
 
-    def __call__(self, pred, batch):
+    def __call__(self, pred, batch, confidence=None):
+        """``confidence`` (B, 1, h, w) or None: per-pixel ICP weights of the pose loss."""
         if self.loss == "mse":
             return self.mse(pred, batch.sparse, batch.dense)
         if self.loss == "chamfer":
             return self.chamfer(pred, batch.dense, batch.K, batch.T_world_cam)
-        pose, details = self.pose(pred, batch.K, batch.T_world_cam)
+        pose, details = self.pose(pred, batch.K, batch.T_world_cam, confidence)
         terms = {"pose": pose}
         if self.weights["mse"] > 0:
             terms["mse"] = self.mse(pred, batch.sparse, batch.dense)
@@ -190,7 +203,8 @@ class Objective:
         return sum(self.weights[k] * v for k, v in terms.items())
 
 
-def validate_pose(model, drives: list[DriveFrames], pose, frames_per_window: int, device) -> dict:
+def validate_pose(model, drives: list[DriveFrames], pose, frames_per_window: int, device,
+                  use_confidence: bool = True) -> dict:
     """The pose loss of the validation drives without back-propagation: its mean over the windows of
     ``frames_per_window`` frames (those of >= 2 frames) of each drive, averaged over the drives, with the mean
     translation (m) and rotation (rad) error per step."""
@@ -203,7 +217,8 @@ def validate_pose(model, drives: list[DriveFrames], pose, frames_per_window: int
                 if len(window) < 2:
                     continue
                 batch = frames.load(window).to(device)
-                loss, details = pose(run_model(model, batch), batch.K, batch.T_world_cam)
+                pred, confidence = run_model_with_confidence(model, batch, use_confidence)
+                loss, details = pose(pred, batch.K, batch.T_world_cam, confidence)
                 rows.append((float(loss), float(details["translation_m"].mean()),
                              float(details["rotation_rad"].mean())))
             if rows:
@@ -313,6 +328,11 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
 
         wrapped = DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
     objective = Objective(config, map_builder)
+    use_confidence = config.loss == "pose" and config.pose_weights == "confidence" and \
+        hasattr(model, "forward_with_confidence")
+    if use_confidence and world > 1:
+        raise DcslamError("the pose loss with confidence weights runs in one process; pass --pose-weights none or "
+                          "--nproc 1")
     chunks = _chunks(train_frames, config.chunk)
     if config.loss == "pose":  # a pose window needs a frame pair
         chunks = [(d, window) for d, window in chunks if len(window) >= 2]
@@ -343,8 +363,11 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
             for position in range(next_chunk, per_rank):
                 d, window = mine[position]
                 batch = train_frames[d].load(window).to(device)
-                pred = run_model(wrapped, batch)
-                loss = objective(pred, batch)
+                if use_confidence:  # (not through DistributedDataParallel: refused above)
+                    pred, confidence = run_model_with_confidence(model, batch)
+                    loss = objective(pred, batch, confidence)
+                else:
+                    loss = objective(run_model(wrapped, batch), batch)
                 if not torch.isfinite(loss):
                     raise DcslamError(f"training loss became {float(loss)} at step {step} ({train_frames[d].name})")
                 optimizer.zero_grad(set_to_none=True)
@@ -361,7 +384,8 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
             if rank == 0 and val_frames:
                 last_val = validate(model, val_frames, map_frames_val, device, map_builder)
                 if objective.pose is not None:
-                    last_val.update(validate_pose(model, val_frames, objective.pose, config.pose_frames, device))
+                    last_val.update(validate_pose(model, val_frames, objective.pose, config.pose_frames, device,
+                                                  config.pose_weights == "confidence"))
                 write({"kind": "val", "epoch": epoch, "step": step, **last_val})
                 key = selection_key(config.loss)
                 if best is None or last_val[key] < best[key]:

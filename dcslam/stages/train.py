@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from dcslam.depth.models import ARCHITECTURES
-from dcslam.depth.recipes import LOSSES, MASKS, check_pose_options, run_name, selection_key
+from dcslam.depth.recipes import LOSSES, MASKS, POSE_WEIGHTS, check_pose_options, run_name, selection_key
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
 from dcslam.io.atomic import write_json_atomic
@@ -72,6 +72,8 @@ class TrainStageConfig:
     pose_max_sources: int = option(0, help="Pose loss: align at most N random valid pixels per frame (0 = all).")
     pose_source_voxel: float = option(0.2, help="Pose loss: ICP keeps one source point per voxel of this size, "
                                                 "metres (0 = every point).")
+    pose_weights: str = option("confidence", choices=POSE_WEIGHTS, help="Pose loss: per-pixel ICP weights: "
+                               "confidence (the network's, for nconv models; others have none) or none.")
 
     def __post_init__(self) -> None:
         for name, choices in (("loss", LOSSES), ("mask", MASKS), ("model", MODELS)):
@@ -122,7 +124,7 @@ class TrainStageConfig:
 
 POSE_OPTIONS = ("pose_frames", "pose_weight", "mse_weight", "chamfer_weight", "pose_translation_weight",
                 "pose_rotation_weight", "pose_iterations", "pose_grad_iterations", "pose_max_sources",
-                "pose_source_voxel")
+                "pose_source_voxel", "pose_weights")
 RUN_FILES = ("model.pt", "last.pt", "metrics.jsonl", "config.json", "curves.png")
 
 

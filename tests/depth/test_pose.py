@@ -114,6 +114,18 @@ class TestPoseLoss:
         grad = torch.autograd.grad(loss(noisy, K, T)[0], noisy)[0]
         assert float(grad[0].abs().sum()) > 0 and float(grad[1].abs().sum()) > 0  # map frame and source frame
 
+    def test_gradcheck_wrt_weight(self):
+        depth, T = pair()
+        v, u = torch.meshgrid(torch.arange(H, dtype=torch.float64), torch.arange(W, dtype=torch.float64),
+                              indexing="ij")
+        noisy = depth * (1 + 0.01 * torch.sin(u + 2 * v))
+        weight = (0.5 + 0.3 * torch.cos(u - v)).expand(2, 1, H, W).clone().requires_grad_()
+        loss = small_loss(3)
+        assert torch.autograd.gradcheck(lambda w: loss(noisy, K, T, w)[0], (weight,), eps=1e-7, atol=1e-5)
+        zero_far = weight.detach().clone()
+        zero_far[1, 0, :, W // 2:] = 0  # half of the source frame not trusted: a different pose
+        assert float(loss(noisy, K, T, zero_far)[0]) != pytest.approx(float(loss(noisy, K, T, weight)[0]), abs=1e-6)
+
     def test_source_subsampling(self):
         depth, T = pair()
         loss = small_loss(10, max_sources=40)

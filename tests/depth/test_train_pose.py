@@ -96,3 +96,14 @@ def test_init_starts_from_the_other_run(workspace):
 def test_bad_pose_options(workspace, bad):
     with pytest.raises(DcslamError, match="--pose|--mse"):
         _config(workspace, **bad).check()
+
+
+def test_nconv_confidence_weights_the_icp(workspace):
+    losses = {}
+    for weights in ("confidence", "none"):
+        run = workspace / "runs" / weights
+        train(run, _config(workspace, model="nconv", max_frames=3, pose_weights=weights))
+        losses[weights] = _rows(run)[0]["pose"]
+    assert losses["confidence"] != pytest.approx(losses["none"], rel=1e-6)
+    with pytest.raises(DcslamError, match="--pose-weights"):
+        _config(workspace, pose_weights="depth").check()
