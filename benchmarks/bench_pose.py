@@ -53,6 +53,7 @@ def one_step(drive: str, frames: int, model: str, iterations: int, options: dict
     from dcslam.depth.train import Objective, TrainConfig, initial_model, run_model
 
     torch.set_num_threads(1)
+    torch.manual_seed(0)  # the same untrained network in every configuration
     config = TrainConfig(loss="pose", model=model, train_drives=[Path(drive)], pose_frames=frames,
                          pose_iterations=iterations, **options)
     data = DriveFrames(Path(drive), 200, 1, 1.0, 0, "sparse", "dense")
