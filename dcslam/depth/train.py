@@ -3,9 +3,10 @@
 Losses: masked MSE (``sparse`` or ``dense`` mask), chamfer between maps of predicted and ground-truth depth built
 with ground-truth poses (``map_frames`` frames per map), or the pose loss (:mod:`dcslam.depth.pose`: the relative-pose
 error of differentiable frame-to-model ICP over windows of ``pose_frames`` frames, plus optional MSE and chamfer
-terms); ``init`` starts from another run's model file (fine-tuning). AdamW (lr 1e-3, weight decay 0.01); at most 200 frames
-per drive; the training drives in turn; after each epoch a validation pass without back-propagation averaged over
-the validation drives (chamfer, MSE, MAE, RMSE); the best validation checkpoint is kept.
+terms); ``init`` starts from another run's model file (fine-tuning). AdamW (lr 1e-3, weight decay 0.01); at most
+200 frames per drive; the training drives in turn; after each epoch a validation pass without back-propagation
+averaged over the validation drives (chamfer, MSE, MAE, RMSE; and the pose error for pose runs); the best validation
+checkpoint (by the run's own loss) is kept.
 
 :func:`train_loop` writes into a run folder ``metrics.jsonl`` (one JSON object per training step and per validation),
 ``model.pt`` (best validation) and ``last.pt`` (resume state, written after every drive); the run folder itself (its

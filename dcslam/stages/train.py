@@ -115,8 +115,9 @@ class TrainStageConfig:
         from dcslam.depth.train import TrainConfig
 
         pose = {name: getattr(self, name) for name in POSE_OPTIONS}
-        return TrainConfig(**pose, init=str(init) if init else "", loss=self.loss, mask=self.mask, map_frames=self.map_frames, model=self.model,
-                           epochs=self.epochs, lr=self.lr, weight_decay=self.weight_decay,
+        return TrainConfig(**pose, init=str(init) if init else "", loss=self.loss, mask=self.mask,
+                           map_frames=self.map_frames, model=self.model, epochs=self.epochs, lr=self.lr,
+                           weight_decay=self.weight_decay,
                            max_frames=self.max_frames, stride=self.stride, scale=self.scale, crop=self.crop,
                            batch_size=self.batch_size, seed=self.seed, device=self.device, input=self.input,
                            target=self.target, train_drives=train_drives, val_drives=val_drives)
