@@ -1,11 +1,33 @@
 """The training recipes' names, decoded in this one place (no torch: the command line imports it).
 
-A recipe is a loss (``mse`` with a ``sparse`` or ``dense`` mask, or ``chamfer`` over maps of ``map_frames`` frames).
+A recipe is a loss (``mse`` with a ``sparse`` or ``dense`` mask, ``chamfer`` over maps of ``map_frames`` frames, or
+``pose``: the relative-pose error of dcslam's differentiable ICP over windows of frames, issue 14), and for ``pose``
+the run it was fine-tuned from (``init``), if any.
 """
 from __future__ import annotations
 
-LOSSES = ("mse", "chamfer")
+LOSSES = ("mse", "chamfer", "pose")
 MASKS = ("sparse", "dense")
+POSE_WEIGHTS = ("confidence", "none")  # per-pixel ICP weights of the pose loss: the network's confidence, or none
+
+
+def check_pose_options(config) -> None:
+    """The pose loss's options of a training configuration (``pose_frames``, the weights, ...); raises
+    :class:`dcslam.errors.DcslamError` naming the option."""
+    from dcslam.errors import DcslamError
+
+    if config.pose_frames < 2:
+        raise DcslamError(f"--pose-frames must be >= 2 (a window of consecutive frames), got {config.pose_frames}")
+    for name in ("pose_weight", "mse_weight", "chamfer_weight", "pose_translation_weight", "pose_rotation_weight",
+                 "pose_source_voxel"):
+        if not 0 <= getattr(config, name) < float("inf"):
+            raise DcslamError(f"--{name.replace('_', '-')} must be a number >= 0, got {getattr(config, name)}")
+    if config.pose_weights not in POSE_WEIGHTS:
+        raise DcslamError(f"unknown --pose-weights {config.pose_weights!r}; expected one of {', '.join(POSE_WEIGHTS)}")
+    for name in ("pose_iterations", "pose_grad_iterations", "pose_max_sources"):
+        if getattr(config, name) < (1 if name == "pose_iterations" else 0):
+            raise DcslamError(f"--{name.replace('_', '-')} must be >= {1 if name == 'pose_iterations' else 0}, "
+                              f"got {getattr(config, name)}")
 
 
 def map_frames_of(loss: str, map_frames: int) -> int:
@@ -14,13 +36,24 @@ def map_frames_of(loss: str, map_frames: int) -> int:
 
 
 def selection_key(loss: str) -> str:
-    """The validation metric that picks a run's best checkpoint: its own loss (``chamfer`` or ``mse``)."""
-    return "chamfer" if loss == "chamfer" else "mse"
+    """The validation metric that picks a run's best checkpoint: its own loss (``chamfer``, ``mse`` or ``pose``)."""
+    return loss if loss in ("chamfer", "pose") else "mse"
 
 
-def run_name(loss: str, mask: str, map_frames: int) -> str:
-    """The default run name of a recipe: ``mse-<mask>`` or ``chamfer-<map frames>``."""
+def run_name(loss: str, mask: str, map_frames: int, init: str | None = None) -> str:
+    """The default run name of a recipe: ``mse-<mask>``, ``chamfer-<map frames>``, ``pose`` or
+    ``pose-from-<init run>``."""
+    if loss == "pose":
+        return f"pose-from-{init}" if init else "pose"
     return f"{loss}-{mask}" if loss == "mse" else f"{loss}-{map_frames}"
+
+
+def init_run(settings: dict) -> str:
+    """The name of the run a run was fine-tuned from (its ``init`` model file's folder), "" if none."""
+    from pathlib import PurePath
+
+    init = settings.get("init") or ""
+    return PurePath(init).parent.name if init else ""
 
 
 def recipe_label(settings: dict) -> str:
@@ -30,4 +63,7 @@ def recipe_label(settings: dict) -> str:
         return "chamfer single-frame" if int(settings.get("map_frames", 1)) <= 1 else "chamfer multi-frame"
     if loss == "mse":
         return f"MSE {settings.get('mask', 'dense')} mask"
+    if loss == "pose":
+        init = init_run(settings)
+        return f"pose, fine-tuned from {init}" if init else "pose from scratch"
     return f"{loss} (unknown recipe)"

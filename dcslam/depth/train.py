@@ -1,9 +1,12 @@
 """Training a depth-completion network with the thesis's recipes.
 
-Losses: masked MSE (``sparse`` or ``dense`` mask) or chamfer between maps of predicted and ground-truth depth built
-with ground-truth poses (``map_frames`` frames per map). AdamW (lr 1e-3, weight decay 0.01); at most 200 frames
-per drive; the training drives in turn; after each epoch a validation pass without back-propagation averaged over
-the validation drives (chamfer, MSE, MAE, RMSE); the best validation checkpoint is kept.
+Losses: masked MSE (``sparse`` or ``dense`` mask), chamfer between maps of predicted and ground-truth depth built
+with ground-truth poses (``map_frames`` frames per map), or the pose loss (:mod:`dcslam.depth.pose`: the relative-pose
+error of differentiable frame-to-model ICP over windows of ``pose_frames`` frames, plus optional MSE and chamfer
+terms); ``init`` starts from another run's model file (fine-tuning). AdamW (lr 1e-3, weight decay 0.01); at most
+200 frames per drive; the training drives in turn; after each epoch a validation pass without back-propagation
+averaged over the validation drives (chamfer, MSE, MAE, RMSE; and the pose error for pose runs); the best validation
+checkpoint (by the run's own loss) is kept.
 
 :func:`train_loop` writes into a run folder ``metrics.jsonl`` (one JSON object per training step and per validation),
 ``model.pt`` (best validation) and ``last.pt`` (resume state, written after every drive); the run folder itself (its
@@ -26,7 +29,7 @@ import torch
 from dcslam.depth.data import DriveFrames, check_view, frame_windows
 from dcslam.depth.losses import MASKS, MaskedMSE, batch_depth_errors
 from dcslam.depth.maps import MapChamfer
-from dcslam.depth.recipes import LOSSES, map_frames_of, selection_key
+from dcslam.depth.recipes import LOSSES, check_pose_options, map_frames_of, selection_key
 from dcslam.depth.models import architectures, build_model, model_record, save_model
 from dcslam.errors import DcslamError
 from dcslam.progress import Bar
@@ -57,6 +60,18 @@ class TrainConfig:
     target: str = "dense"
     train_drives: list = field(default_factory=list)
     val_drives: list = field(default_factory=list)
+    pose_frames: int = 4
+    pose_weight: float = 1.0
+    mse_weight: float = 0.0
+    chamfer_weight: float = 0.0
+    pose_translation_weight: float = 1.0
+    pose_rotation_weight: float = 1.0
+    pose_iterations: int = 10
+    pose_grad_iterations: int = 0
+    pose_max_sources: int = 0
+    pose_source_voxel: float = 0.2
+    pose_weights: str = "confidence"
+    init: str = ""
 
     def check(self) -> None:
         if self.loss not in LOSSES:
@@ -68,6 +83,7 @@ class TrainConfig:
         for name in ("map_frames", "epochs", "max_frames", "stride", "batch_size"):
             if getattr(self, name) < 1:
                 raise DcslamError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
+        check_pose_options(self)
         check_view(self.scale, self.crop)
         from dcslam.io.drive import check_input_kind
 
@@ -78,7 +94,9 @@ class TrainConfig:
 
     @property
     def chunk(self) -> int:
-        """Frames per optimisation step: one multi-frame map window, else one batch."""
+        """Frames per optimisation step: one pose window, one multi-frame map window, else one batch."""
+        if self.loss == "pose":
+            return self.pose_frames
         frames = map_frames_of(self.loss, self.map_frames)
         return frames if frames > 1 else self.batch_size
 
@@ -135,18 +153,82 @@ def run_model(model, batch):
     return model(batch.sparse, mask) if batch.rgb is None else model(batch.sparse, mask, batch.rgb)
 
 
+def run_model_with_confidence(model, batch, use_confidence: bool = True):
+    """(prediction (B, 1, h, w), confidence (B, 1, h, w) in [0, 1] or None): the confidence of networks that give
+    one (``forward_with_confidence``, e.g. nconv) when ``use_confidence``, else None."""
+    if not use_confidence or not hasattr(model, "forward_with_confidence"):
+        return run_model(model, batch), None
+    mask = (batch.sparse > 0).to(batch.sparse.dtype)
+    args = (batch.sparse, mask) if batch.rgb is None else (batch.sparse, mask, batch.rgb)
+    pred, confidence = model.forward_with_confidence(*args)
+    return pred, confidence.clamp(0.0, 1.0)
+
+
+def pose_loss_of(config: TrainConfig):
+    """The :class:`dcslam.depth.pose.PoseLoss` of a configuration."""
+    from dcslam.depth.pose import PoseLoss, PoseLossSettings, default_odometry
+
+    odometry = default_odometry(config.pose_iterations, config.pose_grad_iterations, config.pose_source_voxel)
+    return PoseLoss(odometry, settings=PoseLossSettings(config.pose_translation_weight, config.pose_rotation_weight,
+                                                        config.pose_max_sources))
+
+
 class Objective:
-    """The training loss of a configuration: ``objective(pred, batch)`` → scalar."""
+    """The training loss of a configuration: ``objective(pred, batch)`` → scalar; :attr:`parts` holds the terms of
+    the last call (pose loss: ``pose``, its mean ``pose_translation_m`` and ``pose_rotation_rad`` per step, and
+    ``mse`` / ``chamfer`` when weighted in)."""
 
     def __init__(self, config: TrainConfig, map_builder=None):
         self.loss = config.loss
         self.mse = MaskedMSE(config.mask)
         self.chamfer = MapChamfer(config.map_frames, map_builder)
+        self.pose = pose_loss_of(config) if config.loss == "pose" else None
+        self.weights = {"pose": config.pose_weight, "mse": config.mse_weight, "chamfer": config.chamfer_weight}
+        self.parts: dict = {}
 
-    def __call__(self, pred, batch):
+    def __call__(self, pred, batch, confidence=None):
+        """``confidence`` (B, 1, h, w) or None: per-pixel ICP weights of the pose loss."""
         if self.loss == "mse":
             return self.mse(pred, batch.sparse, batch.dense)
-        return self.chamfer(pred, batch.dense, batch.K, batch.T_world_cam)
+        if self.loss == "chamfer":
+            return self.chamfer(pred, batch.dense, batch.K, batch.T_world_cam)
+        pose, details = self.pose(pred, batch.K, batch.T_world_cam, confidence)
+        terms = {"pose": pose}
+        if self.weights["mse"] > 0:
+            terms["mse"] = self.mse(pred, batch.sparse, batch.dense)
+        if self.weights["chamfer"] > 0:
+            terms["chamfer"] = self.chamfer(pred, batch.dense, batch.K, batch.T_world_cam)
+        self.parts = {**{k: float(v.detach()) for k, v in terms.items()},
+                      "pose_translation_m": float(details["translation_m"].mean()),
+                      "pose_rotation_rad": float(details["rotation_rad"].mean()), "pose_rejected": details["rejected"]}
+        return sum(self.weights[k] * v for k, v in terms.items())
+
+
+def validate_pose(model, drives: list[DriveFrames], pose, frames_per_window: int, device,
+                  use_confidence: bool = True) -> dict:
+    """The pose loss of the validation drives without back-propagation: its mean over the windows of
+    ``frames_per_window`` frames (those of >= 2 frames) of each drive, averaged over the drives, with the mean
+    translation (m) and rotation (rad) error per step."""
+    per_drive = []
+    model.eval()
+    with torch.no_grad():
+        for frames in drives:
+            rows = []
+            for window in frame_windows(len(frames), frames_per_window):
+                if len(window) < 2:
+                    continue
+                batch = frames.load(window).to(device)
+                pred, confidence = run_model_with_confidence(model, batch, use_confidence)
+                loss, details = pose(pred, batch.K, batch.T_world_cam, confidence)
+                rows.append((float(loss), float(details["translation_m"].mean()),
+                             float(details["rotation_rad"].mean())))
+            if rows:
+                per_drive.append(np.mean(rows, axis=0))
+    model.train()
+    if not per_drive:
+        raise DcslamError(f"no validation drive has {frames_per_window} frames for the pose loss")
+    mean = np.mean(per_drive, axis=0)
+    return {"pose": float(mean[0]), "pose_translation_m": float(mean[1]), "pose_rotation_rad": float(mean[2])}
 
 
 def validate(model, drives: list[DriveFrames], map_frames: int, device, map_builder=None) -> dict:
@@ -176,6 +258,23 @@ def validate(model, drives: list[DriveFrames], map_frames: int, device, map_buil
                               "rmse_mm": math.sqrt(mse) * 1000.0})
     model.train()
     return {key: float(np.mean([d[key] for d in per_drive])) for key in ("chamfer", "mse", "mae_mm", "rmse_mm")}
+
+
+def initial_model(config: TrainConfig):
+    """A new network of ``config.model``, or, with ``config.init``, the network of that model file (which must be
+    of the same architecture; its hyperparameters come with it)."""
+    if not config.init:
+        return build_model(config.model, **config.model_hparams)
+    from dcslam.depth.models import model_from_record, read_torch_file
+
+    path = Path(config.init)
+    if not path.exists():
+        raise DcslamError(f"--init model {path} not found; train that run first (`dcslam train --name ...`)")
+    record = read_torch_file(path, "model file", "retrain that run with `dcslam train --force`")
+    if isinstance(record, dict) and record.get("arch") != config.model:
+        raise DcslamError(f"--init {path} is a {record.get('arch')} network, not {config.model}; pass "
+                          f"--model {record.get('arch')}")
+    return model_from_record(record, str(path))
 
 
 def _chunks(drives: list[DriveFrames], chunk: int) -> list[tuple[int, range]]:
@@ -210,7 +309,7 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
     Writes ``metrics.jsonl``, ``last.pt`` (after every drive and epoch) and ``model.pt`` (best validation) on rank 0,
     and calls ``on_epoch()`` there after each epoch. With ``resume``, continues from ``last.pt``.
     """
-    model = build_model(config.model, **config.model_hparams).to(device)
+    model = initial_model(config).to(device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     metrics_path = run_dir / "metrics.jsonl"
     epoch, next_chunk, step, best, last_val = 0, 0, 0, None, None
@@ -230,7 +329,14 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
 
         wrapped = DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
     objective = Objective(config, map_builder)
+    use_confidence = config.loss == "pose" and config.pose_weights == "confidence" and \
+        hasattr(model, "forward_with_confidence")
+    if use_confidence and world > 1:
+        raise DcslamError("the pose loss with confidence weights runs in one process; pass --pose-weights none or "
+                          "--nproc 1")
     chunks = _chunks(train_frames, config.chunk)
+    if config.loss == "pose":  # a pose window needs a frame pair
+        chunks = [(d, window) for d, window in chunks if len(window) >= 2]
     per_rank = len(chunks) // world
     if per_rank == 0:
         raise DcslamError(f"{len(chunks)} training steps per epoch cannot be shared by {world} processes")
@@ -258,15 +364,19 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
             for position in range(next_chunk, per_rank):
                 d, window = mine[position]
                 batch = train_frames[d].load(window).to(device)
-                pred = run_model(wrapped, batch)
-                loss = objective(pred, batch)
+                if use_confidence:  # (not through DistributedDataParallel: refused above)
+                    pred, confidence = run_model_with_confidence(model, batch)
+                    loss = objective(pred, batch, confidence)
+                else:
+                    loss = objective(run_model(wrapped, batch), batch)
                 if not torch.isfinite(loss):
                     raise DcslamError(f"training loss became {float(loss)} at step {step} ({train_frames[d].name})")
                 optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                optimizer.step()
+                if loss.requires_grad:  # a pose window whose every ICP step was rejected has no gradient
+                    loss.backward()
+                    optimizer.step()
                 write({"kind": "train", "epoch": epoch, "step": step, "drive": train_frames[d].name,
-                       "loss": float(loss.detach())})
+                       "loss": float(loss.detach()), **objective.parts})
                 step += 1
                 bar.advance(status=f"epoch {epoch} loss {float(loss.detach()):.4g}")
                 last_of_drive = position + 1 == per_rank or mine[position + 1][0] != d
@@ -274,6 +384,9 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
                     checkpoint(epoch, position + 1)
             if rank == 0 and val_frames:
                 last_val = validate(model, val_frames, map_frames_val, device, map_builder)
+                if objective.pose is not None:
+                    last_val.update(validate_pose(model, val_frames, objective.pose, config.pose_frames, device,
+                                                  config.pose_weights == "confidence"))
                 write({"kind": "val", "epoch": epoch, "step": step, **last_val})
                 key = selection_key(config.loss)
                 if best is None or last_val[key] < best[key]:

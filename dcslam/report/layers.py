@@ -19,8 +19,10 @@ from dcslam.workspace import LayerRef, Workspace, drive_file, find_layer, resolv
 __all__ = ["LayerRef", "TrajectoryPair", "drive_file", "find_layer", "load_pair", "resolve_layer",
            "score_layer_depth", "score_layer_trajectories", "select_drives", "slam_settings", "slam_trajectory"]
 
-#: The SLAM settings that make two trajectories comparable (``beams``: the sparse input's beam count, when known).
-RUN_SETTINGS = ("frames", "odometry", "mapper", "solver", "association", "voxel_size", "beams")
+#: The SLAM settings that make two trajectories comparable (``beams``: the sparse input's beam count, when known;
+#: ``confidence`` and ``min_confidence``: how a layer's confidence was used, ``none`` for a layer without one).
+RUN_SETTINGS = ("frames", "odometry", "mapper", "solver", "association", "voxel_size", "beams", "confidence",
+                "min_confidence")
 
 
 def score_layer_depth(ws: Workspace, layer: LayerRef, drives: list[str], interpolate: bool = True,
@@ -137,6 +139,9 @@ def slam_settings(ws: Workspace, layer: str, drive: str, root: Path | None = Non
     except json.JSONDecodeError:
         raise DcslamError(f"{path}: not valid JSON; rerun `dcslam slam --depth {layer} --force`") from None
     settings = {**record.get("settings", {}), **({"beams": record["beams"]} if "beams" in record else {})}
+    used = record.get("confidence")
+    if isinstance(used, dict) and "mode" in used:    # what was done, not what was asked (a layer may have none)
+        settings.update(confidence=used["mode"], min_confidence=used.get("min_confidence", 0.0))
     out = {k: settings[k] for k in RUN_SETTINGS if k in settings}
     out["suspect"] = bool(record.get("rejected_steps")) or bool(record.get("suspect"))
     return out

@@ -54,7 +54,10 @@ class Frame:
     """A depth frame in its camera.
 
     Shape: depth (1, 1, H, W) metres; vertex (H, W, 3) and normal (H, W, 3) in the camera frame; valid (H, W) bool
-    (depth in range and a normal); rgb (H, W, 3) in [0, 1] or None; K (3, 3).
+    (depth in range, a normal, and a weight above 0); rgb (H, W, 3) in [0, 1] or None; K (3, 3); weight (H, W) in
+    [0, 1] or None (every pixel counts fully): how much each pixel's point is trusted, e.g. a completer's confidence.
+    ICP multiplies its residuals' robust weights by it and fusion its surfel confidences; a pixel of weight 0 is
+    invalid (neither aligned, nor counted as evidence, nor fused).
     """
 
     depth: torch.Tensor
@@ -63,6 +66,7 @@ class Frame:
     valid: torch.Tensor
     rgb: torch.Tensor | None
     K: torch.Tensor
+    weight: torch.Tensor | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -70,10 +74,15 @@ class Frame:
 
 
 def prepare_frame(depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None = None,
-                  settings: FrameSettings = FrameSettings()) -> Frame:
+                  settings: FrameSettings = FrameSettings(), weight: torch.Tensor | None = None) -> Frame:
     """Back-project one depth image and take its normals.
 
-    Shape: depth (1, 1, H, W) or (H, W) metres, K (3, 3), rgb (1, 3, H, W) or (3, H, W) in [0, 1] -> :class:`Frame`.
+    Normals come from the depth alone (a pixel of weight 0 still serves as its neighbours' normal neighbour); the
+    weight only decides how much each pixel counts (see :class:`Frame`). Gradients flow to ``depth`` and
+    ``weight``.
+
+    Shape: depth (1, 1, H, W) or (H, W) metres, K (3, 3), rgb (1, 3, H, W) or (3, H, W) in [0, 1], weight
+    (1, 1, H, W) or (H, W) in [0, 1] or None -> :class:`Frame`.
     """
     if isinstance(depth, torch.Tensor) and depth.ndim == 2:
         depth = depth[None, None]
@@ -94,4 +103,22 @@ def prepare_frame(depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None
         if rgb.shape != (1, 3, H, W):
             raise DcslamError(f"rgb has shape {tuple(rgb.shape)}, expected (1, 3, {H}, {W})")
         rgb = rgb[0].permute(1, 2, 0).to(depth.dtype)
-    return Frame(depth, vertex[0].permute(1, 2, 0), normal[0].permute(1, 2, 0), ok[0, 0], rgb, K)
+    valid = ok[0, 0]
+    if weight is not None:
+        weight = _check_weight(weight, H, W).to(depth.dtype)
+        valid = valid & (weight.detach() > 0)
+    return Frame(depth, vertex[0].permute(1, 2, 0), normal[0].permute(1, 2, 0), valid, rgb, K, weight)
+
+
+def _check_weight(weight: torch.Tensor, H: int, W: int) -> torch.Tensor:
+    """A per-pixel weight as (H, W), checked: the image's size, finite, in [0, 1]."""
+    if not isinstance(weight, torch.Tensor):
+        raise DcslamError(f"weight must be a torch tensor, got {type(weight).__name__}")
+    if weight.ndim == 4 and weight.shape[:2] == (1, 1):
+        weight = weight[0, 0]
+    if weight.shape != (H, W):
+        raise DcslamError(f"weight has shape {tuple(weight.shape)}, expected ({H}, {W}) or (1, 1, {H}, {W})")
+    w = weight.detach()
+    if not bool(torch.isfinite(w).all()) or bool((w < 0).any()) or bool((w > 1).any()):
+        raise DcslamError("weight must be finite and in [0, 1] (e.g. a completer's confidence)")
+    return weight

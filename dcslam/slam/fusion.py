@@ -6,7 +6,8 @@ with the highest confidence wins the pixel; (2) frame surfels without a match go
 start a new point per new voxel (so the map grows with the explored volume, not with time); (3) matched points are
 merged by confidence-weighted averaging, with the weight ``alpha = exp(-gamma^2 / 2 sigma^2)`` of the *normalised
 radial image distance* gamma of the pixel (Keller's definition: gradSLAM used the metric point norm, which at street
-ranges clamps every weight to the same tiny value); (4) unstable points are pruned: points seen in fewer than
+ranges clamps every weight to the same tiny value), times the frame's per-pixel weight where it has one
+(:attr:`~dcslam.slam.frame.Frame.weight`, e.g. a completer's confidence; pixels of weight 0 are not fused); (4) unstable points are pruned: points seen in fewer than
 ``min_observations`` frames and not updated for ``prune_after`` frames, and unstable points found in front of a
 surface the current frame sees (free space).
 """
@@ -32,6 +33,14 @@ def surfel_weights(frame: Frame, pixels: torch.Tensor, sigma: float) -> torch.Te
     far = math.hypot(max(float(cx), W - 1 - float(cx)), max(float(cy), H - 1 - float(cy)))
     gamma2 = ((u - cx) ** 2 + (v - cy) ** 2) / far ** 2
     return torch.exp(-gamma2 / (2 * sigma ** 2))
+
+
+def pixel_weights(frame: Frame, pixels: torch.Tensor) -> torch.Tensor:
+    """The frame's per-pixel weight (:attr:`Frame.weight`, e.g. a completer's confidence) at ``pixels``, 1 where the
+    frame has none. Shape: pixels (F,) flat indices -> (F,)."""
+    if frame.weight is None:
+        return torch.ones(pixels.shape[0], dtype=frame.vertex.dtype, device=pixels.device)
+    return frame.weight.reshape(-1)[pixels]
 
 
 def surfel_radius(frame: Frame, points_cam: torch.Tensor, normals_cam: torch.Tensor) -> torch.Tensor:
@@ -92,7 +101,7 @@ class PointFusion(Mapper):
         dtype, device = frame.vertex.dtype, frame.vertex.device
         pm = self.map if self.map is not None else PointMap.empty(dtype, device)
         pixels, p_w, n_w, colors, radius, v_cam = frame_surfels(frame, T_world_cam)
-        weight = surfel_weights(frame, pixels, self.sigma)
+        weight = surfel_weights(frame, pixels, self.sigma) * pixel_weights(frame, pixels)
         target = torch.full_like(pixels, -1)
         free_space = torch.zeros(len(pm), dtype=torch.bool, device=device)
         if len(pm) and len(pixels):

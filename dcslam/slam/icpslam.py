@@ -1,13 +1,14 @@
 """The ICP-SLAM map (gradSLAM's ICPSLAM): every frame's points accumulated in the world frame, downsampled on a
-voxel grid (points falling in one voxel are averaged), and rendered for frame-to-model ICP. No confidence gating and
-no pruning: the plain accumulated model that PointFusion improves on.
+voxel grid (points falling in one voxel are averaged, weighted by the frame's per-pixel weight where it has one),
+and rendered for frame-to-model ICP. No confidence gating and no pruning: the plain accumulated model that
+PointFusion improves on.
 """
 from __future__ import annotations
 
 import torch
 
 from dcslam.slam.frame import Frame
-from dcslam.slam.fusion import frame_surfels
+from dcslam.slam.fusion import frame_surfels, pixel_weights
 from dcslam.slam.pointmap import Mapper, PointMap, assign_voxels, merge, voxel_keys
 
 
@@ -34,7 +35,7 @@ class ICPSLAM(Mapper):
         pixels, p_w, n_w, colors, radius, _ = frame_surfels(frame, T_world_cam)
         target, new_keys = assign_voxels(pm, voxel_keys(p_w, self.voxel_size), torch.full_like(pixels, -1),
                                          self.voxel_size)
-        pm = merge(pm, target, new_keys, p_w, n_w, colors, radius, torch.ones_like(radius), self.frames)
+        pm = merge(pm, target, new_keys, p_w, n_w, colors, radius, pixel_weights(frame, pixels), self.frames)
         if not self.keep_graph:
             pm = pm.detach()
         self.map = self._slide(pm)

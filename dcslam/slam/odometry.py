@@ -59,12 +59,18 @@ class PointToPlane:
     sparse LiDAR depth self-align: its scan rings land on the same pixels at the initial guess, so any move lost
     partners and the differentiable LM never left the initial pose.)
 
-    Shape: source (F, 3), source_normals (F, 3) camera frame.
+    ``weights`` (per source point, in [0, 1], e.g. a completer's confidence) multiply the kernel's weights in
+    :meth:`linearize` and the kernel's cost in :meth:`cost`, so the pose is a differentiable function of them as of
+    the depth; a point of weight 0 is never a pair (it is no evidence for the inlier count).
+
+    Shape: source (F, 3), source_normals (F, 3) camera frame, weights (F,) or None (all 1).
     """
 
     def __init__(self, source: torch.Tensor, source_normals: torch.Tensor, associate, max_distance: float,
-                 cos_max_angle: float, kernel=None, hold_below: float = 0.0):
-        self.source, self.source_normals = source, source_normals
+                 cos_max_angle: float, kernel=None, hold_below: float = 0.0, weights: torch.Tensor | None = None):
+        if weights is not None and weights.shape != source.shape[:1]:
+            raise DcslamError(f"weights have shape {tuple(weights.shape)}, expected ({source.shape[0]},)")
+        self.source, self.source_normals, self.weights = source, source_normals, weights
         self.associate, self.max_distance, self.cos_max_angle = associate, max_distance, cos_max_angle
         self.kernel = kernel if kernel is not None else Quadratic()
         self.hold_below = hold_below
@@ -78,21 +84,30 @@ class PointToPlane:
         diff = p[src] - q
         ok = ((diff.detach() ** 2).sum(1) < self.max_distance ** 2) & \
              ((rotate(T.detach(), self.source_normals[src].detach()) * n.detach()).sum(1) > self.cos_max_angle)
+        if self.weights is not None:
+            ok &= self.weights[src].detach() > 0
         return (diff[ok] * n[ok]).sum(1), src[ok], q[ok], n[ok]
+
+    def _pair_weights(self, src: torch.Tensor) -> torch.Tensor | None:
+        """Weights of the paired source points (float64), or None when every point counts fully."""
+        return None if self.weights is None else self.weights[src].double()
 
     def _fixed_residuals(self, T: torch.Tensor) -> torch.Tensor:
         src, q, n = self.pairs
         return ((transform_points(T, self.source[src]) - q) * n).sum(1)
 
-    def _mean_rho(self, r: torch.Tensor) -> torch.Tensor:
-        return self.kernel.rho(r, self.max_distance).sum() / max(r.numel(), 1)
+    def _mean_rho(self, r: torch.Tensor, pair_weights: torch.Tensor | None) -> torch.Tensor:
+        rho = self.kernel.rho(r, self.max_distance)
+        if pair_weights is not None:
+            rho = pair_weights * rho
+        return rho.sum() / max(r.numel(), 1)
 
     def cost(self, T: torch.Tensor) -> tuple[torch.Tensor, int]:
-        """Mean kernel cost at T of the pairs of the last :meth:`linearize` (which must come first)."""
+        """Mean (weighted) kernel cost at T of the pairs of the last :meth:`linearize` (which must come first)."""
         if self.pairs is None:
             raise DcslamError("PointToPlane.cost before linearize")
         r = self._fixed_residuals(T)
-        return self._mean_rho(r.double()), r.numel()
+        return self._mean_rho(r.double(), self._pair_weights(self.pairs[0])), r.numel()
 
     def linearize(self, T: torch.Tensor) -> Linearization:
         r, src, q, n = self.residuals(T)
@@ -100,8 +115,11 @@ class PointToPlane:
         m = n @ T[:3, :3]                           # R^T n: the normal in the camera frame
         J = torch.cat([m, torch.cross(self.source[src], m, dim=1)], 1).double()
         rd = r.double()
+        pw = self._pair_weights(src)
         w = self.kernel.weight(rd, self.max_distance)
-        lin = Linearization(J.T @ (w[:, None] * J), J.T @ (w * rd), self._mean_rho(rd), r.numel(),
+        if pw is not None:
+            w = w * pw
+        lin = Linearization(J.T @ (w[:, None] * J), J.T @ (w * rd), self._mean_rho(rd, pw), r.numel(),
                             float(w.detach().sum()))
         if self.hold_below > 0 and r.numel() >= 6:
             lin.H_step = self._hold(lin)
@@ -188,20 +206,22 @@ class ICPOdometry:
         if source.shape[0] < self.min_inliers:
             return OdometryResult(T_init, False, f"{source.shape[0]} valid source points", sources=source.shape[0])
         normals = frame.normal.reshape(-1, 3)[flat]
+        weights = None if frame.weight is None else frame.weight.reshape(-1)[flat]
         if self.source_voxel > 0:
             keep = voxel_representatives(source, self.source_voxel)
             source, normals = source[keep], normals[keep]
+            weights = None if weights is None else weights[keep]
         associate = self.association.prepare(model)
         gate = self.adaptive.gate() if self.adaptive is not None else self.max_distance
         T, iterations = T_init, 0
         for multiplier in self.coarse_to_fine:
             problem = PointToPlane(source, normals, associate, gate * multiplier, self.cos_max_angle, self.kernel,
-                                   self.hold_below)
+                                   self.hold_below, weights)
             result = self.solver.solve(problem, T, self.iterations)
             T, iterations = result.T, iterations + result.iterations
         lin = problem.linearize(T.detach())
         r = problem._fixed_residuals(T.detach())
-        rmse = math.sqrt(float((r.double() ** 2).mean())) if r.numel() else math.inf
+        rmse = math.sqrt(float((r.detach().double() ** 2).mean())) if r.numel() else math.inf
         base = dict(iterations=iterations, inliers=lin.count, rmse=rmse, sources=source.shape[0], gate=gate)
         if not bool(torch.isfinite(T).all()):
             return OdometryResult(T_init, False, "non-finite pose", **base)

@@ -18,26 +18,31 @@ from dcslam.slam.pointmap import PointMap
 
 
 def build_map(depth: torch.Tensor, K: torch.Tensor, T_world_cam: torch.Tensor, rgb: torch.Tensor | None = None,
-              mapper=None, frame_settings: FrameSettings = FrameSettings()) -> PointMap:
+              mapper=None, frame_settings: FrameSettings = FrameSettings(),
+              weight: torch.Tensor | None = None) -> PointMap:
     """Fuse depth frames seen from given poses (e.g. ground-truth odometry) into one point map.
 
     Differentiable: gradients of the map's points (and normals, radii) flow back to ``depth``, those of its colours
     to ``rgb``. The mapper (default: a new ``PointFusion(keep_graph=True)``) is reset first.
 
     Shape: depth (N, 1, H, W) metres (0 = none), K (3, 3), T_world_cam (N, 4, 4), rgb (N, 3, H, W) in [0, 1] or
-    None -> :class:`PointMap`.
+    None, weight (N, 1, H, W) in [0, 1] or None (per-pixel trust, see :class:`~dcslam.slam.frame.Frame`)
+    -> :class:`PointMap`.
     """
     N, H, W = check_depth(depth)
     if not isinstance(T_world_cam, torch.Tensor) or T_world_cam.shape != (N, 4, 4):
         raise DcslamError(f"T_world_cam has shape {tuple(getattr(T_world_cam, 'shape', ()))}, expected ({N}, 4, 4)")
     if rgb is not None and rgb.shape != (N, 3, H, W):
         raise DcslamError(f"rgb has shape {tuple(rgb.shape)}, expected ({N}, 3, {H}, {W})")
+    if weight is not None and weight.shape != (N, 1, H, W):
+        raise DcslamError(f"weight has shape {tuple(weight.shape)}, expected ({N}, 1, {H}, {W})")
     if mapper is None:
         mapper = PointFusion(keep_graph=True)
     mapper.reset()
     pm = PointMap.empty(depth.dtype, depth.device)
     for i in range(N):
-        frame = prepare_frame(depth[i:i + 1], K, None if rgb is None else rgb[i:i + 1], frame_settings)
+        frame = prepare_frame(depth[i:i + 1], K, None if rgb is None else rgb[i:i + 1], frame_settings,
+                              None if weight is None else weight[i:i + 1])
         pm = mapper.integrate(frame, T_world_cam[i].to(depth.dtype))
     return pm
 
@@ -137,10 +142,12 @@ class SLAM:
         return last @ torch.linalg.solve(prev, last)
 
     def step(self, depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None = None,
-             T_gt: torch.Tensor | None = None) -> StepReport:
-        """Process one frame. Shape: depth (1, 1, H, W) metres, K (3, 3), rgb (1, 3, H, W) or None, T_gt (4, 4)."""
+             T_gt: torch.Tensor | None = None, weight: torch.Tensor | None = None) -> StepReport:
+        """Process one frame. Shape: depth (1, 1, H, W) metres, K (3, 3), rgb (1, 3, H, W) or None, T_gt (4, 4),
+        weight (1, 1, H, W) in [0, 1] or None (per-pixel trust for ICP and fusion, see
+        :class:`~dcslam.slam.frame.Frame`)."""
         start = time.perf_counter()
-        frame = prepare_frame(depth, K, rgb, self.frame_settings)
+        frame = prepare_frame(depth, K, rgb, self.frame_settings, weight)
         T_init = self._prediction(frame.vertex.dtype, frame.vertex.device)
         index = len(self.poses)
         if index == 0 and self.reference_depth_m > 0 and bool(frame.valid.any()):
@@ -170,12 +177,15 @@ class SLAM:
         return report
 
     def run(self, depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None = None,
-            T_gt: torch.Tensor | None = None) -> torch.Tensor:
-        """Process a whole sequence. Shape: depth (N, 1, H, W), rgb (N, 3, H, W), T_gt (N, 4, 4) -> poses
-        (N, 4, 4)."""
-        N, _, _ = check_depth(depth)
+            T_gt: torch.Tensor | None = None, weight: torch.Tensor | None = None) -> torch.Tensor:
+        """Process a whole sequence. Shape: depth (N, 1, H, W), rgb (N, 3, H, W), T_gt (N, 4, 4), weight
+        (N, 1, H, W) or None -> poses (N, 4, 4)."""
+        N, H, W = check_depth(depth)
+        if weight is not None and weight.shape != (N, 1, H, W):
+            raise DcslamError(f"weight has shape {tuple(weight.shape)}, expected ({N}, 1, {H}, {W})")
         for i in range(N):
-            self.step(depth[i:i + 1], K, None if rgb is None else rgb[i:i + 1], None if T_gt is None else T_gt[i])
+            self.step(depth[i:i + 1], K, None if rgb is None else rgb[i:i + 1], None if T_gt is None else T_gt[i],
+                      None if weight is None else weight[i:i + 1])
         return self.trajectory()
 
 

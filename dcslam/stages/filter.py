@@ -1,4 +1,5 @@
-"""``dcslam filter``: filter a depth layer (sparse, dense, predicted or filtered) into ``filtered/<name>/``."""
+"""``dcslam filter``: filter a depth layer (any the workspace resolver knows: sparse, dense, sparse@<beams>, exact,
+predicted, filtered, a layer folder or file) into ``filtered/<name>/``."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -9,7 +10,8 @@ from dcslam.filters import filter_help, parse_filter
 from dcslam.stages.config import option
 from dcslam.workspace import Workspace
 
-DEPTHS = ("sparse", "dense", "predicted", "filtered")
+#: --depth values that name a folder of layers and need --run to say which
+LAYER_FOLDERS = ("predicted", "filtered")
 
 
 @dataclass(frozen=True)
@@ -18,8 +20,10 @@ class FilterConfig:
 
     filters: list[str] = option(default_factory=list, flags=("--filter", "-f"), metavar="SPEC", help=filter_help(),
                                 validate=parse_filter)
-    depth: str = option("predicted", choices=DEPTHS, help="Input: sparse, dense (from the drive files), predicted "
-                                                          "(predictions/<run>/) or filtered (filtered/<run>/).")
+    depth: str = option("predicted", help="Input: any depth layer: sparse, dense, sparse@<beams> (prepare-kitti "
+                                          "--beams), exact (the drive files' own depth), predicted or filtered "
+                                          "(with --run), predicted/<run>, filtered/<name>, or a layer folder or "
+                                          "file path.")
     run: str | None = option(None, help="Run name (or folder of layer files) for --depth predicted or filtered.")
     name: str | None = option(None, help="Output name (default: <input>+<filters>, e.g. mse-dense+range).")
     drive: list[str] = option(default_factory=list, help="Drive name (repeatable); default: the test split.")
@@ -29,9 +33,9 @@ class FilterConfig:
         if not self.filters:
             raise DcslamError("give at least one --filter (or a filters list in the configuration file)")
         self.chain()
-        if self.depth not in DEPTHS:
-            raise DcslamError(f"{self.depth!r} is not one of {', '.join(DEPTHS)}")
-        if self.depth in ("predicted", "filtered") and not self.run:
+        if not self.depth:
+            raise DcslamError("--depth is empty; name a depth layer, e.g. sparse, sparse@16 or predicted/<run>")
+        if self.depth in LAYER_FOLDERS and not self.run:
             raise DcslamError(f"--depth {self.depth} needs --run NAME (a run or filter name, or a folder of layer "
                               "files)")
         if self.name is not None:

@@ -2,9 +2,9 @@
 
 The experiment composes the other stages' configurations and runs them in this process::
 
-    synth (unless a KITTI root is given) → prepare-kitti → train × 4 recipes → predict (4 runs + IP-Basic)
-    → filter (each model's predictions) → slam (sparse, dense, every prediction and filtered layer; and the
-    profile's ``long_layers`` over whole test drives, into ``slam-long/``) → score tables
+    synth (unless a KITTI root is given) → prepare-kitti → train × 4 recipes (+ 3 pose-loss runs) → predict
+    (7 runs + IP-Basic) → filter (each thesis recipe's predictions) → slam (sparse, dense, every prediction and
+    filtered layer; and the profile's ``long_layers`` over whole test drives, into ``slam-long/``) → score tables
 
 A stage is skipped when its outputs exist, are newer than its inputs, and were made with the same configuration by
 the same dcslam (version and a hash of its sources, recorded in ``<workspace>/.reproduce/<stage>.json``), so a rerun
@@ -39,6 +39,11 @@ RECIPES = {  # run name → `dcslam train` options (Table 5.1 / 5.2 rows of the 
     "mse-sparse": {"loss": "mse", "mask": "sparse"},
     "mse-dense": {"loss": "mse", "mask": "dense"},
 }
+POSE_RECIPES = {  # the pose loss (issue 14), from scratch and fine-tuned from a chamfer and an MSE run (trained first)
+    "pose": {"loss": "pose"},
+    "pose-from-chamfer-8": {"loss": "pose", "init": "chamfer-8"},
+    "pose-from-mse-dense": {"loss": "pose", "init": "mse-dense"},
+}
 IP_BASIC = "ip-basic-fast"
 
 
@@ -56,6 +61,7 @@ class Profile:
     split: tuple[int, int, int] | None = None  # (train, val, test) drive counts; None: the thesis's proportion
     slam: dict = field(default_factory=dict)    # SLAM settings other than the defaults (fields of SlamSettings)
     long_layers: tuple[str, ...] = ()           # layers also run by SLAM over whole test drives (slam-long/)
+    pose: dict = field(default_factory=dict)    # options of the pose-loss runs over ``train`` (TrainStageConfig)
 
     def __post_init__(self) -> None:
         if self.split is not None and (sum(self.split) != self.drives or min(self.split) < 1):
@@ -71,6 +77,7 @@ PROFILES = {
     "quick": Profile(
         name="quick", drives=8, frames=42, train={"epochs": 2, "max_frames": 31, "scale": 0.5, "lr": 3e-3},
         slam_frames=30, filters={"edges": ["edges"]}, split=(3, 1, 4), long_layers=("sparse", "dense", IP_BASIC),
+        pose={"epochs": 1, "max_frames": 16, "lr": 1e-3, "pose_grad_iterations": 2, "pose_max_sources": 2000},
         description="8 generated drives of 42 frames (3 train / 1 val / 4 test), models trained 2 epochs at half "
                     "resolution, SLAM on the first 30 frames of each test drive, one outlier filter; sparse, dense "
                     "and IP-Basic also over whole test drives (32 frames: too short for KITTI drift)"),
@@ -336,24 +343,27 @@ def compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | Non
     test = [ws.drives / f"{name}.h5" for name in splits["test"]]
     learn = [ws.drives / f"{name}.h5" for name in splits["train"] + splits["val"]]
 
-    for run_name, options in RECIPES.items():
-        config = train.TrainStageConfig(**options, **profile.train, name=run_name, seed=seed)
+    runs = {**RECIPES, **POSE_RECIPES}
+    for run_name, options in runs.items():
+        extra = profile.pose if run_name in POSE_RECIPES else {}
+        config = train.TrainStageConfig(**options, **{**profile.train, **extra}, name=run_name, seed=seed)
+        init = [ws.runs / options["init"] / "model.pt"] if options.get("init") else []
         pipe.run(Stage(f"train-{run_name}", train.run, config,
                        outputs=lambda r=run_name: [ws.runs / r / "model.pt", ws.runs / r / "metrics.jsonl"],
-                       inputs=lambda: learn))
+                       inputs=lambda init=init: learn + init))
     if table == "5.1":
-        return _tables(pipe, ws, "5.1", inputs=[ws.runs / r / "metrics.jsonl" for r in RECIPES])
+        return _tables(pipe, ws, "5.1", inputs=[ws.runs / r / "metrics.jsonl" for r in runs])
 
     layers = {}  # layer name → (files it is made of, the layer's reference)
     for kind in ("sparse", "dense"):
         layers[kind] = (test, kind)
-    for run_name in [*RECIPES, IP_BASIC]:
+    for run_name in [*runs, IP_BASIC]:
         made = [ws.predictions / run_name / p.name for p in test]
-        config = predict.PredictConfig(run=run_name) if run_name in RECIPES else predict.PredictConfig(model=run_name)
+        config = predict.PredictConfig(run=run_name) if run_name in runs else predict.PredictConfig(model=run_name)
         pipe.run(Stage(f"predict-{run_name}", predict.run, config, outputs=lambda made=made: made,
-                       inputs=lambda r=run_name: [ws.runs / r / "model.pt", *test] if r in RECIPES else test))
+                       inputs=lambda r=run_name: [ws.runs / r / "model.pt", *test] if r in runs else test))
         layers[run_name] = (made, f"predicted/{run_name}")
-    for run_name in RECIPES:
+    for run_name in RECIPES:  # the thesis's recipes only: filtering the pose runs too would not fit the budget
         for fname, specs in profile.filters.items():
             name = f"{run_name}+{fname}"
             made = [ws.filtered / name / p.name for p in test]
@@ -367,7 +377,7 @@ def compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | Non
                     for layer in profile.long_layers for drive, source in zip(test, layers[layer][0])]
     slam_outputs = [path for stage in slam_stages for path in stage.outputs()]
     pipe.run_all(slam_stages, jobs)
-    return _tables(pipe, ws, "5.2", inputs=slam_outputs + [ws.runs / r / "metrics.jsonl" for r in RECIPES])
+    return _tables(pipe, ws, "5.2", inputs=slam_outputs + [ws.runs / r / "metrics.jsonl" for r in runs])
 
 
 def _slam_stage(ws: Workspace, profile: Profile, layer: str, reference: str, drive: Path, source,

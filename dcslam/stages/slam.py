@@ -22,6 +22,31 @@ from dcslam.stages.config import option
 from dcslam.workspace import Workspace
 
 
+#: How SLAM uses a depth layer's per-pixel confidence (``--confidence``).
+CONFIDENCE_USES = ("weights", "mask", "ignore")
+
+
+@dataclass(frozen=True)
+class ConfidenceUse:
+    """What SLAM does with a layer's confidence: ``mode`` one of :data:`CONFIDENCE_USES`, pixels below ``minimum``
+    dropped (weights, mask)."""
+
+    mode: str = "weights"
+    minimum: float = 0.0
+
+    def apply(self, depth: np.ndarray, confidence: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+        """(depth with the dropped pixels at 0, per-pixel weight or None). Shape: (H, W) each."""
+        if confidence is None or self.mode == "ignore":
+            return depth, None
+        kept = np.where(confidence >= self.minimum, depth, 0).astype(np.float32)
+        return kept, (np.where(kept > 0, confidence, 0).astype(np.float32) if self.mode == "weights" else None)
+
+    def record(self, has_confidence: bool) -> dict:
+        """What the summary says was done: ``mode`` is ``none`` for a layer without a confidence."""
+        return {"mode": self.mode if has_confidence else "none", "min_confidence": self.minimum,
+                "layer_has_confidence": has_confidence}
+
+
 @dataclass(frozen=True)
 class SlamStageConfig(SlamSettings):
     """Options of ``dcslam slam``: the SLAM's settings plus its input, frames, output and device."""
@@ -41,6 +66,13 @@ class SlamStageConfig(SlamSettings):
                                          "fastest for one SLAM process on a shared machine.")
     strict: bool = option(False, help="Exit 1 when a drive's trajectory is suspect (too many degraded or rejected "
                                       "steps); its outputs are still written.")
+    confidence: str = option("weights", choices=CONFIDENCE_USES, help=(
+        "When the depth layer has a confidence (nconv predictions): weights (each pixel's confidence weights its "
+        "ICP residual and its fusion), mask (pixels below --min-confidence are dropped, the rest count fully) or "
+        "ignore. No effect on layers without one."))
+    min_confidence: float = option(0.0, min=0.0, max=1.0, help=(
+        "Pixels whose confidence is below this are dropped before SLAM (with --confidence weights or mask; needs a "
+        "layer with a confidence)."))
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -48,6 +80,15 @@ class SlamStageConfig(SlamSettings):
             raise DcslamError(f"--frames must be >= 0, got {self.frames}")
         if self.threads < 0:
             raise DcslamError(f"--threads must be >= 0, got {self.threads}")
+        if self.confidence not in CONFIDENCE_USES:
+            raise DcslamError(f"unknown confidence use {self.confidence!r} (choose from {', '.join(CONFIDENCE_USES)})")
+        if not 0.0 <= self.min_confidence <= 1.0:
+            raise DcslamError(f"--min-confidence must be within [0, 1], got {self.min_confidence}")
+        if self.confidence == "ignore" and self.min_confidence > 0:
+            raise DcslamError("--min-confidence needs --confidence weights or mask (ignore uses no confidence)")
+
+    def confidence_use(self) -> "ConfidenceUse":
+        return ConfidenceUse(self.confidence, self.min_confidence)
 
     def settings(self) -> SlamSettings:
         """The SLAM algorithm's own settings (what :func:`dcslam.slam.config.build_slam` takes)."""
@@ -82,13 +123,18 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
     for path in paths:
         source = layer.require(path.stem)
         check_outputs(out_dir, path.stem, force)
+        if config.min_confidence > 0 and not has_confidence(source):
+            raise DcslamError(f"--min-confidence {config.min_confidence}: {source} holds no confidence (only layers "
+                              f"predicted by a confidence-aware model such as `dcslam train --model nconv` have one); "
+                              f"drop --min-confidence")
         jobs.append((path, source))
     results = []
     with torch_threads(config.threads):
         for path, source in jobs:
             slam = build_slam(config.settings())
             drive_run = run_drive(path, source, slam, config.frames or None, config.device,
-                                  settings={**to_dict(config), "source": str(source)})
+                                  settings={**to_dict(config), "source": str(source)},
+                                  confidence=config.confidence_use())
             drive_run.name = path.stem
             written = write_outputs(drive_run, out_dir, force)
             results.append(SlamDriveResult(path.stem, drive_run.summary(), written))
@@ -98,6 +144,21 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
             f"{r.drive}: {', '.join(r.summary['health']['reasons'])}" for r in suspect)
             + f"; outputs written under {out_dir}")
     return results
+
+
+def has_confidence(source: str | Path) -> bool:
+    """Whether a depth source (a drive depth kind or a layer file) has a per-pixel confidence."""
+    from dcslam.io.drive import is_depth_kind
+
+    if not isinstance(source, Path) and is_depth_kind(str(source)):
+        return False
+    import h5py
+
+    try:
+        with h5py.File(source, "r") as h5:
+            return "confidence" in h5
+    except OSError as exc:
+        raise DcslamError(f"{source} is not a readable HDF5 layer file ({exc})") from None
 
 
 @contextlib.contextmanager
@@ -126,6 +187,7 @@ class DriveRun:
     reports: list               # dcslam.slam.pipeline.StepReport per frame
     seconds: float
     settings: dict = field(default_factory=dict)
+    confidence: dict = field(default_factory=dict)  # ConfidenceUse.record() plus the fraction of pixels kept
 
     def __post_init__(self) -> None:
         from dcslam.geometry.rotations import nearest_rotation
@@ -151,17 +213,20 @@ class DriveRun:
             "health": summarise(self.reports),
             "translation_error_m": {"final": float(dt[-1]), "max": float(dt.max()), "mean": float(dt.mean())},
             "rotation_error_deg": {"final": float(dr[-1]) * 180 / np.pi, "max": float(dr.max()) * 180 / np.pi},
+            "confidence": self.confidence,
             "settings": self.settings,
         }
 
 
 def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | None = None,
-              device: str = "cpu", description: str | None = None, settings: dict | None = None) -> DriveRun:
+              device: str = "cpu", description: str | None = None, settings: dict | None = None,
+              confidence: ConfidenceUse = ConfidenceUse()) -> DriveRun:
     """SLAM (a :class:`dcslam.slam.pipeline.SLAM`) over the first ``frames`` frames (all if None) of a drive, with
-    depth from ``sparse``, ``dense`` or a layer file."""
+    depth from ``sparse``, ``dense`` or a layer file, whose confidence (if it has one) is used as ``confidence``
+    says."""
     import torch
 
-    from dcslam.io.drive import DriveFile, load_depth
+    from dcslam.io.drive import DriveFile, load_depth, read_layer
     from dcslam.progress import Bar
 
     with DriveFile(drive_path) as drive:
@@ -170,6 +235,10 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
             raise DcslamError(f"{drive_path}: no frames")
         check_timestamps(drive.timestamps[:n], str(drive_path))  # before any work, not after it
         depth_all = load_depth(drive, depth_source)[:n]
+        confidence_all = read_layer(depth_source).confidence if has_confidence(depth_source) else None
+        if confidence_all is not None:
+            confidence_all = confidence_all[:n]
+        measured = kept = 0
         K = torch.from_numpy(drive.K).float().to(device)
         T_gt = drive.poses[:n]
         slam.T_world_cam0 = torch.from_numpy(T_gt[0]).float()
@@ -177,15 +246,21 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
         start = time.perf_counter()
         with Bar(description or drive.name, total=n) as bar:
             for i in range(n):
-                depth = torch.from_numpy(np.ascontiguousarray(depth_all[i])).to(device)[None, None]
+                depth_np, weight_np = confidence.apply(depth_all[i], None if confidence_all is None
+                                                       else confidence_all[i])
+                measured, kept = measured + int((depth_all[i] > 0).sum()), kept + int((depth_np > 0).sum())
+                depth = torch.from_numpy(np.ascontiguousarray(depth_np)).to(device)[None, None]
+                weight = None if weight_np is None else torch.from_numpy(weight_np).to(device)[None, None]
                 rgb = torch.from_numpy(drive.rgb(i)).to(device).permute(2, 0, 1)[None].float() / 255
-                report = slam.step(depth, K, rgb, torch.from_numpy(T_gt[i]).float().to(device))
+                report = slam.step(depth, K, rgb, torch.from_numpy(T_gt[i]).float().to(device), weight)
                 bar.advance(status=f"{report.points} points" + ("" if report.accepted else " (step rejected)"))
         seconds = time.perf_counter() - start
         poses = slam.trajectory().detach().cpu().double().numpy()
         global_map = slam.mapper.global_map().detach().to("cpu")
+        used = {**confidence.record(confidence_all is not None),
+                "kept_fraction": round(kept / measured, 4) if measured else 0.0}
         return DriveRun(drive.name, poses, drive.timestamps[:n].copy(), T_gt.copy(), global_map,
-                        list(slam.reports), seconds, dict(settings or {}))
+                        list(slam.reports), seconds, dict(settings or {}), used)
 
 
 def output_paths(out_dir: Path, name: str) -> dict[str, Path]:

@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from dcslam.depth.models import ARCHITECTURES
-from dcslam.depth.recipes import LOSSES, MASKS, run_name, selection_key
+from dcslam.depth.recipes import LOSSES, MASKS, POSE_WEIGHTS, check_pose_options, run_name, selection_key
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
 from dcslam.io.atomic import write_json_atomic
@@ -31,7 +31,8 @@ class TrainStageConfig:
     """Options of ``dcslam train`` (the training's own settings are passed on as a
     :class:`dcslam.depth.train.TrainConfig`)."""
 
-    loss: str = option("mse", choices=LOSSES, help="mse or chamfer.")
+    loss: str = option("mse", choices=LOSSES, help="mse, chamfer or pose (relative-pose error of differentiable "
+                                                   "ICP over --pose-frames windows).")
     mask: str = option("dense", choices=MASKS, help="MSE mask: dense (pixels with ground truth) or sparse (pixels "
                                                     "with sparse input and ground truth).")
     map_frames: int = option(1, help="Frames per chamfer map: 1, or windows of up to N frames (the thesis: 8; its "
@@ -56,6 +57,23 @@ class TrainStageConfig:
                                          "input or target, e.g. mse-dense-sparse16, mse-dense-to-exact).")
     resume: bool = option(False, flags=("--resume",), help="Continue an interrupted run from last.pt.")
     nproc: int = option(1, help="Processes for distributed data-parallel training (launches torchrun).")
+    init: str | None = option(None, help="Start from the best model of this run (runs/<INIT>/model.pt): "
+                                         "fine-tuning, e.g. --loss pose --init chamfer-8.")
+    pose_frames: int = option(4, help="Pose loss: frames per window (the first at its true pose, the others "
+                                      "tracked by ICP).")
+    pose_weight: float = option(1.0, help="Pose loss: weight of the pose term.")
+    mse_weight: float = option(0.0, help="Pose loss: weight of an added MSE term (with --mask).")
+    chamfer_weight: float = option(0.0, help="Pose loss: weight of an added chamfer term (with --map-frames).")
+    pose_translation_weight: float = option(1.0, help="Pose loss: weight of the translation error (per metre).")
+    pose_rotation_weight: float = option(1.0, help="Pose loss: weight of the rotation error (per radian).")
+    pose_iterations: int = option(10, help="Pose loss: LM iterations per ICP gate stage.")
+    pose_grad_iterations: int = option(0, help="Pose loss: back-propagate through only the last N LM iterations "
+                                               "of each stage (0 = all).")
+    pose_max_sources: int = option(0, help="Pose loss: align at most N random valid pixels per frame (0 = all).")
+    pose_source_voxel: float = option(0.2, help="Pose loss: ICP keeps one source point per voxel of this size, "
+                                                "metres (0 = every point).")
+    pose_weights: str = option("confidence", choices=POSE_WEIGHTS, help="Pose loss: per-pixel ICP weights: "
+                               "confidence (the network's, for nconv models; others have none) or none.")
 
     def __post_init__(self) -> None:
         for name, choices in (("loss", LOSSES), ("mask", MASKS), ("model", MODELS)):
@@ -77,27 +95,37 @@ class TrainStageConfig:
         check_view(self.scale, self.crop)
         _check_kind(self.input)
         _check_kind(self.target)
+        if self.init is not None:
+            from dcslam.workspace import plain_name
+
+            plain_name(self.init, "--init")
+        check_pose_options(self)
 
     @property
     def run_name(self) -> str:
         if self.name:
             return self.name
-        name = run_name(self.loss, self.mask, self.map_frames)
+        name = run_name(self.loss, self.mask, self.map_frames, self.init)
         if self.input != "sparse":
             name += "-" + self.input.replace("@", "")
         return name + (f"-to-{self.target}" if self.target != "dense" else "")
 
-    def train_config(self, train_drives: list[Path], val_drives: list[Path]):
-        """The :class:`dcslam.depth.train.TrainConfig` of this run."""
+    def train_config(self, train_drives: list[Path], val_drives: list[Path], init: Path | None = None):
+        """The :class:`dcslam.depth.train.TrainConfig` of this run (``init``: the model file of ``--init``)."""
         from dcslam.depth.train import TrainConfig
 
-        return TrainConfig(loss=self.loss, mask=self.mask, map_frames=self.map_frames, model=self.model,
-                           epochs=self.epochs, lr=self.lr, weight_decay=self.weight_decay,
+        pose = {name: getattr(self, name) for name in POSE_OPTIONS}
+        return TrainConfig(**pose, init=str(init) if init else "", loss=self.loss, mask=self.mask,
+                           map_frames=self.map_frames, model=self.model, epochs=self.epochs, lr=self.lr,
+                           weight_decay=self.weight_decay,
                            max_frames=self.max_frames, stride=self.stride, scale=self.scale, crop=self.crop,
                            batch_size=self.batch_size, seed=self.seed, device=self.device, input=self.input,
                            target=self.target, train_drives=train_drives, val_drives=val_drives)
 
 
+POSE_OPTIONS = ("pose_frames", "pose_weight", "mse_weight", "chamfer_weight", "pose_translation_weight",
+                "pose_rotation_weight", "pose_iterations", "pose_grad_iterations", "pose_max_sources",
+                "pose_source_voxel", "pose_weights")
 RUN_FILES = ("model.pt", "last.pt", "metrics.jsonl", "config.json", "curves.png")
 
 
@@ -271,7 +299,12 @@ def run(ws: Workspace, config: TrainStageConfig, *, force: bool = False):
     from dcslam.io.drive import read_splits
 
     splits = read_splits(ws.splits)
-    train_config = config.train_config(_drive_paths(ws, splits["train"]), _drive_paths(ws, splits["val"]))
+    init = None
+    if config.init:
+        from dcslam.workspace import require
+
+        init = require(ws.runs / config.init / "model.pt", f"dcslam train --name {config.init}")
+    train_config = config.train_config(_drive_paths(ws, splits["train"]), _drive_paths(ws, splits["val"]), init)
     if distributed.in_torchrun():
         distributed.init_from_env(resolve_device(config.device).type)
     try:

@@ -102,3 +102,54 @@ def test_strict_exits_1_on_a_suspect_drive_and_still_writes_it(workspace, tmp_pa
     assert strict.exit_code == 1
     assert "suspect trajectories (--strict): street_0001" in strict.output
     assert (tmp_path / "strict" / "street_0001.txt").exists()
+
+
+@pytest.fixture(scope="module")
+def confident_layer(workspace, tmp_path_factory):
+    """A layer of the drive's dense depth with 20 % of its pixels pushed 1 m away, where its confidence is 0.1
+    (elsewhere 0.9): what a completer that knows its mistakes would write."""
+    from dcslam.io.drive import DriveFile
+
+    with DriveFile(workspace / "drives" / "street_0001.h5") as drive:
+        depth = np.stack([drive.depth("dense", i) for i in range(N)])
+    bad = (np.random.default_rng(0).random(depth.shape) < 0.2) & (depth > 0)
+    confidence = np.where(bad, 0.1, 0.9).astype(np.float32)
+    path = tmp_path_factory.mktemp("layers") / "noisy.h5"
+    write_layer(path, Layer(np.where(bad, depth + 1.0, depth), "street_0001", "test", confidence=confidence))
+    return path, float(1 - bad[depth > 0].mean())
+
+
+@pytest.mark.parametrize("use, minimum", [("weights", 0.0), ("mask", 0.5), ("ignore", 0.0), ("weights", 0.5)])
+def test_confidence_use_is_applied_and_recorded(workspace, confident_layer, tmp_path, use, minimum):
+    from dcslam.report.layers import slam_settings
+    from dcslam.workspace import Workspace
+
+    path, good_fraction = confident_layer
+    out = tmp_path / "slam" / "noisy"
+    result = _run("--depth", str(path), "--confidence", use, "--min-confidence", str(minimum), "-w", str(workspace),
+                  "--out", str(out), "--frames", "3")
+    assert result.exit_code == 0, result.output
+    assert {p.name for p in out.iterdir()} == {f"street_0001{s}" for s in (".txt", ".kitti.txt", ".ply", ".json")}
+    record = json.loads((out / "street_0001.json").read_text())
+    assert record["settings"]["confidence"] == use and record["settings"]["min_confidence"] == minimum
+    used = record["confidence"]
+    assert used["mode"] == use and used["min_confidence"] == minimum and used["layer_has_confidence"]
+    expected = good_fraction if minimum > 0 else 1.0
+    assert abs(used["kept_fraction"] - expected) < 0.02
+    settings = slam_settings(Workspace(tmp_path), "noisy", "street_0001")
+    assert settings["confidence"] == use and settings["min_confidence"] == minimum
+
+
+def test_confidence_of_a_layer_without_one(workspace, tmp_path):
+    result = _run("--depth", "dense", "--min-confidence", "0.3", "-w", str(workspace), "--out", str(tmp_path / "o"))
+    assert result.exit_code == 1 and "holds no confidence" in result.output
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+    result = _run("--depth", "dense", "--odometry", "gt", "--frames", "2", "-w", str(workspace),
+                  "--out", str(tmp_path / "p"))
+    assert result.exit_code == 0, result.output
+    used = json.loads((tmp_path / "p" / "street_0001.json").read_text())["confidence"]
+    assert used == {"mode": "none", "min_confidence": 0.0, "layer_has_confidence": False, "kept_fraction": 1.0}
+    result = _run("--depth", "dense", "--confidence", "ignore", "--min-confidence", "0.3", "-w", str(workspace))
+    assert result.exit_code == 1 and "--min-confidence needs --confidence weights or mask" in result.output
+    assert _run("--depth", "dense", "--confidence", "often", "-w", str(workspace)).exit_code == 2
+    assert _run("--depth", "dense", "--min-confidence", "1.5", "-w", str(workspace)).exit_code == 2

@@ -114,13 +114,15 @@ def test_smoke_profile_runs_every_stage_and_writes_the_tables(tmp_path):
     assert "Table 5.2" in result.stdout
     test_drive = json.loads((tmp_path / "drives" / "splits.json").read_text())["test"][0]
     for layer in ("chamfer-1", "chamfer-8", "mse-sparse", "mse-dense", "sparse", "dense", "ip-basic-fast",
-                  "mse-dense+edges"):
+                  "mse-dense+edges", "pose", "pose-from-chamfer-8", "pose-from-mse-dense"):
         assert f"| {layer} |" in table, layer
         for suffix in (".txt", ".kitti.txt", ".json"):
             assert (tmp_path / "slam" / layer / f"{test_drive}{suffix}").exists(), (layer, suffix)
     with open(results / "table_5_2.csv") as f:
         rows = list(csv.DictReader(f))
-    assert len(rows) == 11 and not any(row["missing"] for row in rows)  # no row lacks its inputs
+    assert len(rows) == 14 and not any(row["missing"] for row in rows)  # no row lacks its inputs
+    assert {"pose from scratch", "pose, fine-tuned from chamfer-8", "pose, fine-tuned from mse-dense"} <= \
+        {row["method"] for row in rows}
     assert {row["slam_settings"] for row in rows} == {"as the others"}  # every row from the same SLAM settings
     assert all(row["drives"] == "1" for row in rows)
     for layer in PROFILES["smoke"].long_layers:  # and SLAM over the whole test drives, in the long-drive table

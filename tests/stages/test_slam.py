@@ -52,3 +52,33 @@ def test_sparse_of_fewer_beams_and_exact_depth(tmp_path):
     sixteen = json.loads((ws.slam / "sparse@16" / "drive_d.json").read_text())["points"]
     exact = json.loads((ws.slam / "exact" / "drive_d.json").read_text())["points"]
     assert exact > 0 and sixteen < exact  # two LiDAR rows per frame give (almost) no map points with normals
+
+
+class TestConfidenceUse:
+    depth = np.array([[5.0, 6.0, 0.0], [7.0, 8.0, 9.0]], np.float32)
+    confidence = np.array([[0.9, 0.2, 0.0], [0.5, 0.0, 1.0]], np.float32)
+
+    def test_weights_drop_below_the_minimum_and_weight_the_rest(self):
+        from dcslam.stages.slam import ConfidenceUse
+
+        depth, weight = ConfidenceUse("weights", 0.3).apply(self.depth, self.confidence)
+        assert depth.tolist() == [[5, 0, 0], [7, 0, 9]]
+        assert weight.tolist() == [[np.float32(0.9), 0, 0], [0.5, 0, 1]]
+
+    def test_mask_and_ignore(self):
+        from dcslam.stages.slam import ConfidenceUse
+
+        depth, weight = ConfidenceUse("mask", 0.3).apply(self.depth, self.confidence)
+        assert depth.tolist() == [[5, 0, 0], [7, 0, 9]] and weight is None
+        depth, weight = ConfidenceUse("ignore", 0.0).apply(self.depth, self.confidence)
+        assert depth is self.depth and weight is None
+        depth, weight = ConfidenceUse("weights", 0.3).apply(self.depth, None)
+        assert depth is self.depth and weight is None
+
+    def test_config_checks(self):
+        with pytest.raises(DcslamError, match="unknown confidence use"):
+            SlamStageConfig(confidence="sometimes")
+        with pytest.raises(DcslamError, match="within"):
+            SlamStageConfig(min_confidence=2.0)
+        with pytest.raises(DcslamError, match="needs --confidence weights or mask"):
+            SlamStageConfig(confidence="ignore", min_confidence=0.2)
