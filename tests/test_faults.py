@@ -75,7 +75,7 @@ def interrupt(args, after_s: float) -> bool:
     out, err = proc.communicate(timeout=120)
     assert "Traceback" not in err and "Exception ignored" not in err, err
     if proc.returncode == 0:
-        assert out.strip() and not err.strip(), (out, err)  # its work was done and summarised
+        assert out.strip(), (out, err)  # its work was done and summarised (stderr may hold its progress log)
         return False
     assert proc.returncode == 130, (proc.returncode, err)
     assert err.strip().splitlines()[-1] == "interrupted: no partial output was kept; rerun the command to finish"
@@ -165,7 +165,12 @@ def test_interrupted_reproduce_then_rerun_gives_the_same_table(baseline):
     ws = root / "reproduce"
     rng = random.Random(f"{SEED}-reproduce")
     args = ["reproduce", "--profile", "smoke", "--kitti", str(kitti), "-w", str(ws)]
-    assert interrupt(args, after_s=rng.uniform(0.1, 0.8) * seconds["reproduce"])
+    fraction = rng.uniform(0.1, 0.8)
+    # On a loaded machine the rerun can be faster than the baseline and finish before the Ctrl-C: interrupt earlier.
+    while not interrupt(args, after_s=fraction * seconds["reproduce"]):
+        assert fraction > 0.01, "reproduce always finished before the interrupt"
+        shutil.rmtree(ws)
+        fraction /= 4
     assert leftovers(ws) == []
     again, _ = dcslam(*args)
     assert again == table
