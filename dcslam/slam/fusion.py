@@ -7,7 +7,8 @@ start a new point per new voxel (so the map grows with the explored volume, not 
 merged by confidence-weighted averaging, with the weight ``alpha = exp(-gamma^2 / 2 sigma^2)`` of the *normalised
 radial image distance* gamma of the pixel (Keller's definition: gradSLAM used the metric point norm, which at street
 ranges clamps every weight to the same tiny value), times the frame's per-pixel weight where it has one
-(:attr:`~dcslam.slam.frame.Frame.weight`, e.g. a completer's confidence; pixels of weight 0 are not fused); (4) unstable points are pruned: points seen in fewer than
+(:attr:`~dcslam.slam.frame.Frame.weight`, e.g. a completer's confidence; pixels of weight 0 are not fused);
+(4) unstable points are pruned: points seen in fewer than
 ``min_observations`` frames and not updated for ``prune_after`` frames, and unstable points found in front of a
 surface the current frame sees (free space).
 """

@@ -86,6 +86,8 @@ class SlamStageConfig(SlamSettings):
             raise DcslamError(f"--min-confidence must be within [0, 1], got {self.min_confidence}")
         if self.confidence == "ignore" and self.min_confidence > 0:
             raise DcslamError("--min-confidence needs --confidence weights or mask (ignore uses no confidence)")
+        if self.confidence == "mask" and self.min_confidence <= 0:
+            raise DcslamError("--confidence mask drops the pixels below --min-confidence; give one above 0")
 
     def confidence_use(self) -> "ConfidenceUse":
         return ConfidenceUse(self.confidence, self.min_confidence)

@@ -198,7 +198,8 @@ def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(tmp_path
     assert len(short) == 11 * 4 and len(whole) == 3 * 4
     assert {c["drive"][0] for c in short.values()} == set(test)
     assert {c["frames"] for c in short.values()} == {30} and {c["frames"] for c in whole.values()} == {0}
-    assert stages["slam-long-ip-basic-fast-2011_09_26_drive_1004_sync"]["out"] == str(ws / "slam-long" / "ip-basic-fast")
+    long_ip = stages["slam-long-ip-basic-fast-2011_09_26_drive_1004_sync"]
+    assert long_ip["out"] == str(ws / "slam-long" / "ip-basic-fast")
     assert stages["slam-mse-dense+edges-2011_09_26_drive_1007_sync"]["depth"] == "filtered/mse-dense+edges"
 
     thesis = read_stage_configs(runner.invoke(app, ["reproduce", "--profile", "thesis", "--table", "5.1",

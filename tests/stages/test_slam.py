@@ -82,3 +82,5 @@ class TestConfidenceUse:
             SlamStageConfig(min_confidence=2.0)
         with pytest.raises(DcslamError, match="needs --confidence weights or mask"):
             SlamStageConfig(confidence="ignore", min_confidence=0.2)
+        with pytest.raises(DcslamError, match="give one above 0"):
+            SlamStageConfig(confidence="mask")
