@@ -195,7 +195,7 @@ def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(tmp_path
     test = [f"2011_09_26_drive_{n}_sync" for n in (1004, 1005, 1006, 1007)]  # the profile's split: 3 / 1 / 4
     short = {n: c for n, c in stages.items() if n.startswith("slam-") and not n.startswith("slam-long-")}
     whole = {n: c for n, c in stages.items() if n.startswith("slam-long-")}
-    assert len(short) == 11 * 4 and len(whole) == 3 * 4
+    assert len(short) == 14 * 4 and len(whole) == 3 * 4  # 11 thesis layers + 3 pose-loss runs
     assert {c["drive"][0] for c in short.values()} == set(test)
     assert {c["frames"] for c in short.values()} == {30} and {c["frames"] for c in whole.values()} == {0}
     long_ip = stages["slam-long-ip-basic-fast-2011_09_26_drive_1004_sync"]
