@@ -73,14 +73,32 @@ def layer_name(item: BeamsInput, beams: int | None) -> str:
 
 
 def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_diff: float = EVO_MAX_TIME_DIFF_S,
-                  failure_threshold: float = FAILURE_THRESHOLD) -> dict[tuple[int | None, str], LayerResult]:
+                  failure_threshold: float = FAILURE_THRESHOLD,
+                  jobs: int = 1) -> dict[tuple[int | None, str], LayerResult]:
     """Scores of every (beam count, input): ``{(beams, label): result}``, beam counts from the largest; the
     beam-independent inputs last, under ``(None, label)``. Missing inputs are recorded in each result (see
-    :func:`dcslam.report.table_5_2.score_layer`)."""
+    :func:`dcslam.report.table_5_2.score_layer`). ``jobs`` > 1 scores the rows in that many worker processes."""
     keys = [(b, i) for b in sorted(beams, reverse=True) for i in INPUTS if i.per_beam]
     keys += [(None, i) for i in INPUTS if not i.per_beam]
-    return {(b, item.label): score_layer(ws, item.label, layer_name(item, b), drives, max_time_diff=max_time_diff,
-                                         failure_threshold=failure_threshold) for b, item in keys}
+    work = [(ws, item.label, layer_name(item, b), drives, max_time_diff, failure_threshold) for b, item in keys]
+    if jobs <= 1:
+        scored = [_score(*args) for args in work]
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        from dcslam.stages.reproduce import _one_thread
+
+        with ProcessPoolExecutor(max_workers=min(jobs, len(work)), mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=_one_thread) as pool:
+            scored = list(pool.map(_score, *zip(*work)))
+    return {(b, item.label): result for (b, item), result in zip(keys, scored)}
+
+
+def _score(ws, label, layer, drives, max_time_diff, failure_threshold) -> LayerResult:
+    result = score_layer(ws, label, layer, drives, max_time_diff=max_time_diff, failure_threshold=failure_threshold)
+    _ = result.scores  # computed here, in the worker
+    return result
 
 
 def common_settings(results: dict[tuple[int | None, str], LayerResult]) -> dict:
@@ -281,17 +299,18 @@ class BeamsReport:
 
 def build_beams_report(ws: Workspace, beams: list[int], drives: list[str], out_dir: Path | None = None,
                        force: bool = False, max_time_diff: float = EVO_MAX_TIME_DIFF_S,
-                       failure_threshold: float = FAILURE_THRESHOLD) -> BeamsReport:
+                       failure_threshold: float = FAILURE_THRESHOLD, jobs: int = 1) -> BeamsReport:
     """Score every row and write ``table_beams.{md,csv}``, ``table_beams_per_drive.{md,csv}`` and
     ``beams_localisation.png`` under ``out_dir`` (default ``results/``); nothing is written when an output exists
-    without ``force``, or when rows were made with different SLAM settings."""
+    without ``force``, or when rows were made with different SLAM settings (``jobs``: worker processes that score
+    the rows)."""
     from dcslam.io.atomic import write_text_atomic
     from dcslam.report.scores import check_outputs
 
     if not beams or not drives:
         raise DcslamError("the beams table needs at least one beam count and one test drive")
     out_dir = Path(out_dir) if out_dir else ws.results
-    results = beams_results(ws, beams, drives, max_time_diff, failure_threshold)
+    results = beams_results(ws, beams, drives, max_time_diff, failure_threshold, jobs)
     table, per_drive = table_beams(results, beams, drives), per_drive_table(results)
     tables = {"table_beams": table, "table_beams_per_drive": per_drive}
     outputs = [out_dir / f"{name}.{ext}" for name in tables for ext in ("md", "csv")]

@@ -97,6 +97,7 @@ class BeamsTableConfig:
     out_dir: Path | None = option(None, help="Output folder (default: <workspace>/results).")
     max_time_diff: float = option(EVO_MAX_TIME_DIFF_S, min=0.0, help="Trajectory association tolerance (s).")
     failure_threshold: float = option(FAILURE_THRESHOLD, min=0.0, help="Localisation above which a drive failed.")
+    jobs: int = option(1, internal=True, help="Worker processes that score the rows (not part of the stamp).")
 
 
 def run_table(ws: Workspace, config: BeamsTableConfig, *, force: bool = False):
@@ -109,7 +110,7 @@ def run_table(ws: Workspace, config: BeamsTableConfig, *, force: bool = False):
 
     report = build_beams_report(ws, list(config.beams), select_drives(ws, config.drive), out_dir=config.out_dir,
                                 force=force, max_time_diff=config.max_time_diff,
-                                failure_threshold=config.failure_threshold)
+                                failure_threshold=config.failure_threshold, jobs=config.jobs)
     write_json_atomic(report.written[0].parent / "table_beams.json", stage_config("score-beams", to_dict(config)),
                       force=True)
     return report
@@ -180,7 +181,7 @@ def reproduce(ws: Workspace, profile: BeamsProfile, kitti_root: Path | None = No
                 slam_stages.append(Stage(f"slam-{layer}-{drive.stem}", slam.run, config, outputs=lambda m=made: m,
                                          inputs=lambda d=drive, s=source: [d, *s]))
     pipe.run_all(slam_stages, jobs)
-    table = BeamsTableConfig(beams=list(profile.beams), drive=[p.stem for p in test])
+    table = BeamsTableConfig(beams=list(profile.beams), drive=[p.stem for p in test], jobs=jobs)
     pipe.run(Stage("score-beams", run_table, table, outputs=lambda: [ws.results / "table_beams.md"],
                    inputs=lambda: slam_outputs))
     return ws.results / "table_beams.md"

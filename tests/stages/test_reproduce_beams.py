@@ -55,6 +55,13 @@ def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(tmp_path,
     assert json.loads((tmp_path / "runs" / "nconv-guided" / "config.json").read_text())["settings"]["model"] == \
         "nconv-guided"
 
+    # the rows scored in worker processes give the same table
+    from dcslam.report.table_beams import build_beams_report
+    from dcslam.workspace import Workspace
+
+    build_beams_report(Workspace(tmp_path), [64, 16], ["drive_d"], out_dir=tmp_path / "parallel", jobs=2)
+    assert (tmp_path / "parallel" / "table_beams.csv").read_text() == (results / "table_beams.csv").read_text()
+
     again = runner.invoke(app, [*ARGS, "--workspace", str(tmp_path)])
     assert again.exit_code == 0, again.output
     assert "[run]" not in again.stderr and again.stderr.count("[skip]") >= 30
