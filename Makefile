@@ -11,7 +11,7 @@ KITTI_ROOT ?=
 JOBS       ?= $(shell nproc 2>/dev/null || echo 1)
 REPRO_ARGS  = --profile $(PROFILE) --workspace $(WORKSPACE) --jobs $(JOBS) $(if $(KITTI_ROOT),--kitti $(KITTI_ROOT))
 
-.PHONY: setup test bench clean reproduce-table-5-2 reproduce-table-5-1 demo-icl
+.PHONY: setup test bench clean reproduce-table-5-2 reproduce-table-5-1 reproduce-beams demo-icl
 
 setup: $(STAMP)
 
@@ -38,6 +38,12 @@ reproduce-table-5-2: setup
 
 reproduce-table-5-1: setup
 	$(DCSLAM) reproduce --table 5.1 $(REPRO_ARGS)
+
+# The beams experiment (issue 13): every input (sparse, IP-Basic, SparseConvNet, nconv unmasked and masked by its
+# confidence, nconv-guided, annotated dense, exact) at 64/32/16/8 LiDAR beams; table, per-drive CSV and a PNG of
+# localisation against beam count under $(WORKSPACE)/results/ (table_beams.*, beams_localisation.png).
+reproduce-beams: setup
+	$(DCSLAM) reproduce --table beams $(REPRO_ARGS)
 
 # The thesis's appendix C.2: a DnCNN learns to remove Gaussian depth noise from the chamfer distance between maps
 # alone. Generates indoor rooms in the ICL-NUIM layout (kept under $(WORKSPACE)/demo-icl/), trains, prints the

@@ -11,8 +11,9 @@ from dcslam.stages import reproduce
 from dcslam.stages.reproduce_plan import stage_configs_toml
 
 HELP = ("Run the thesis's experiment end to end — synth (or a KITTI root), prepare-kitti, train the four recipes, "
-        "predict, filter, slam, score — and print Table 5.2 (or 5.1). Stages whose outputs are up to date (same "
-        "configuration, same dcslam) are skipped.")
+        "predict, filter, slam, score — and print Table 5.2 (or 5.1; or, with --table beams, the beams experiment: "
+        "every input at 64/32/16/8 LiDAR beams). Stages whose outputs are up to date (same configuration, same "
+        "dcslam) are skipped.")
 
 
 def _log(line: str) -> None:
@@ -34,5 +35,6 @@ def report(result) -> None:
 reproduce_command = stage_command(app, "reproduce", reproduce.ReproduceConfig, run, report, help=HELP, force=False,
                                   examples=("dcslam reproduce --profile smoke -w /tmp/check    # a few minutes",
                                             "dcslam reproduce --table 5.1 --kitti /data/kitti",
+                                            "dcslam reproduce --table beams --jobs 2     # make reproduce-beams",
                                             "dcslam reproduce --print-config    # every stage's settings, as TOML"),
                                   describe=stage_configs_toml)

@@ -11,6 +11,7 @@ inputs are missing is kept, with its values empty and a note naming what is miss
 from __future__ import annotations
 
 import functools
+import math
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -130,6 +131,10 @@ class LayerResult:
             elif len(values) != len(per_drive):
                 continue  # a figure some drives lack (e.g. aligned ATE of a straight line) is not averaged
             fmt = next(c.fmt for c in SPREAD_COLUMNS if c.key == key)
+            if not all(math.isfinite(v) for v in values):  # e.g. the depth errors of a layer left empty
+                row.update({key: math.inf, f"{key}_text": f"inf ({sum(not math.isfinite(v) for v in values)} "
+                                                          "drive(s) without a finite value)"})
+                continue
             sp = spread(values)
             row.update({key: sp.mean, f"{key}_std": sp.std, f"{key}_ci_low": sp.ci_low,
                         f"{key}_ci_high": sp.ci_high, f"{key}_median": sp.median, f"{key}_text": sp.text(fmt)})

@@ -16,7 +16,8 @@ launches through torchrun.
 A profile chooses the scale: ``quick`` (the default: at least 4 test drives, about half an hour on 2 CPU cores),
 ``smoke`` (a check that every stage runs) or ``thesis`` (the thesis's 15 / 4 / 5 drives of 200 frames, for a GPU).
 SLAM runs one stage per (layer, test drive); they are independent, so ``jobs`` > 1 runs them in that many worker
-processes with one torch thread each.
+processes with one torch thread each. ``table="beams"`` runs the beams experiment instead
+(:mod:`dcslam.stages.reproduce_beams`, which reuses this module's pipeline and :func:`make_drives`).
 """
 from __future__ import annotations
 
@@ -96,14 +97,16 @@ PROFILES = {
         description="the thesis's scale: 15 / 4 / 5 drives, 200 frames per drive, full resolution (use a GPU); "
                     "sparse, dense, IP-Basic and the four models also over whole test drives (about 200 m)"),
 }
-TABLES = ("5.2", "5.1")
+TABLES = ("5.2", "5.1", "beams")
 
 
 @dataclass(frozen=True)
 class ReproduceConfig:
     """Options of ``dcslam reproduce``."""
 
-    table: str = option("5.2", choices=TABLES, help="Table to print: 5.2 or 5.1 (5.1 stops after training).")
+    table: str = option("5.2", choices=TABLES, help="Table to print: 5.2 or 5.1 (5.1 stops after training), or "
+                        "beams (the beams experiment: every input at 64/32/16/8 LiDAR beams; "
+                        "dcslam.stages.reproduce_beams).")
     profile: str = option("quick", choices=tuple(PROFILES), help="quick (about 30 min on 2 CPU cores), smoke (a "
                           "few minutes; checks the stages, its numbers mean nothing) or thesis (15/4/5 drives of 200 "
                           "frames; for a GPU).")
@@ -119,7 +122,7 @@ class ReproduceConfig:
         if self.jobs < 1:
             raise DcslamError(f"--jobs must be >= 1, got {self.jobs}")
         if self.table not in TABLES:
-            raise DcslamError(f"unknown table {self.table!r}; expected 5.1 or 5.2")
+            raise DcslamError(f"unknown table {self.table!r}; expected 5.2, 5.1 or beams")
         if self.profile not in PROFILES:
             raise DcslamError(f"unknown profile {self.profile!r}; expected one of {', '.join(PROFILES)}")
 
@@ -277,6 +280,11 @@ def _timed(run: Callable, ws: Workspace, config) -> float:
 
 def run(ws: Workspace, config: ReproduceConfig, *, log: Callable[[str], None] = lambda line: None) -> Path:
     """Run the experiment at the profile's scale; return the Markdown file of the requested table."""
+    if config.table == "beams":
+        from dcslam.stages import reproduce_beams
+
+        return reproduce_beams.reproduce(ws, reproduce_beams.PROFILES[config.profile], kitti_root=config.kitti,
+                                         seed=config.seed, log=log, force=config.force, jobs=config.jobs)
     return reproduce(ws, PROFILES[config.profile], table=config.table, kitti_root=config.kitti, seed=config.seed,
                      log=log, force=config.force, jobs=config.jobs)
 
@@ -308,6 +316,33 @@ def _profile_splits(ws: Workspace, kitti: Path, counts: tuple[int, int, int]) ->
     return path
 
 
+def make_drives(pipe: Pipeline, *, drives: int, frames: int, split: tuple[int, int, int] | None,
+                kitti_root: Path | None = None, seed: int = 0, beams: tuple[int, ...] = ()
+                ) -> tuple[list[Path], list[Path]]:
+    """The synth (unless ``kitti_root``) and prepare-kitti stages (``beams``: the extra sparse inputs of
+    ``prepare-kitti --beams``); returns the drive files (test, train + val). A planning pipeline (``--print-config``)
+    runs nothing and reads the split it plans with."""
+    ws = pipe.ws
+    kitti = Path(kitti_root) if kitti_root else ws.kitti
+    if kitti_root is None:
+        pipe.run(Stage("synth", synth.run, synth.SynthConfig(drives=drives, frames=frames, seed=seed),
+                       outputs=lambda: [ws.kitti / "SYNTHETIC"]))
+    elif not kitti.is_dir() and not pipe.planning:  # a plan may name a root that is not mounted here
+        raise DcslamError(f"KITTI root {kitti} does not exist or is not a folder; pass --kitti DIR")
+    split_file = None
+    if kitti_root is None and split:
+        split_file = _split_file(ws) if pipe.planning else _profile_splits(ws, kitti, split)
+    pipe.run(Stage("prepare-kitti", prepare.run, prepare.PrepareConfig(kitti=kitti, splits=split_file,
+                                                                       beams=list(beams)),
+                   outputs=lambda: [ws.splits, *sorted(ws.drives.glob("*.h5"))],
+                   inputs=lambda: [p for p in (kitti / "SYNTHETIC", split_file) if p is not None and p.exists()]))
+    from dcslam.io.drive import read_splits
+
+    splits = pipe.splits if pipe.planning else read_splits(ws.splits)
+    return ([ws.drives / f"{name}.h5" for name in splits["test"]],
+            [ws.drives / f"{name}.h5" for name in splits["train"] + splits["val"]])
+
+
 def reproduce(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_root: Path | None = None,
               seed: int = 0, log: Callable[[str], None] = lambda line: None, force: bool = False,
               jobs: int = 1) -> Path:
@@ -321,27 +356,12 @@ def reproduce(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_
 def compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | None, seed: int,
             jobs: int = 1) -> Path:
     """Hand every stage of the experiment to ``pipe`` in order; return the Markdown file of ``table``."""
-    if table not in TABLES:
-        raise DcslamError(f"unknown table {table!r}; expected 5.1 or 5.2")
+    if table not in ("5.2", "5.1"):
+        raise DcslamError(f"unknown table {table!r}; expected 5.1 or 5.2 (the beams table: "
+                          "dcslam.stages.reproduce_beams.reproduce)")
     ws = pipe.ws
-    kitti = Path(kitti_root) if kitti_root else ws.kitti
-    drives = lambda: sorted(ws.drives.glob("*.h5"))  # noqa: E731
-    if kitti_root is None:
-        pipe.run(Stage("synth", synth.run, synth.SynthConfig(drives=profile.drives, frames=profile.frames, seed=seed),
-                       outputs=lambda: [ws.kitti / "SYNTHETIC"]))
-    elif not kitti.is_dir() and not pipe.planning:  # a plan may name a root that is not mounted here
-        raise DcslamError(f"KITTI root {kitti} does not exist or is not a folder; pass --kitti DIR")
-    split_file = None
-    if kitti_root is None and profile.split:
-        split_file = _split_file(ws) if pipe.planning else _profile_splits(ws, kitti, profile.split)
-    pipe.run(Stage("prepare-kitti", prepare.run, prepare.PrepareConfig(kitti=kitti, splits=split_file),
-                   outputs=lambda: [ws.splits, *drives()],
-                   inputs=lambda: [p for p in (kitti / "SYNTHETIC", split_file) if p is not None and p.exists()]))
-    from dcslam.io.drive import read_splits
-
-    splits = pipe.splits if pipe.planning else read_splits(ws.splits)
-    test = [ws.drives / f"{name}.h5" for name in splits["test"]]
-    learn = [ws.drives / f"{name}.h5" for name in splits["train"] + splits["val"]]
+    test, learn = make_drives(pipe, drives=profile.drives, frames=profile.frames, split=profile.split,
+                              kitti_root=kitti_root, seed=seed)
 
     runs = {**RECIPES, **POSE_RECIPES}
     for run_name, options in runs.items():

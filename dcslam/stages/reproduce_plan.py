@@ -42,6 +42,13 @@ def planned_stages(workspace: Workspace, profile: Profile, table: str = "5.2", k
                    seed: int = 0) -> list[Stage]:
     """The stages :func:`dcslam.stages.reproduce.reproduce` would run, in order, with their configurations (test
     drives from :func:`planned_splits`); nothing is run or written."""
+    if table == "beams":
+        from dcslam.stages import reproduce_beams
+
+        profile = reproduce_beams.PROFILES[profile.name]
+        pipe = _Listing(workspace, planned_splits(workspace, profile, kitti_root))
+        reproduce_beams.compose(pipe, profile, kitti_root, seed)
+        return pipe.stages
     pipe = _Listing(workspace, planned_splits(workspace, profile, kitti_root))
     compose(pipe, profile, table, kitti_root, seed)
     return pipe.stages

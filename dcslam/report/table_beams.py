@@ -1,0 +1,325 @@
+"""The beams experiment's table: depth and localisation of every input at every LiDAR beam count (issue 13).
+
+For each beam count B and each input made from the B-beam sparse depth — the sparse depth itself, IP-Basic's
+completion, SparseConvNet, nconv unmasked and masked by its confidence, nconv-guided — and for the inputs that do not
+depend on B (annotated dense depth, the generator's exact depth): MAE / RMSE against the annotated depth and
+localisation (the thesis's metric, ATE, RPE) as the mean over the test drives ± the half-width of the 95 % t-interval
+(:mod:`dcslam.report.spread`), the median, the failures, whether the row differs from the sparse input of its beam
+count beyond the spread (paired by drive), and the share of the gap from that sparse input to exact depth that it
+closes. Rows made with different SLAM settings are refused: a comparison across them would mean nothing.
+
+Layer names (one function, :func:`layer_name`, used by the pipeline that makes them and by this table):
+``sparse`` / ``sparse@B`` (the drive files' depth), ``ip-basic-fast-sparseB``, ``<run>-sparseB`` (a trained
+completer's predictions of the B-beam input), ``nconv-sparseB+masked`` (those predictions filtered by confidence),
+``dense``, ``exact``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from dcslam.errors import DcslamError
+from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
+from dcslam.report.spread import differs, spread
+from dcslam.report.table_5_2 import FAILURE_THRESHOLD, LayerResult, score_layer
+from dcslam.report.tables import Column, Table
+from dcslam.workspace import Workspace
+
+FULL_BEAMS = 64  # the HDL-64E's lasers: the drive's own sparse depth
+IP_BASIC_RUN = "ip-basic-fast"
+MASKED = "masked"  # name of the confidence filter's output (``<run>-sparseB+masked``)
+
+
+@dataclass(frozen=True)
+class BeamsInput:
+    """One input of the table: its label, the completer behind it (``None``: the sparse depth itself; ``""``: none,
+    a layer of the drive files that does not depend on the beam count), and whether it is masked by confidence."""
+
+    label: str
+    completer: str | None
+    masked: bool = False
+
+    @property
+    def per_beam(self) -> bool:
+        return self.completer != ""
+
+
+INPUTS = (BeamsInput("sparse", None), BeamsInput("IP-Basic", IP_BASIC_RUN),
+          BeamsInput("SparseConvNet", "sparse-conv"), BeamsInput("nconv", "nconv"),
+          BeamsInput("nconv masked", "nconv", masked=True), BeamsInput("nconv-guided", "nconv-guided"),
+          BeamsInput("annotated dense", ""), BeamsInput("exact", ""))
+TRAINED = tuple(dict.fromkeys(i.completer for i in INPUTS if i.completer not in (None, "", IP_BASIC_RUN)))
+"""Run names of the learned completers the table expects (``runs/<name>/``)."""
+
+
+def sparse_kind(beams: int) -> str:
+    """The drive files' depth kind of ``beams`` beams: ``sparse`` for 64, ``sparse@B`` otherwise."""
+    return "sparse" if beams == FULL_BEAMS else f"sparse@{beams}"
+
+
+def prediction_name(completer: str, beams: int) -> str:
+    """The prediction layer of ``completer`` (a run or IP-Basic) on the ``beams``-beam input."""
+    return f"{completer}-sparse{beams}"
+
+
+def layer_name(item: BeamsInput, beams: int | None) -> str:
+    """The layer behind ``item`` at ``beams`` beams (``beams`` is ignored for the beam-independent inputs)."""
+    if not item.per_beam:
+        return "dense" if item.label == "annotated dense" else "exact"
+    if item.completer is None:
+        return sparse_kind(beams)
+    name = prediction_name(item.completer, beams)
+    return f"{name}+{MASKED}" if item.masked else name
+
+
+def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_diff: float = EVO_MAX_TIME_DIFF_S,
+                  failure_threshold: float = FAILURE_THRESHOLD,
+                  jobs: int = 1) -> dict[tuple[int | None, str], LayerResult]:
+    """Scores of every (beam count, input): ``{(beams, label): result}``, beam counts from the largest; the
+    beam-independent inputs last, under ``(None, label)``. Missing inputs are recorded in each result (see
+    :func:`dcslam.report.table_5_2.score_layer`). ``jobs`` > 1 scores the rows in that many worker processes."""
+    keys = [(b, i) for b in sorted(beams, reverse=True) for i in INPUTS if i.per_beam]
+    keys += [(None, i) for i in INPUTS if not i.per_beam]
+    work = [(ws, item.label, layer_name(item, b), drives, max_time_diff, failure_threshold) for b, item in keys]
+    if jobs <= 1:
+        scored = [_score(*args) for args in work]
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        from dcslam.stages.reproduce import _one_thread
+
+        with ProcessPoolExecutor(max_workers=min(jobs, len(work)), mp_context=multiprocessing.get_context("spawn"),
+                                 initializer=_one_thread) as pool:
+            scored = list(pool.map(_score, *zip(*work)))
+    return {(b, item.label): result for (b, item), result in zip(keys, scored)}
+
+
+def _score(ws, label, layer, drives, max_time_diff, failure_threshold) -> LayerResult:
+    result = score_layer(ws, label, layer, drives, max_time_diff=max_time_diff, failure_threshold=failure_threshold)
+    _ = result.scores  # computed here, in the worker
+    return result
+
+
+def common_settings(results: dict[tuple[int | None, str], LayerResult]) -> dict:
+    """The SLAM settings every row was made with; a :class:`DcslamError` naming two rows that differ (and how)."""
+    first, first_key = None, None
+    for key, result in results.items():
+        if not result.pairs:
+            continue
+        own = {k: v for k, v in result.run_settings().items() if k != "beams"}
+        if first is None:
+            first, first_key = own, key
+            continue
+        for name in sorted(set(first) | set(own)):
+            if first.get(name) != own.get(name):
+                raise DcslamError(
+                    f"the beams table mixes SLAM runs made with different settings: {name}={first.get(name)} for "
+                    f"{_row_name(first_key)} ({results[first_key].layer}) but {name}={own.get(name)} for "
+                    f"{_row_name(key)} ({result.layer}); rerun `dcslam reproduce --table beams` (or `dcslam slam "
+                    f"--force` on the odd layer) so that every row is made the same way")
+    return first or {}
+
+
+def _row_name(key: tuple[int | None, str]) -> str:
+    beams, label = key
+    return label if beams is None else f"{label} at {beams} beams"
+
+
+GAP_NOTE = ("gap closed: (sparse − row) / (sparse − exact) of the mean localisation at that beam count (100 % = as "
+            "good as exact depth, < 0 = worse than sparse)")
+COLUMNS = [Column("beams", "beams"), Column("input", "input"), Column("layer", "layer"), Column("drives", "drives"),
+           Column("failures", "failed"), Column("localisation_text", "localisation"),
+           Column("localisation_median_text", "median"), Column("vs_sparse", "vs sparse"),
+           Column("gap_closed_text", "gap closed"), Column("mae_mm_text", "MAE (mm)"),
+           Column("rmse_mm_text", "RMSE (mm)"), Column("ate_rmse_m_text", "ATE RMSE (m)"),
+           Column("rpe_rmse_m_text", "RPE RMSE (m)"), Column("rpe_rmse_deg_text", "RPE RMSE (°)"),
+           Column("notes", "why —")]
+FIGURES = ("localisation", "mae_mm", "rmse_mm", "ate_rmse_m", "rpe_rmse_m", "rpe_rmse_deg")
+
+
+def _verdict(result: LayerResult, reference: LayerResult | None) -> str | None:
+    if reference is None or not reference.pairs or not result.pairs:
+        return None
+    if result is reference:
+        return "reference"
+    common = [d for d in result.pairs if d in reference.pairs]
+    mine = [result.scores[d].localisation for d in common]
+    theirs = [reference.scores[d].localisation for d in common]
+    verdict = differs(mine, theirs)
+    if verdict is None:
+        return "one drive"
+    if not verdict:
+        return "within spread"
+    return "better" if sum(mine) < sum(theirs) else "worse"
+
+
+def _gap_closed(result: LayerResult, sparse: LayerResult | None, exact: LayerResult | None) -> float | None:
+    if result.localisation is None or sparse is None or exact is None or None in (sparse.localisation,
+                                                                                  exact.localisation):
+        return None
+    gap = sparse.localisation - exact.localisation
+    return None if gap <= 0 else (sparse.localisation - result.localisation) / gap
+
+
+def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[int], drives: list[str]) -> Table:
+    """The beams table: one row per (beam count, input), then the beam-independent rows (compared with the 64-beam
+    sparse input, or the largest beam count's). Refuses rows made with different SLAM settings."""
+    settings = common_settings(results)
+    frames = {p.T_est.shape[0] for r in results.values() for p in r.pairs.values()}
+    table = Table(f"The beams experiment — {len(drives)} test drive(s) ({', '.join(drives)})", COLUMNS)
+    table.csv_columns = [Column(k, k) for k in ("beams", "input", "layer", "drives", "failures", "vs_sparse",
+                                                "gap_closed")] + [
+        Column(f"{k}{s}", "") for k in FIGURES for s in ("", "_std", "_ci_low", "_ci_high", "_median")] + [
+        Column("missing", "")]
+    exact = results.get((None, "exact"))
+    top = max(beams)
+    for key, result in results.items():
+        b, label = key
+        sparse = results.get((b if b is not None else top, "sparse"))
+        row = result.row()
+        row.update(beams=b if b is not None else "any", input=label, vs_sparse=_verdict(result, sparse))
+        gap = None if result is exact else _gap_closed(result, sparse, exact)
+        row["gap_closed"] = gap
+        row["gap_closed_text"] = None if gap is None else f"{100 * gap:.0f} %"
+        row["notes"] = row.get("missing")
+        table.rows.append(row)
+    table.notes += [
+        f"{len(drives)} test drives × {'/'.join(map(str, sorted(frames))) or '—'} SLAM frames each; every figure: "
+        "mean over the test drives ± the half-width of its 95 % t-interval (std, interval and median in the CSV, "
+        "every drive in the per-drive CSV)",
+        "localisation: the thesis's metric, mean over poses of ‖t_X‖ + acos((tr R_X − 1)/2), X = T_gt⁻¹ T_est "
+        "(m + rad); lower is better",
+        f"vs sparse: paired t-interval (95 %) of the per-drive differences from the sparse input of the same beam "
+        f"count (rows 'any': from {top}-beam sparse); better / worse beyond the spread, or within it",
+        GAP_NOTE,
+        "MAE / RMSE: against the annotated depth, KITTI devkit with dcslam's two departures (predictions below 0.1 m "
+        "are holes; pixels the devkit cannot interpolate are left out)",
+        f"failed: drives whose SLAM run rejected steps or whose localisation exceeds "
+        f"{next(iter(results.values())).failure_threshold:g} m + rad (kept in the means)" if results else "",
+        "SLAM settings of every row: " + (", ".join(f"{k}={settings[k]}" for k in sorted(settings)) or "none "
+                                           "recorded"),
+        *findings(results, beams)]
+    table.notes = [n for n in table.notes if n]
+    return table
+
+
+def findings(results: dict[tuple[int | None, str], LayerResult], beams: list[int]) -> list[str]:
+    """One line per beam count: the completed inputs that localise better than sparse beyond the spread, the best
+    one's share of the sparse → exact gap, and whether masking nconv by its confidence differs beyond the spread."""
+    lines = []
+    exact = results.get((None, "exact"))
+    for b in sorted(beams, reverse=True):
+        sparse = results.get((b, "sparse"))
+        if sparse is None or not sparse.pairs:
+            continue
+        completed = [results[(b, i.label)] for i in INPUTS if i.completer and (b, i.label) in results
+                     and results[(b, i.label)].pairs]
+        better = [r.label for r in completed if _verdict(r, sparse) == "better"]
+        scored = [r for r in completed if r.localisation is not None]
+        best = min(scored, key=lambda r: r.localisation) if scored else None
+        gap = _gap_closed(best, sparse, exact) if best is not None else None
+        text = f"{b} beams: better than sparse beyond the spread: {', '.join(better) or 'none'}"
+        if best is not None:
+            text += f"; best completed input {best.label} ({best.localisation:.4f} vs sparse {sparse.localisation:.4f}"
+            text += f", {100 * gap:.0f} % of the gap to exact)" if gap is not None else ")"
+        masked, plain = results.get((b, "nconv masked")), results.get((b, "nconv"))
+        if masked is not None and plain is not None and masked.pairs and plain.pairs:
+            text += f"; nconv masked vs unmasked: {_verdict(masked, plain)}"
+        lines.append(text)
+    return lines
+
+
+def per_drive_table(results: dict[tuple[int | None, str], LayerResult]) -> Table:
+    """Every figure of every row on every test drive (``results/table_beams_per_drive.csv``)."""
+    from dcslam.report.scores import PER_DRIVE_KEYS
+
+    columns = [Column("beams", "beams"), Column("input", "input"), Column("layer", "layer"),
+               Column("drive", "drive")] + [Column(k, k) for k in PER_DRIVE_KEYS]
+    rows = [{"beams": b if b is not None else "any", "input": label, "layer": r.layer, "drive": drive, **values}
+            for (b, label), r in results.items() for drive, values in r.per_drive().items()]
+    return Table("The beams experiment per drive", columns, rows)
+
+
+def plot_localisation_vs_beams(path: Path | str, results: dict[tuple[int | None, str], LayerResult],
+                               beams: list[int], force: bool = False) -> Path:
+    """Localisation (mean over drives, bars: 95 % half-width, clipped above zero) against beam count, one line per
+    input; the beam-independent inputs as horizontal lines with their interval as a band. Log-log axes."""
+    from dcslam.io.atomic import atomic_output
+    from dcslam.report.plots import _pyplot
+
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7.5, 5))
+    xs = sorted(beams)
+    for i, item in enumerate(INPUTS):
+        if not item.per_beam:
+            continue
+        points = [(b, spread([s.localisation for s in results[(b, item.label)].scores.values()]))
+                  for b in xs if (b, item.label) in results and results[(b, item.label)].pairs]
+        if not points:
+            continue
+        x = [b * (1 + 0.03 * (i - 2.5)) for b, _ in points]  # the bars of different inputs a little apart
+        mean = [s.mean for _, s in points]
+        low = [0.0 if s.ci_low is None else s.mean - max(s.ci_low, 0.05 * s.mean) for _, s in points]
+        high = [0.0 if s.ci_high is None else s.ci_high - s.mean for _, s in points]
+        ax.errorbar(x, mean, yerr=[low, high], marker="os^vDP"[i % 6], capsize=3, lw=1.4, label=item.label)
+    for j, item in enumerate(i for i in INPUTS if not i.per_beam):
+        result = results.get((None, item.label))
+        if result is None or not result.pairs:
+            continue
+        s = spread([v.localisation for v in result.scores.values()])
+        colour = f"C{6 + j}"
+        ax.axhline(s.mean, color=colour, ls="--", lw=1.2, label=f"{item.label} (any beam count)")
+        if s.ci_low is not None:
+            ax.axhspan(max(s.ci_low, 0.05 * s.mean), s.ci_high, color=colour, alpha=0.12)
+    ax.set_xscale("log", base=2)
+    ax.set_yscale("log")
+    ax.set_xticks(xs, [str(b) for b in xs])
+    ax.set_xlabel("LiDAR beams kept (of 64)")
+    ax.set_ylabel("localisation error (m + rad, thesis metric; lower is better)")
+    n = max((len(r.pairs) for r in results.values()), default=0)
+    ax.set_title(f"Localisation against beam count: mean over {n} test drives, bars/bands 95 % interval", fontsize=9)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="best")
+    fig.tight_layout()
+    with atomic_output(path, force=force) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+@dataclass
+class BeamsReport:
+    """The beams table, its per-drive table and the files written."""
+
+    table: Table
+    per_drive: Table
+    written: list[Path]
+
+
+def build_beams_report(ws: Workspace, beams: list[int], drives: list[str], out_dir: Path | None = None,
+                       force: bool = False, max_time_diff: float = EVO_MAX_TIME_DIFF_S,
+                       failure_threshold: float = FAILURE_THRESHOLD, jobs: int = 1) -> BeamsReport:
+    """Score every row and write ``table_beams.{md,csv}``, ``table_beams_per_drive.{md,csv}`` and
+    ``beams_localisation.png`` under ``out_dir`` (default ``results/``); nothing is written when an output exists
+    without ``force``, or when rows were made with different SLAM settings (``jobs``: worker processes that score
+    the rows)."""
+    from dcslam.io.atomic import write_text_atomic
+    from dcslam.report.scores import check_outputs
+
+    if not beams or not drives:
+        raise DcslamError("the beams table needs at least one beam count and one test drive")
+    out_dir = Path(out_dir) if out_dir else ws.results
+    results = beams_results(ws, beams, drives, max_time_diff, failure_threshold, jobs)
+    table, per_drive = table_beams(results, beams, drives), per_drive_table(results)
+    tables = {"table_beams": table, "table_beams_per_drive": per_drive}
+    outputs = [out_dir / f"{name}.{ext}" for name in tables for ext in ("md", "csv")]
+    plot = out_dir / "beams_localisation.png"
+    check_outputs([*outputs, plot], force)
+    written = []
+    for name, t in tables.items():
+        written.append(write_text_atomic(out_dir / f"{name}.md", t.to_markdown(), force=True))
+        written.append(write_text_atomic(out_dir / f"{name}.csv", t.to_csv(), force=True))
+    if any(r.pairs for r in results.values()):
+        written.append(plot_localisation_vs_beams(plot, results, beams, force=True))
+    return BeamsReport(table, per_drive, written)

@@ -1,0 +1,193 @@
+"""``dcslam reproduce --table beams`` (``make reproduce-beams``): does completed depth help SLAM when the LiDAR has
+fewer beams? (issue 13)
+
+The experiment composes the other stages as :mod:`dcslam.stages.reproduce` does (same stamps, same skipping of
+finished stages, same ``jobs``)::
+
+    synth (unless a KITTI root is given) → prepare-kitti --beams 32,16,8 (plus depth/exact on generated drives)
+    → train SparseConvNet, nconv, nconv-guided → predict each (and IP-Basic) at every beam count
+    → filter nconv's predictions by confidence ("masked") → slam over every (input, beam count, test drive)
+    → score: the beams table, its per-drive CSV and a plot of localisation against beam count
+
+The trainings, the predictions and the SLAM runs are each independent of one another, so ``jobs`` > 1 runs each
+group in that many worker processes (one torch thread each). A profile sets the scale; its ``train`` is the one dict
+of training options (run name → options of ``dcslam train``).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from dcslam.errors import DcslamError
+from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
+from dcslam.report.table_5_2 import FAILURE_THRESHOLD
+from dcslam.report.table_beams import (FULL_BEAMS, INPUTS, IP_BASIC_RUN, TRAINED, layer_name,
+                                       prediction_name, sparse_kind)
+from dcslam.stages import filter as filter_stage
+from dcslam.stages import predict, prepare, slam, train
+from dcslam.stages.config import option
+from dcslam.stages.reproduce import Pipeline, Stage, make_drives
+from dcslam.workspace import Workspace
+
+
+@dataclass(frozen=True)
+class BeamsProfile:
+    """The scale of one beams experiment."""
+
+    name: str
+    drives: int                          # generated drives
+    frames: int                          # raw frames per generated drive (depth exists for frames 5 … N−6)
+    train: dict[str, dict]               # run name (sparse-conv, nconv, nconv-guided) → `dcslam train` options
+    slam_frames: int                     # frames of each test drive fed to SLAM
+    beams: tuple[int, ...] = (64, 32, 16, 8)
+    confidence_min: float = 0.5          # nconv's "masked" rows keep pixels at least this confident
+    split: tuple[int, int, int] | None = None
+    slam: dict = field(default_factory=dict)  # SLAM settings other than the defaults (fields of SlamSettings)
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if set(self.train) != set(TRAINED):
+            raise DcslamError(f"beams profile {self.name}: train must hold options for exactly "
+                              f"{', '.join(TRAINED)}, got {', '.join(self.train) or 'none'}")
+        if FULL_BEAMS not in self.beams:
+            raise DcslamError(f"beams profile {self.name}: beams {self.beams} must include {FULL_BEAMS} (the "
+                              "drive's own sparse depth, the reference of the others)")
+        for b in self.beams:
+            prepare.check_beams(b)
+        if self.split is not None and (sum(self.split) != self.drives or min(self.split) < 1):
+            raise DcslamError(f"beams profile {self.name}: split {self.split} must be >= 1 drive each and add up "
+                              f"to {self.drives} drives")
+
+    def train_config(self, run: str, seed: int) -> train.TrainStageConfig:
+        """The ``dcslam train`` configuration of run ``run`` (its ``model`` defaults to the run's name)."""
+        return train.TrainStageConfig(**{"model": run, **self.train[run]}, name=run, seed=seed)
+
+
+_QUICK = {"epochs": 2, "max_frames": 31, "scale": 0.5}  # as the Table 5.2 quick profile
+PROFILES = {
+    "quick": BeamsProfile(
+        name="quick", drives=8, frames=42, split=(3, 1, 4), slam_frames=30,
+        train={"sparse-conv": {**_QUICK, "lr": 3e-3}, "nconv": {**_QUICK, "lr": 1e-2},
+               "nconv-guided": {**_QUICK, "lr": 1e-2}},
+        description="8 generated drives of 42 frames (3 train / 1 val / 4 test, the drives of the Table 5.2 quick "
+                    "profile), 64/32/16/8 beams, completers trained 2 epochs at half resolution on the 64-beam "
+                    "input, SLAM on the first 30 frames of each test drive"),
+    "smoke": BeamsProfile(
+        name="smoke", drives=3, frames=12, beams=(64, 16), slam_frames=2,
+        train={run: {"epochs": 1, "max_frames": 2, "scale": 0.25} for run in TRAINED},
+        slam={"iterations": 3, "voxel_size": 0.2},
+        description="a check that every stage runs (3 drives of 12 frames, 64 and 16 beams, tiny training, SLAM "
+                    "over 2 frames): numbers mean nothing"),
+    "thesis": BeamsProfile(
+        name="thesis", drives=24, frames=211, slam_frames=30,
+        train={"sparse-conv": {"epochs": 5, "max_frames": 200}, "nconv": {"epochs": 5, "max_frames": 200,
+                                                                          "lr": 1e-2},
+               "nconv-guided": {"epochs": 5, "max_frames": 200, "lr": 1e-2}},
+        description="the thesis's scale: 15 / 4 / 5 drives of 200 frames, full resolution (use a GPU)"),
+}
+
+
+@dataclass(frozen=True)
+class BeamsTableConfig:
+    """What the scoring stage of the beams experiment reads (its record in the pipeline's stamp)."""
+
+    beams: list[int] = option(default_factory=lambda: [64, 32, 16, 8], help="Beam counts (rows).")
+    drive: list[str] = option(default_factory=list, help="Test drives.")
+    out_dir: Path | None = option(None, help="Output folder (default: <workspace>/results).")
+    max_time_diff: float = option(EVO_MAX_TIME_DIFF_S, min=0.0, help="Trajectory association tolerance (s).")
+    failure_threshold: float = option(FAILURE_THRESHOLD, min=0.0, help="Localisation above which a drive failed.")
+    jobs: int = option(1, internal=True, help="Worker processes that score the rows (not part of the stamp).")
+
+
+def run_table(ws: Workspace, config: BeamsTableConfig, *, force: bool = False):
+    """Write the beams table, its per-drive table and the plot (:func:`dcslam.report.table_beams.build_beams_report`)
+    and the configuration beside them (``table_beams.json``)."""
+    from dcslam.io.atomic import write_json_atomic
+    from dcslam.report.table_beams import build_beams_report
+    from dcslam.stages.config import to_dict
+    from dcslam.workspace import select_drives, stage_config
+
+    report = build_beams_report(ws, list(config.beams), select_drives(ws, config.drive), out_dir=config.out_dir,
+                                force=force, max_time_diff=config.max_time_diff,
+                                failure_threshold=config.failure_threshold, jobs=config.jobs)
+    write_json_atomic(report.written[0].parent / "table_beams.json", stage_config("score-beams", to_dict(config)),
+                      force=True)
+    return report
+
+
+def _have_exact(drives: list[Path]) -> bool:
+    """Whether every drive file holds the generator's exact depth (``depth/exact``)."""
+    from dcslam.io.drive import EXACT, DriveFile
+
+    for path in drives:
+        with DriveFile(path) as drive:
+            if EXACT not in drive.kinds:
+                return False
+    return True
+
+
+def reproduce(ws: Workspace, profile: BeamsProfile, kitti_root: Path | None = None, seed: int = 0,
+              log: Callable[[str], None] = lambda line: None, force: bool = False, jobs: int = 1) -> Path:
+    """Run the beams experiment at ``profile``'s scale; return the Markdown file of its table (``force``, ``jobs``:
+    as :func:`dcslam.stages.reproduce.reproduce`)."""
+    return compose(Pipeline(ws, log, force=force), profile, kitti_root, seed, jobs)
+
+
+def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = None, seed: int = 0,
+            jobs: int = 1) -> Path:
+    """Hand every stage of the beams experiment to ``pipe`` in order; return the Markdown file of its table."""
+    ws = pipe.ws
+    test, learn = make_drives(pipe, drives=profile.drives, frames=profile.frames, split=profile.split,
+                              kitti_root=kitti_root, seed=seed,
+                              beams=tuple(b for b in profile.beams if b != FULL_BEAMS))
+    pipe.run_all([Stage(f"train-{run}", train.run, profile.train_config(run, seed),
+                        outputs=lambda r=run: [ws.runs / r / "model.pt", ws.runs / r / "metrics.jsonl"],
+                        inputs=lambda: learn) for run in TRAINED], jobs)
+    predictions = []
+    for b in profile.beams:
+        for completer in (IP_BASIC_RUN, *TRAINED):
+            out = ws.predictions / prediction_name(completer, b)
+            made = [out / p.name for p in test]
+            config = (predict.PredictConfig(model=completer, input=sparse_kind(b), output=out)
+                      if completer == IP_BASIC_RUN else
+                      predict.PredictConfig(run=completer, input=sparse_kind(b), output=out))
+            needs = [] if completer == IP_BASIC_RUN else [ws.runs / completer / "model.pt"]
+            predictions.append(Stage(f"predict-{out.name}", predict.run, config, outputs=lambda m=made: m,
+                                     inputs=lambda n=needs: [*n, *test]))
+    pipe.run_all(predictions, jobs)
+    masked = []
+    for item in (i for i in INPUTS if i.masked):
+        for b in profile.beams:
+            name, source = layer_name(item, b), prediction_name(item.completer, b)
+            made = [ws.filtered / name / p.name for p in test]
+            config = filter_stage.FilterConfig(filters=[f"confidence:min={profile.confidence_min:g}"],
+                                               depth="predicted", run=source, name=name)
+            masked.append(Stage(f"filter-{name}", filter_stage.run, config, outputs=lambda m=made: m,
+                                inputs=lambda s=source: [ws.predictions / s / p.name for p in test]))
+    pipe.run_all(masked, jobs)
+
+    slam_stages, slam_outputs = [], []
+    exact = kitti_root is None if pipe.planning else _have_exact(test)
+    if not exact and not pipe.planning:
+        pipe.log("[note] the test drives have no exact depth (real KITTI): the exact row stays empty")
+    for item in INPUTS:
+        if item.label == "exact" and not exact:
+            continue
+        for b in (profile.beams if item.per_beam else [None]):
+            layer = layer_name(item, b)
+            folder = None if item.completer in (None, "") else (ws.filtered if item.masked else ws.predictions)
+            reference = layer if folder is None else f"{'filtered' if item.masked else 'predicted'}/{layer}"
+            for drive in test:
+                made = [ws.slam / layer / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt")]
+                slam_outputs += made
+                config = slam.SlamStageConfig(**{"odometry": "icp", **profile.slam}, depth=reference,
+                                              drive=[drive.stem], frames=profile.slam_frames)
+                source = [] if folder is None else [folder / layer / drive.name]
+                slam_stages.append(Stage(f"slam-{layer}-{drive.stem}", slam.run, config, outputs=lambda m=made: m,
+                                         inputs=lambda d=drive, s=source: [d, *s]))
+    pipe.run_all(slam_stages, jobs)
+    table = BeamsTableConfig(beams=list(profile.beams), drive=[p.stem for p in test], jobs=jobs)
+    pipe.run(Stage("score-beams", run_table, table, outputs=lambda: [ws.results / "table_beams.md"],
+                   inputs=lambda: slam_outputs))
+    return ws.results / "table_beams.md"

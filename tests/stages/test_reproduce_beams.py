@@ -1,0 +1,110 @@
+"""``dcslam reproduce --table beams`` at the smoke profile: exit code, files, skipping on a rerun, and the refusal of
+rows made with different SLAM settings. The drives are the tiny analytic ones of the stage tests (with ``sparse@16``
+and ``exact``) in place of generated KITTI drives, so that the whole experiment runs in seconds; every other stage
+(training, prediction, confidence filter, SLAM, scoring) runs for real."""
+import csv
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from dcslam.cli import app
+from dcslam.errors import DcslamError
+from dcslam.stages import reproduce_beams
+from dcslam.stages.reproduce_beams import PROFILES, BeamsProfile
+from tests.fixtures import depth as depth_fixtures
+
+runner = CliRunner()
+ARGS = ["reproduce", "--table", "beams", "--profile", "smoke"]
+
+
+@pytest.fixture
+def tiny_drives(monkeypatch):
+    """synth and prepare-kitti replaced by the tiny drive files (4 drives of 6 frames, 32 × 64; 64 and 16 beams)."""
+    def synth(ws, config, *, force=False):
+        ws.kitti.mkdir(parents=True, exist_ok=True)
+        (ws.kitti / "SYNTHETIC").write_text("tiny drives of the beams test\n")
+
+    def prepare(ws, config, *, force=False):
+        assert list(config.beams) == [16]  # the profile's beam counts other than 64
+        depth_fixtures.write_workspace(ws.root, n=6, extra=True)
+
+    monkeypatch.setattr("dcslam.stages.synth.run", synth)
+    monkeypatch.setattr("dcslam.stages.prepare.run", prepare)
+
+
+def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(tmp_path, tiny_drives):
+    result = runner.invoke(app, [*ARGS, "--workspace", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    results = tmp_path / "results"
+    for name in ("table_beams.md", "table_beams.csv", "table_beams_per_drive.csv", "beams_localisation.png"):
+        assert (results / name).stat().st_size > 0, name
+    assert "The beams experiment" in result.stdout
+    with open(results / "table_beams.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["beams"], r["input"]) for r in rows][:6] == [("64", label) for label in (
+        "sparse", "IP-Basic", "SparseConvNet", "nconv", "nconv masked", "nconv-guided")]
+    assert len(rows) == 2 * 6 + 2 and not any(r["missing"] for r in rows)
+    assert all(r["drives"] == "1" and r["localisation"] for r in rows)
+    for layer in ("sparse", "sparse@16", "nconv-sparse16+masked", "nconv-guided-sparse64", "exact", "dense"):
+        assert (tmp_path / "slam" / layer / "drive_d.txt").exists(), layer
+    with open(results / "table_beams_per_drive.csv") as f:
+        assert len(list(csv.DictReader(f))) == 14  # one test drive
+    masked = json.loads((tmp_path / "filtered" / "nconv-sparse16+masked" / "config.json").read_text())
+    assert masked["settings"]["filters"] == [{"filter": "confidence", "min": 0.5}]
+    assert json.loads((tmp_path / "runs" / "nconv-guided" / "config.json").read_text())["settings"]["model"] == \
+        "nconv-guided"
+
+    # the rows scored in worker processes give the same table
+    from dcslam.report.table_beams import build_beams_report
+    from dcslam.workspace import Workspace
+
+    build_beams_report(Workspace(tmp_path), [64, 16], ["drive_d"], out_dir=tmp_path / "parallel", jobs=2)
+    assert (tmp_path / "parallel" / "table_beams.csv").read_text() == (results / "table_beams.csv").read_text()
+
+    again = runner.invoke(app, [*ARGS, "--workspace", str(tmp_path)])
+    assert again.exit_code == 0, again.output
+    assert "[run]" not in again.stderr and again.stderr.count("[skip]") >= 30
+
+    # one row's SLAM run made with another setting: the table is refused, with exit code 1 and one line
+    summary = tmp_path / "slam" / "nconv-sparse16" / "drive_d.json"
+    record = json.loads(summary.read_text())
+    record["settings"]["voxel_size"] = 0.5
+    summary.write_text(json.dumps(record))
+    mixed = runner.invoke(app, [*ARGS, "--workspace", str(tmp_path)])
+    assert mixed.exit_code == 1
+    assert "different settings" in mixed.stderr and "voxel_size=0.5 for nconv at 16 beams" in mixed.stderr
+
+
+def test_profiles_hold_the_training_options_of_every_completer_and_the_full_beam_count():
+    quick = PROFILES["quick"]
+    assert quick.beams == (64, 32, 16, 8) and quick.split[2] >= 4 and set(quick.train) == {
+        "sparse-conv", "nconv", "nconv-guided"}
+    assert quick.train_config("nconv", seed=3).model == "nconv" and quick.train_config("nconv", 3).seed == 3
+    with pytest.raises(DcslamError, match="exactly sparse-conv, nconv, nconv-guided"):
+        BeamsProfile(name="bad", drives=3, frames=12, train={"nconv": {}}, slam_frames=2)
+    with pytest.raises(DcslamError, match="must include 64"):
+        BeamsProfile(name="bad", drives=3, frames=12, train=quick.train, slam_frames=2, beams=(32, 16))
+    with pytest.raises(DcslamError, match="divisor"):
+        BeamsProfile(name="bad", drives=3, frames=12, train=quick.train, slam_frames=2, beams=(64, 12))
+
+
+def test_drives_without_exact_depth_leave_the_exact_row_empty(tmp_path):
+    drives = [depth_fixtures.write_drive(tmp_path / f"{n}.h5", n=2, extra=extra) for n, extra in (("a", True),
+                                                                                                  ("b", False))]
+    assert reproduce_beams._have_exact(drives[:1]) and not reproduce_beams._have_exact(drives)
+
+
+def test_print_config_of_the_beams_table_lists_its_stages_and_runs_nothing(tmp_path):
+    from dcslam.stages.reproduce_plan import read_stage_configs
+
+    ws = tmp_path / "ws"
+    result = runner.invoke(app, ["reproduce", "--table", "beams", "--print-config", "--workspace", str(ws)])
+    assert result.exit_code == 0, result.output
+    assert not ws.exists()
+    stages = read_stage_configs(result.stdout)
+    names = list(stages)
+    assert names[:2] == ["synth", "prepare-kitti"] and names[-1] == "score-beams"
+    assert sorted(stages["prepare-kitti"]["beams"]) == sorted(b for b in PROFILES["quick"].beams if b != 64)
+    assert {n for n in names if n.startswith("train-")} == {f"train-{r}" for r in PROFILES["quick"].train}
+    assert any(n.startswith("slam-exact-") for n in names)  # generated drives: the exact row is planned
