@@ -24,8 +24,21 @@ def test_chain_passes_confidence_only_to_the_filters_that_use_it():
     assert (filter_frames(depth, K, chain, confidence=confidence) > 0).tolist() == [[[False, False], [True, True]]]
 
 
+def test_keep_holds_the_most_confident_fraction_of_the_pixels_with_depth():
+    depth = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 0.0]], np.float32)
+    confidence = np.array([[0.01, 0.02, 0.03], [0.04, 0.05, 0.9]], np.float32)  # the hole's confidence is ignored
+    out = parse_filter("confidence:min=0,keep=0.4").apply(depth, K, confidence=confidence)
+    assert out.tolist() == [[0.0, 0.0, 0.0], [4.0, 5.0, 0.0]]
+    both = ConfidenceFilter(min=0.045, keep=0.4).apply(depth, K, confidence=confidence)
+    assert both.tolist() == [[0.0, 0.0, 0.0], [0.0, 5.0, 0.0]]  # min and keep both apply
+    assert np.array_equal(ConfidenceFilter(min=0, keep=1).apply(depth, K, confidence=confidence), depth)
+    empty = np.zeros_like(depth)
+    assert np.array_equal(ConfidenceFilter(min=0, keep=0.5).apply(empty, K, confidence=confidence), empty)
+
+
 @pytest.mark.parametrize("make, match", [
     (lambda: ConfidenceFilter(1.5), "0 <= min <= 1"),
+    (lambda: ConfidenceFilter(0.1, keep=0), "0 < keep <= 1"),
     (lambda: ConfidenceFilter().apply(np.ones((2, 2)), K), "needs a layer with confidence"),
     (lambda: ConfidenceFilter().apply(np.ones((2, 2)), K, confidence=np.ones((3, 2))), "like its depth"),
     (lambda: parse_filter("confidence:min=x"), "min"),
