@@ -6,6 +6,7 @@ from __future__ import annotations
 
 LOSSES = ("mse", "chamfer")
 MASKS = ("sparse", "dense")
+LR_SCHEDULES = ("constant", "cosine")
 
 
 def map_frames_of(loss: str, map_frames: int) -> int:
