@@ -20,7 +20,11 @@ has a lower MAE and a lower RMSE than both the fill and its own untrained networ
 from __future__ import annotations
 
 import argparse
+import json
 import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict
+from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -47,11 +51,56 @@ def score(complete, drives, kind: str) -> tuple[float, float, int]:
     return abs_sum / n * 1e3, np.sqrt(sq_sum / n) * 1e3, n
 
 
-def network(model):
+def completer(spec: tuple):
+    """A completer ``(sparse, rgb) -> depth`` from its description: ``("fill",)``, ``("ip-basic",)``, or
+    ``("network", arch, hparams, seed, model file or None)`` (None: the untrained network of that seed)."""
+    if spec[0] == "fill":
+        return lambda sparse, rgb: nearest_fill(sparse)
+    if spec[0] == "ip-basic":
+        from dcslam.depth.models.ip_basic import IPBasic
+
+        return lambda sparse, rgb: IPBasic("fast")(sparse)
+    from dcslam.depth.models import build_model, load_model
     from dcslam.depth.predict import NetworkCompleter
 
-    completer = NetworkCompleter(model.eval(), "cpu", 1.0, model.ARCH)
-    return lambda sparse, rgb: completer.complete(sparse, rgb if completer.guided else None)[0]
+    _, arch, hparams, seed, path = spec
+    if path is None:
+        torch.manual_seed(seed)  # the initialisation train() starts from (it seeds torch the same way)
+        model = build_model(arch, **hparams)
+    else:
+        model = load_model(path)[0]
+    network = NetworkCompleter(model.eval(), "cpu", 1.0, model.ARCH)
+    return lambda sparse, rgb: network.complete(sparse, rgb if network.guided else None)[0]
+
+
+def score_task(spec: tuple, drives: list[Path], kind: str) -> tuple[float, float, int]:
+    """One cell of one seed (run in a worker process)."""
+    torch.set_num_threads(1)
+    return score(completer(spec), drives, kind)
+
+
+def train_task(run: Path, config, reuse: bool) -> str:
+    """Train one run (or check and take the one there with ``reuse``); returns its summary line."""
+    from dcslam.stages.train import read_result, train
+
+    torch.set_num_threads(1)
+    start = time.perf_counter()
+    if reuse and (run / "model.pt").exists():
+        same = json.loads((run / "config.json").read_text())["settings"]
+        differ = [k for k, v in json.loads(json.dumps(asdict(config), default=str)).items()
+                  if k != "device" and same.get(k) != v]
+        if differ:
+            raise SystemExit(f"{run} was trained with other options ({', '.join(differ)}); drop --reuse")
+        result, how = read_result(run), "reused"
+    else:
+        result, how = train(run, config, force=True), f"in {(time.perf_counter() - start) / 60:.1f} min"
+    best = min((r for r in result_rows(run) if r["kind"] == "val"), key=lambda r: r["mse"])
+    return (f"{run.name}: {result.steps} steps ({result.epochs} epochs) {how}; best validation (epoch "
+            f"{best['epoch']}) MAE {best['mae_mm']:.0f} mm, RMSE {best['rmse_mm']:.0f} mm")
+
+
+def result_rows(run: Path) -> list[dict]:
+    return [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines() if line.strip()]
 
 
 def cell(values: list[tuple[float, float]]) -> str:
@@ -76,13 +125,15 @@ def main() -> None:
     parser.add_argument("--lr", type=float, default=1e-2)
     parser.add_argument("--crop", type=int, default=256)
     parser.add_argument("--max-frames", type=int, default=200)
+    parser.add_argument("--jobs", type=int, default=2, help="worker processes (training runs and table cells)")
+    parser.add_argument("--train-only", action="store_true", help="train the runs, print no table")
+    parser.add_argument("--reuse", action="store_true",
+                        help="take a run that is already there (e.g. trained by parallel --train-only processes with "
+                             "the same options) instead of training it again")
     args = parser.parse_args()
 
-    from dcslam.depth.models import build_model, load_model
-    from dcslam.depth.models.ip_basic import IPBasic
     from dcslam.depth.train import TrainConfig
     from dcslam.io.drive import DriveFile, input_beams, read_splits
-    from dcslam.stages.train import train
     from dcslam.workspace import Workspace
 
     ws = Workspace.resolve(args.workspace)
@@ -98,42 +149,39 @@ def main() -> None:
     def hparams(arch):
         return {"fill_holes": True} if args.fill_holes and arch == "sparse-conv" else {}
 
-    trained = {}
-    for arch in args.models:
-        for seed in args.seeds:
-            config = TrainConfig(loss="mse", mask="dense", model=arch, model_hparams=hparams(arch), crop=args.crop,
-                                 seed=seed, device="cpu", lr=args.lr, lr_schedule=args.lr_schedule,
-                                 l1_weight=args.l1_weight, input=args.train_input, input_mix=list(args.input_mix),
-                                 max_frames=args.max_frames, epochs=args.epochs, train_drives=paths["train"],
-                                 val_drives=paths["val"])
-            run = ws.runs / f"beams-{arch}-seed{seed}"
-            start = time.perf_counter()
-            result = train(run, config, force=True)
-            trained[arch, seed] = load_model(run / "model.pt")[0]
-            print(f"{arch} seed {seed}: {result.steps} steps ({result.epochs} epochs) in "
-                  f"{(time.perf_counter() - start) / 60:.1f} min on {len(paths['train'])} drive(s); best validation "
-                  f"(epoch {result.best['epoch']}) MAE {result.best['mae_mm']:.0f} mm, RMSE "
-                  f"{result.best['rmse_mm']:.0f} mm", flush=True)
-
-    def untrained(arch, seed):
-        torch.manual_seed(seed)  # the initialisation train() starts from (it seeds torch the same way)
-        return network(build_model(arch, **hparams(arch)))
-
-    rows = {"nearest-neighbour fill": [lambda s, rgb: nearest_fill(s)],
-            "IP-Basic fast": [lambda s, rgb: IPBasic("fast")(s)]}
-    for arch in args.models:
-        rows[f"{arch} untrained"] = [untrained(arch, seed) for seed in args.seeds]
-        rows[f"{arch} trained"] = [network(trained[arch, seed]) for seed in args.seeds]
+    runs = {(arch, seed): ws.runs / f"beams-{arch}-seed{seed}" for arch in args.models for seed in args.seeds}
+    configs = {key: TrainConfig(loss="mse", mask="dense", model=key[0], model_hparams=hparams(key[0]),
+                                crop=args.crop, seed=key[1], device="cpu", lr=args.lr, lr_schedule=args.lr_schedule,
+                                l1_weight=args.l1_weight, input=args.train_input, input_mix=list(args.input_mix),
+                                max_frames=args.max_frames, epochs=args.epochs, train_drives=paths["train"],
+                                val_drives=paths["val"]) for key in runs}
+    start = time.perf_counter()
+    with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn")) as pool:
+        for line in pool.map(train_task, runs.values(), configs.values(), [args.reuse] * len(runs)):
+            print(line, flush=True)
+        print(f"training: {(time.perf_counter() - start) / 60:.1f} min wall with {args.jobs} processes on "
+              f"{len(paths['train'])} training drive(s)", flush=True)
+        if args.train_only:
+            return
+        rows = {"nearest-neighbour fill": [("fill",)], "IP-Basic fast": [("ip-basic",)]}
+        for arch in args.models:
+            rows[f"{arch} untrained"] = [("network", arch, hparams(arch), seed, None) for seed in args.seeds]
+            rows[f"{arch} trained"] = [("network", arch, hparams(arch), seed, runs[arch, seed] / "model.pt")
+                                       for seed in args.seeds]
+        tasks = [(name, kind, spec) for name, specs in rows.items() for kind in kinds for spec in specs]
+        start = time.perf_counter()
+        results = list(pool.map(score_task, [t[2] for t in tasks], [paths["test"]] * len(tasks),
+                                [t[1] for t in tasks]))
+    scores = {}
+    for (name, kind, _), result in zip(tasks, results):
+        scores.setdefault((name, kind), []).append(result[:2])
     print(f"\ntest drives: {', '.join(p.stem for p in paths['test'])}; MAE / RMSE in mm over every ground-truth "
-          f"pixel, holes as 0 m; seeds {args.seeds}: mean ±half-range")
+          f"pixel, holes as 0 m; seeds {args.seeds}: mean ±half-range (scored in "
+          f"{(time.perf_counter() - start) / 60:.1f} min)")
     print(f"{'method':<26}" + "".join(f"{kind:>26}" for kind in kinds))
-    scores, pixels = {}, 0
-    for name, completers in rows.items():
-        for kind in kinds:
-            results = [score(complete, paths["test"], kind) for complete in completers]
-            scores[name, kind], pixels = [r[:2] for r in results], results[0][2]
-        print(f"{name:<26}" + "".join(f"{cell(scores[name, kind]):>26}" for kind in kinds), flush=True)
-    print(f"({pixels:,} ground-truth pixels per column)")
+    for name in rows:
+        print(f"{name:<26}" + "".join(f"{cell(scores[name, kind]):>26}" for kind in kinds))
+    print(f"({results[0][2]:,} ground-truth pixels per column)")
     fill = {kind: np.array(scores["nearest-neighbour fill", kind][0]) for kind in kinds}
     for arch in args.models:
         verdict = []
