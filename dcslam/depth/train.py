@@ -3,7 +3,10 @@
 Losses: masked MSE (``sparse`` or ``dense`` mask) or chamfer between maps of predicted and ground-truth depth built
 with ground-truth poses (``map_frames`` frames per map). AdamW (lr 1e-3, weight decay 0.01); at most 200 frames
 per drive; the training drives in turn; after each epoch a validation pass without back-propagation averaged over
-the validation drives (chamfer, MSE, MAE, RMSE); the best validation checkpoint is kept.
+the validation drives (chamfer, MSE, MAE, RMSE); the best validation checkpoint is kept. Beyond the thesis: an L1
+term added to the MSE (``l1_weight``), a cosine learning-rate schedule over the run's steps (``lr_schedule``), and
+density augmentation (``input_mix``: each frame's input drawn in turn from several depth kinds, e.g. the sparse
+depth of 64, 32, 16 and 8 LiDAR beams; see :class:`dcslam.depth.data.DriveFrames`).
 
 :func:`train_loop` writes into a run folder ``metrics.jsonl`` (one JSON object per training step and per validation),
 ``model.pt`` (best validation) and ``last.pt`` (resume state, written after every drive); the run folder itself (its
