@@ -23,4 +23,6 @@ def report(result) -> None:
 train_command = stage_command(app, "train", train.TrainStageConfig, train.run, report, help=HELP,
                               examples=("dcslam train --loss chamfer --map-frames 8 --scale 0.5 --epochs 3",
                                         "dcslam train --loss mse --mask dense --resume    # after Ctrl-C: continue "
-                                        "from last.pt"))
+                                        "from last.pt",
+                                        "dcslam train --model nconv --input-mix sparse --input-mix sparse@16 "
+                                        "--input-mix sparse@8 --l1-weight 1 --lr-schedule cosine --crop 256"))

@@ -93,10 +93,15 @@ class DriveFrames:
     ``load(positions)`` reads frames ``indices[positions]`` as a :class:`Batch` after crop and scaling; the batch's
     ``sparse`` is the drive's depth kind ``input`` (``sparse``, ``sparse@16``, ...) and its ``dense`` the kind
     ``target`` (``dense``, or ``exact`` on generated drives).
+
+    With ``mix`` (depth kinds, e.g. ``sparse``, ``sparse@32``, ``sparse@16``, ``sparse@8``: density augmentation),
+    the input of each frame is drawn from them instead: ``load(positions, epoch)`` gives the frame at position ``p``
+    the kind ``mix[(p + epoch) % len(mix)]``, so consecutive frames differ, each frame meets every kind over
+    ``len(mix)`` epochs, and a resumed run reads exactly what an uninterrupted one would.
     """
 
     def __init__(self, path: Path | str, max_frames: int = 200, stride: int = 1, scale: float = 1.0, crop: int = 0,
-                 input: str = "sparse", target: str = "dense", rgb: bool = False):
+                 input: str = "sparse", target: str = "dense", rgb: bool = False, mix: list[str] | tuple = ()):
         from dcslam.io.drive import DriveFile, check_input_kind
 
         if stride < 1 or max_frames < 1:
@@ -104,9 +109,10 @@ class DriveFrames:
         self.factor = check_view(scale, crop)
         self.crop = crop
         self.input, self.target = check_input_kind(input), check_input_kind(target)
+        self.mix = tuple(check_input_kind(kind) for kind in mix)
         self.with_rgb = rgb
         self.drive = DriveFile(path)
-        for kind in (input, target):
+        for kind in (*(self.mix or (input,)), target):
             if kind not in self.drive.kinds:
                 self.drive.depth(kind, 0)  # fails with one line naming how to make it
         n, height, _ = self.drive.shape
@@ -128,9 +134,13 @@ class DriveFrames:
             depth = depth[..., self.height - self.crop:, :]
         return downscale_depth(depth, self.factor)
 
-    def load(self, positions) -> Batch:
+    def input_of(self, position: int, epoch: int = 0) -> str:
+        """The depth kind fed to the network for the frame at ``position`` in ``epoch`` (see the class)."""
+        return self.mix[(position + epoch) % len(self.mix)] if self.mix else self.input
+
+    def load(self, positions, epoch: int = 0) -> Batch:
         frames = [self.indices[p] for p in positions]
-        sparse = np.stack([self._view(self.drive.depth(self.input, i)) for i in frames])
+        sparse = np.stack([self._view(self.drive.depth(self.input_of(p, epoch), self.indices[p])) for p in positions])
         dense = np.stack([self._view(self.drive.depth(self.target, i)) for i in frames])
         rgb = None
         if self.with_rgb:

@@ -28,6 +28,7 @@ def check_pose_options(config) -> None:
         if getattr(config, name) < (1 if name == "pose_iterations" else 0):
             raise DcslamError(f"--{name.replace('_', '-')} must be >= {1 if name == 'pose_iterations' else 0}, "
                               f"got {getattr(config, name)}")
+LR_SCHEDULES = ("constant", "cosine")
 
 
 def map_frames_of(loss: str, map_frames: int) -> int:

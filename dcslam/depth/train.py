@@ -6,7 +6,10 @@ error of differentiable frame-to-model ICP over windows of ``pose_frames`` frame
 terms); ``init`` starts from another run's model file (fine-tuning). AdamW (lr 1e-3, weight decay 0.01); at most
 200 frames per drive; the training drives in turn; after each epoch a validation pass without back-propagation
 averaged over the validation drives (chamfer, MSE, MAE, RMSE; and the pose error for pose runs); the best validation
-checkpoint (by the run's own loss) is kept.
+checkpoint (by the run's own loss) is kept. Beyond the thesis: an L1
+term added to the MSE (``l1_weight``), a cosine learning-rate schedule over the run's steps (``lr_schedule``), and
+density augmentation (``input_mix``: each frame's input drawn in turn from several depth kinds, e.g. the sparse
+depth of 64, 32, 16 and 8 LiDAR beams; see :class:`dcslam.depth.data.DriveFrames`).
 
 :func:`train_loop` writes into a run folder ``metrics.jsonl`` (one JSON object per training step and per validation),
 ``model.pt`` (best validation) and ``last.pt`` (resume state, written after every drive); the run folder itself (its
@@ -29,12 +32,22 @@ import torch
 from dcslam.depth.data import DriveFrames, check_view, frame_windows
 from dcslam.depth.losses import MASKS, MaskedMSE, batch_depth_errors
 from dcslam.depth.maps import MapChamfer
-from dcslam.depth.recipes import LOSSES, check_pose_options, map_frames_of, selection_key
+from dcslam.depth.recipes import LOSSES, LR_SCHEDULES, check_pose_options, map_frames_of, selection_key
 from dcslam.depth.models import architectures, build_model, model_record, save_model
 from dcslam.errors import DcslamError
 from dcslam.progress import Bar
 from dcslam.io.atomic import atomic_output
 
+
+
+def lr_factor(schedule: str, step: int, total: int) -> float:
+    """The learning rate of optimisation step ``step`` of ``total``, as a fraction of ``--lr``: ``constant`` 1;
+    ``cosine`` 0.5 · (1 + cos(π · step / total)), from 1 down to (almost) 0 at the last step."""
+    if schedule == "constant":
+        return 1.0
+    if schedule == "cosine":
+        return 0.5 * (1.0 + math.cos(math.pi * min(step, total) / max(total, 1)))
+    raise DcslamError(f"unknown lr schedule {schedule!r}; expected one of {', '.join(LR_SCHEDULES)}")
 
 
 @dataclass
@@ -57,7 +70,10 @@ class TrainConfig:
     seed: int = 0
     device: str = "auto"
     input: str = "sparse"
+    input_mix: list = field(default_factory=list)
     target: str = "dense"
+    l1_weight: float = 0.0
+    lr_schedule: str = "constant"
     train_drives: list = field(default_factory=list)
     val_drives: list = field(default_factory=list)
     pose_frames: int = 4
@@ -89,6 +105,12 @@ class TrainConfig:
 
         check_input_kind(self.input)
         check_input_kind(self.target)
+        for kind in self.input_mix:
+            check_input_kind(kind)
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise DcslamError(f"unknown lr schedule {self.lr_schedule!r}; expected one of {', '.join(LR_SCHEDULES)}")
+        if not 0 <= self.l1_weight < float("inf"):
+            raise DcslamError(f"--l1-weight must be a non-negative number, got {self.l1_weight}")
         if not self.train_drives:
             raise DcslamError("no training drives; run `dcslam prepare-kitti` (or `dcslam synth`) first")
 
@@ -180,7 +202,7 @@ class Objective:
 
     def __init__(self, config: TrainConfig, map_builder=None):
         self.loss = config.loss
-        self.mse = MaskedMSE(config.mask)
+        self.mse = MaskedMSE(config.mask, config.l1_weight)
         self.chamfer = MapChamfer(config.map_frames, map_builder)
         self.pose = pose_loss_of(config) if config.loss == "pose" else None
         self.weights = {"pose": config.pose_weight, "mse": config.mse_weight, "chamfer": config.chamfer_weight}
@@ -363,7 +385,9 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
         while epoch < config.epochs:
             for position in range(next_chunk, per_rank):
                 d, window = mine[position]
-                batch = train_frames[d].load(window).to(device)
+                batch = train_frames[d].load(window, epoch).to(device)
+                for group in optimizer.param_groups:
+                    group["lr"] = config.lr * lr_factor(config.lr_schedule, step, config.epochs * per_rank)
                 if use_confidence:  # (not through DistributedDataParallel: refused above)
                     pred, confidence = run_model_with_confidence(model, batch)
                     loss = objective(pred, batch, confidence)
@@ -376,7 +400,7 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
                     loss.backward()
                     optimizer.step()
                 write({"kind": "train", "epoch": epoch, "step": step, "drive": train_frames[d].name,
-                       "loss": float(loss.detach()), **objective.parts})
+                       "loss": float(loss.detach()), "lr": optimizer.param_groups[0]["lr"], **objective.parts})
                 step += 1
                 bar.advance(status=f"epoch {epoch} loss {float(loss.detach()):.4g}")
                 last_of_drive = position + 1 == per_rank or mine[position + 1][0] != d

@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from dcslam.depth.models import ARCHITECTURES
-from dcslam.depth.recipes import LOSSES, MASKS, POSE_WEIGHTS, check_pose_options, run_name, selection_key
+from dcslam.depth.recipes import LOSSES, LR_SCHEDULES, MASKS, POSE_WEIGHTS, check_pose_options, run_name, selection_key
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
 from dcslam.io.atomic import write_json_atomic
@@ -51,8 +51,20 @@ class TrainStageConfig:
     input: str = option("sparse", validate=_check_kind, metavar="KIND",
                         help="Depth fed to the network: sparse (the drive's own), sparse@<beams> (written by "
                              "prepare-kitti --beams), dense or exact.")
+    input_mix: list[str] = option(default_factory=list, validate=_check_kind, metavar="KIND",
+                                  help="Density augmentation (repeatable): each frame's input drawn in turn from "
+                                       "these kinds, e.g. --input-mix sparse --input-mix sparse@32 --input-mix "
+                                       "sparse@16 --input-mix sparse@8 (one model for every beam count); replaces "
+                                       "--input.")
     target: str = option("dense", validate=_check_kind, metavar="KIND",
                          help="Depth the loss compares with: dense (annotated) or exact (generated drives only).")
+    l1_weight: float = option(0.0, help="MSE loss plus this weight times the mean absolute error (metres) over the "
+                                        "same pixels (0 = MSE alone, the thesis's).")
+    lr_schedule: str = option("constant", choices=LR_SCHEDULES, help="constant, or cosine: from --lr down to 0 over "
+                                                                     "all the run's steps.")
+    fill_holes: bool = option(False, flags=("--fill-holes/--no-fill-holes",),
+                              help="sparse-conv only: fill what lies beyond its receptive field from coarser scales, "
+                                   "so it leaves no hole (off: the paper's network).")
     name: str | None = option(None, help="Run name (default: mse-dense, mse-sparse, chamfer-1, ...; with another "
                                          "input or target, e.g. mse-dense-sparse16, mse-dense-to-exact).")
     resume: bool = option(False, flags=("--resume",), help="Continue an interrupted run from last.pt.")
@@ -76,7 +88,7 @@ class TrainStageConfig:
                                "confidence (the network's, for nconv models; others have none) or none.")
 
     def __post_init__(self) -> None:
-        for name, choices in (("loss", LOSSES), ("mask", MASKS), ("model", MODELS)):
+        for name, choices in (("loss", LOSSES), ("mask", MASKS), ("model", MODELS), ("lr_schedule", LR_SCHEDULES)):
             if getattr(self, name) not in choices:
                 raise DcslamError(f"unknown {name} {getattr(self, name)!r}; expected one of {', '.join(choices)}")
         for name in ("map_frames", "epochs", "max_frames", "stride", "batch_size", "nproc"):
@@ -84,6 +96,10 @@ class TrainStageConfig:
                 raise DcslamError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
         if not 0 < self.lr < float("inf"):
             raise DcslamError(f"--lr must be a positive number, got {self.lr}")
+        if not 0 <= self.l1_weight < float("inf"):
+            raise DcslamError(f"--l1-weight must be a non-negative number, got {self.l1_weight}")
+        if self.fill_holes and self.model != "sparse-conv":
+            raise DcslamError(f"--fill-holes is an option of sparse-conv, not of {self.model}")
         if not 0 <= self.weight_decay < float("inf"):
             raise DcslamError(f"--weight-decay must be a non-negative number, got {self.weight_decay}")
         if self.name is not None:
@@ -100,13 +116,17 @@ class TrainStageConfig:
 
             plain_name(self.init, "--init")
         check_pose_options(self)
+        for kind in self.input_mix:
+            _check_kind(kind)
 
     @property
     def run_name(self) -> str:
         if self.name:
             return self.name
         name = run_name(self.loss, self.mask, self.map_frames, self.init)
-        if self.input != "sparse":
+        if self.input_mix:
+            name += "-mix"
+        elif self.input != "sparse":
             name += "-" + self.input.replace("@", "")
         return name + (f"-to-{self.target}" if self.target != "dense" else "")
 
@@ -120,7 +140,10 @@ class TrainStageConfig:
                            weight_decay=self.weight_decay,
                            max_frames=self.max_frames, stride=self.stride, scale=self.scale, crop=self.crop,
                            batch_size=self.batch_size, seed=self.seed, device=self.device, input=self.input,
-                           target=self.target, train_drives=train_drives, val_drives=val_drives)
+                           target=self.target, input_mix=list(self.input_mix), l1_weight=self.l1_weight,
+                           lr_schedule=self.lr_schedule,
+                           model_hparams={"fill_holes": True} if self.fill_holes else {},
+                           train_drives=train_drives, val_drives=val_drives)
 
 
 POSE_OPTIONS = ("pose_frames", "pose_weight", "mse_weight", "chamfer_weight", "pose_translation_weight",
@@ -227,10 +250,10 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
     try:
         guided = is_guided(config.model)
         train_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop, config.input,
-                                    config.target, rgb=guided) for p in config.train_drives]
+                                    config.target, rgb=guided, mix=config.input_mix) for p in config.train_drives]
         open_drives += train_frames
         val_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop, config.input,
-                                  config.target, rgb=guided) for p in config.val_drives]
+                                  config.target, rgb=guided, mix=config.input_mix) for p in config.val_drives]
         open_drives += val_frames
         if rank == 0 and not resume:
             settings = asdict(config)
@@ -239,6 +262,8 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
             settings["resolved_device"] = str(device)
             settings["world_size"] = world
             settings["input_beams"] = input_beams(config.input)
+            if config.input_mix:
+                settings["input_beams"] = [input_beams(kind) for kind in config.input_mix]
             write_json_atomic(run_dir / "config.json", stage_config("train", settings))
         result = train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world,
                             on_epoch=lambda: plot_training_curves(run_dir / "curves.png", run_dir / "metrics.jsonl"))

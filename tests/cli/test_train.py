@@ -73,3 +73,15 @@ def test_bad_numbers_give_one_line(ws, args, line):
     result = _run("train", "-w", str(ws), *args)
     assert result.exit_code == 1 and result.stderr.strip().splitlines() == [line]
     assert not (ws / "runs").exists()
+
+
+def test_train_with_density_mix_l1_cosine_and_filled_holes(tmp_path):
+    ws = fixtures.write_workspace(tmp_path / "mix", n=2, extra=True)
+    result = _run("train", "-w", str(ws), "--device", "cpu", "--input-mix", "sparse", "--input-mix", "sparse@16",
+                  "--l1-weight", "1", "--lr-schedule", "cosine", "--fill-holes", "--scale", "0.5")
+    assert result.exit_code == 0, result.output
+    settings = json.loads((ws / "runs" / "mse-dense-mix" / "config.json").read_text())["settings"]
+    assert (settings["input_mix"], settings["l1_weight"], settings["lr_schedule"], settings["model_hparams"]) == \
+        (["sparse", "sparse@16"], 1.0, "cosine", {"fill_holes": True})
+    bad = _run("train", "-w", str(ws), "--device", "cpu", "--lr-schedule", "step")
+    assert bad.exit_code == 2

@@ -41,3 +41,20 @@ def test_bad_views(drive_path):
         DriveFrames(drive_path, crop=1000)
     with pytest.raises(DcslamError):
         DriveFrames(drive_path, stride=0)
+
+
+def test_input_mix_rotates_the_kinds_over_positions_and_epochs(tmp_path):
+    from dcslam.io.drive import DriveFile
+    from tests.fixtures.depth import write_drive
+
+    path = write_drive(tmp_path / "d.h5", n=3, height=32, width=64, extra=True)
+    frames = DriveFrames(path, mix=["sparse", "sparse@16"])
+    assert [frames.input_of(p, 0) for p in range(3)] == ["sparse", "sparse@16", "sparse"]
+    assert [frames.input_of(p, 1) for p in range(3)] == ["sparse@16", "sparse", "sparse@16"]
+    batch = frames.load([0, 1], epoch=1)
+    with DriveFile(path) as drive:
+        assert np.array_equal(batch.sparse[0, 0].numpy(), drive.depth("sparse@16", 0))
+        assert np.array_equal(batch.sparse[1, 0].numpy(), drive.depth("sparse", 1))
+    assert DriveFrames(path).input_of(1, 1) == "sparse"
+    with pytest.raises(DcslamError, match="holds no sparse@32"):
+        DriveFrames(path, mix=["sparse", "sparse@32"])

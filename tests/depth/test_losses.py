@@ -3,7 +3,7 @@ import math
 import pytest
 import torch
 
-from dcslam.depth.losses import MaskedMSE, batch_depth_errors, masked_mse, supervision_mask
+from dcslam.depth.losses import MaskedMSE, batch_depth_errors, masked_l1, masked_mse, supervision_mask
 from dcslam.errors import DcslamError
 
 
@@ -67,3 +67,19 @@ def test_bad_input():
         MaskedMSE("both")
     with pytest.raises(DcslamError):
         masked_mse(torch.zeros(1, 2, 2), torch.zeros(1, 2, 2), torch.zeros(1, 2, 2, dtype=torch.bool))
+
+
+def test_l1_term_adds_the_mean_absolute_error():
+    pred, sparse, dense = _pair()
+    mse = MaskedMSE("dense")(pred, sparse, dense).item()
+    assert MaskedMSE("dense", l1_weight=2.0)(pred, sparse, dense).item() == pytest.approx(mse + 2.0 * (1 + 0 + 1) / 3)
+    assert masked_l1(pred, dense, supervision_mask(sparse, dense, "sparse")).item() == pytest.approx(1.0)
+    with pytest.raises(DcslamError, match="L1 weight"):
+        MaskedMSE("dense", l1_weight=-1.0)
+
+
+def test_masked_l1_gradcheck_float64():
+    pred, sparse, dense = _pair(dtype=torch.float64)
+    pred = (pred + torch.tensor([0.3, -0.4, 0.2], dtype=torch.float64)).detach().requires_grad_()  # off the kinks
+    mask = supervision_mask(sparse, dense, "dense")
+    assert torch.autograd.gradcheck(lambda p: masked_l1(p, dense, mask), (pred,))

@@ -31,7 +31,7 @@ def test_mse_dense_run_writes_everything(workspace):
     train_rows = [r for r in rows if r["kind"] == "train"]
     val_rows = [r for r in rows if r["kind"] == "val"]
     assert len(train_rows) == 2 * 2 * 3 and result.steps == 12  # 2 epochs x 2 drives x 3 batches of 2 frames
-    assert set(train_rows[0]) == {"kind", "epoch", "step", "drive", "loss"}
+    assert set(train_rows[0]) == {"kind", "epoch", "step", "drive", "loss", "lr"}
     assert [r["drive"] for r in train_rows[:6]] == ["drive_a"] * 3 + ["drive_b"] * 3  # drives in turn
     assert len(val_rows) == 2 and set(val_rows[0]) == {"kind", "epoch", "step", "chamfer", "mse", "mae_mm", "rmse_mm"}
     assert val_rows[0]["rmse_mm"] == pytest.approx(1000 * val_rows[0]["mse"] ** 0.5)

@@ -74,3 +74,43 @@ def test_several_processes_on_an_existing_run_are_refused_before_any_worker_star
     with pytest.raises(DcslamError, match=r"last.pt not found; nothing to resume"):
         run(ws, TrainStageConfig(nproc=2, name="ddp", resume=True))
     assert launched == [] and (ws.runs / "ddp" / "model.pt").read_bytes() == b"mine"
+
+
+def test_density_mix_l1_cosine_and_hole_filling_are_recorded(tmp_path):
+    from dcslam.depth.models import load_model
+    from dcslam.workspace import Workspace
+    from tests.fixtures.depth import write_workspace
+
+    ws = Workspace(write_workspace(tmp_path / "ws", extra=True))
+    config = TrainStageConfig(max_frames=4, scale=0.5, device="cpu", epochs=2, input_mix=["sparse", "sparse@16"],
+                              l1_weight=0.5, lr_schedule="cosine", fill_holes=True, lr=1e-2)
+    assert config.run_name == "mse-dense-mix"
+    result = run(ws, config)
+    assert result.steps == 16 and result.epochs == 2
+    files = sorted(p.name for p in result.run_dir.iterdir())
+    assert files == ["config.json", "curves.png", "last.pt", "metrics.jsonl", "model.pt"]
+    settings = json.loads((result.run_dir / "config.json").read_text())["settings"]
+    assert settings["input_mix"] == ["sparse", "sparse@16"] and settings["input_beams"] == [64, 16]
+    assert (settings["l1_weight"], settings["lr_schedule"]) == (0.5, "cosine")
+    assert settings["model_hparams"] == {"fill_holes": True}
+    model, _ = load_model(result.run_dir / "model.pt")
+    assert model.fill_holes
+    rates = [json.loads(line)["lr"] for line in (result.run_dir / "metrics.jsonl").read_text().splitlines()
+             if json.loads(line)["kind"] == "train"]
+    assert rates[0] == pytest.approx(1e-2) and all(a > b for a, b in zip(rates, rates[1:])) and rates[-1] < 1e-3
+
+
+def test_new_options_are_checked():
+    with pytest.raises(DcslamError, match="--fill-holes is an option of sparse-conv"):
+        TrainStageConfig(model="nconv", fill_holes=True)
+    with pytest.raises(DcslamError, match="--l1-weight"):
+        TrainStageConfig(l1_weight=-1.0)
+    with pytest.raises(DcslamError, match="unknown lr_schedule"):
+        TrainStageConfig(lr_schedule="step")
+    with pytest.raises(DcslamError, match="unknown depth kind"):
+        TrainStageConfig(input_mix=["sparse", "sparse16"])
+
+
+def test_an_input_mix_the_drives_lack_fails_with_one_line(ws):
+    with pytest.raises(DcslamError, match="holds no sparse@16 depth"):
+        run(ws, TrainStageConfig(max_frames=2, scale=0.5, device="cpu", input_mix=["sparse", "sparse@16"]))

@@ -7,6 +7,10 @@ Each layer computes, for input ``x`` and validity mask ``m``::
 
 followed by a ReLU. The network is the paper's: six sparse convolutions 1→16 (11×11), 16→16 (7×7, 5×5, 3×3, 3×3),
 16→1 (1×1).
+
+The paper's network has no output beyond its receptive field (about 13 pixels from the nearest input): with 8 of 64
+LiDAR beams whole bands between scan lines stay empty. With ``fill_holes`` (not the paper's) those pixels take the
+network's own output brought in from coarser scales by :func:`fill_from_coarser`, so it leaves no hole.
 """
 from __future__ import annotations
 
@@ -61,8 +65,38 @@ class SparseConv(nn.Module):
         return y, new_mask
 
 
+def fill_from_coarser(x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Fill the pixels where ``mask`` is 0 from a pyramid of valid-pixel averages (no parameters, differentiable).
+
+    Each level halves the resolution: a 2 × 2 block holds the mean of its valid pixels (valid if it has one); levels
+    are added until no pixel is empty or the image is one pixel. Going back up, an empty pixel takes the value of its
+    block one level coarser (nearest). Valid pixels keep their values.
+
+    Shape:
+        x: (B, C, H, W), mask: (B, 1, H, W) in {0, 1} → (B, C, H, W), (B, 1, H, W) (the mask after filling: 1
+        wherever the image held a valid pixel)
+    """
+    _check_pair(x, mask, x.shape[1])
+    mask = mask.to(x.dtype)
+    levels = [(x, mask)]
+    while bool((levels[-1][1] == 0).any()) and max(levels[-1][1].shape[-2:]) > 1:
+        x_c, m_c = levels[-1]
+        count = F.avg_pool2d(m_c, 2, ceil_mode=True)
+        mean = F.avg_pool2d(x_c * m_c, 2, ceil_mode=True) / count.clamp(min=1e-12)
+        levels.append((mean, (count > 0).to(x.dtype)))
+    x_c, m_c = levels[-1]
+    for x_f, m_f in reversed(levels[:-1]):
+        size = x_f.shape[-2:]
+        x_up = F.interpolate(x_c, size=size, mode="nearest")
+        m_up = F.interpolate(m_c, size=size, mode="nearest")
+        x_c = torch.where(m_f > 0, x_f, x_up)
+        m_c = torch.maximum(m_f, m_up)
+    return x_c, m_c
+
+
 class SparseConvNet(nn.Module):
-    """The paper's six-layer network: sparse depth and its mask in, dense depth out (same units as the input).
+    """The paper's six-layer network: sparse depth and its mask in, dense depth out (same units as the input);
+    with ``fill_holes``, what lies beyond its receptive field is filled by :func:`fill_from_coarser`.
 
     Shape:
         sparse: (B, 1, H, W) depth (0 where unknown), mask: (B, 1, H, W) → (B, 1, H, W)
@@ -70,11 +104,15 @@ class SparseConvNet(nn.Module):
 
     ARCH = "sparse-conv"
 
-    def __init__(self, channels: int = 16, kernels: tuple[int, ...] = (11, 7, 5, 3, 3, 1), eps: float = 1e-8):
+    def __init__(self, channels: int = 16, kernels: tuple[int, ...] = (11, 7, 5, 3, 3, 1), eps: float = 1e-8,
+                 fill_holes: bool = False):
         super().__init__()
         kernels = tuple(int(k) for k in kernels)
         sizes = [1] + [channels] * (len(kernels) - 1) + [1]
         self.hparams = {"channels": int(channels), "kernels": list(kernels), "eps": float(eps)}
+        if fill_holes:  # recorded only when set, so that model files of the paper's network stay as they were
+            self.hparams["fill_holes"] = True
+        self.fill_holes = bool(fill_holes)
         self.layers = nn.ModuleList(SparseConv(sizes[i], sizes[i + 1], k, eps=eps) for i, k in enumerate(kernels))
 
     def forward(self, sparse: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
@@ -84,4 +122,6 @@ class SparseConvNet(nn.Module):
         x, m = sparse, mask
         for layer in self.layers:
             x, m = layer(x, m)
+        if self.fill_holes:
+            x, _ = fill_from_coarser(x, m)
         return x

@@ -75,3 +75,45 @@ class TestSparseConvNet:
     def test_cardinality(self, batch):
         out = SparseConvNet()(torch.rand(batch, 1, 10, 14), None)
         assert out.shape == (batch, 1, 10, 14)
+
+
+class TestFillFromCoarser:
+    def test_known_answer_and_valid_pixels_kept(self):
+        from dcslam.depth.models.sparse_conv import fill_from_coarser
+
+        x = torch.zeros(1, 1, 4, 4)
+        m = torch.zeros(1, 1, 4, 4)
+        x[0, 0, 0, 0], m[0, 0, 0, 0] = 2.0, 1.0
+        x[0, 0, 3, 3], m[0, 0, 3, 3] = 6.0, 1.0
+        y, filled = fill_from_coarser(x, m)
+        assert filled.eq(1).all()
+        assert y[0, 0, 0, 0] == 2.0 and y[0, 0, 3, 3] == 6.0
+        assert y[0, 0, 1, 1] == 2.0 and y[0, 0, 2, 2] == 6.0  # its own 2 x 2 block
+        assert y[0, 0, 0, 3] == 4.0  # a block without data: the mean of the whole image one level up
+
+    def test_no_valid_pixel_stays_empty(self):
+        from dcslam.depth.models.sparse_conv import fill_from_coarser
+
+        y, filled = fill_from_coarser(torch.ones(2, 3, 5, 7), torch.zeros(2, 1, 5, 7))
+        assert y.shape == (2, 3, 5, 7) and y.eq(0).all() and filled.eq(0).all()
+
+    def test_gradcheck_float64(self):
+        from dcslam.depth.models.sparse_conv import fill_from_coarser
+
+        torch.manual_seed(0)
+        x = torch.rand(1, 2, 5, 6, dtype=torch.float64, requires_grad=True)
+        m = (torch.rand(1, 1, 5, 6) > 0.7).double()
+        assert torch.autograd.gradcheck(lambda x: fill_from_coarser(x, m)[0], (x,))
+
+    def test_network_with_filling_leaves_no_hole_and_keeps_its_output_elsewhere(self):
+        torch.manual_seed(0)
+        plain = SparseConvNet()
+        filled = SparseConvNet(fill_holes=True)
+        filled.load_state_dict(plain.state_dict())
+        x = torch.zeros(1, 1, 40, 60)
+        x[0, 0, 5, 5] = 3.0
+        inside = torch.zeros(1, 1, 40, 60, dtype=torch.bool)
+        inside[..., :18, :18] = True  # within the receptive field (about 13 pixels) of the one input
+        y, y_filled = plain(x), filled(x)
+        assert (y_filled > 0).all() and torch.equal(y[inside], y_filled[inside])
+        assert plain.hparams.get("fill_holes") is None and filled.hparams["fill_holes"] is True
