@@ -101,24 +101,38 @@ def _score(ws, label, layer, drives, max_time_diff, failure_threshold) -> LayerR
     return result
 
 
+CONFIDENCE_SETTINGS = ("confidence", "min_confidence")
+
+
 def common_settings(results: dict[tuple[int | None, str], LayerResult]) -> dict:
-    """The SLAM settings every row was made with; a :class:`DcslamError` naming two rows that differ (and how)."""
-    first, first_key = None, None
+    """The SLAM settings every row was made with; a :class:`DcslamError` naming two rows that differ (and how).
+
+    How a confidence was used (``confidence``, ``min_confidence``) is compared only among the rows whose layer has a
+    confidence (mode other than ``none``): a layer without one (sparse, IP-Basic, SparseConvNet) cannot differ in it."""
+    firsts: dict[str, tuple] = {}  # "base" / "confidence" → (settings, key) of the first row of that kind
     for key, result in results.items():
         if not result.pairs:
             continue
-        own = {k: v for k, v in result.run_settings().items() if k != "beams"}
-        if first is None:
-            first, first_key = own, key
-            continue
-        for name in sorted(set(first) | set(own)):
-            if first.get(name) != own.get(name):
-                raise DcslamError(
-                    f"the beams table mixes SLAM runs made with different settings: {name}={first.get(name)} for "
-                    f"{_row_name(first_key)} ({results[first_key].layer}) but {name}={own.get(name)} for "
-                    f"{_row_name(key)} ({result.layer}); rerun `dcslam reproduce --table beams` (or `dcslam slam "
-                    f"--force` on the odd layer) so that every row is made the same way")
-    return first or {}
+        settings = {k: v for k, v in result.run_settings().items() if k != "beams"}
+        parts = {"base": {k: v for k, v in settings.items() if k not in CONFIDENCE_SETTINGS}}
+        if settings.get("confidence", "none") not in (None, "none"):
+            parts["confidence"] = {k: settings.get(k) for k in CONFIDENCE_SETTINGS}
+        for part, own in parts.items():
+            if part not in firsts:
+                firsts[part] = (own, key)
+                continue
+            first, first_key = firsts[part]
+            for name in sorted(set(first) | set(own)):
+                if first.get(name) != own.get(name):
+                    raise DcslamError(
+                        f"the beams table mixes SLAM runs made with different settings: {name}={first.get(name)} "
+                        f"for {_row_name(first_key)} ({results[first_key].layer}) but {name}={own.get(name)} for "
+                        f"{_row_name(key)} ({result.layer}); rerun `dcslam reproduce --table beams` (or `dcslam "
+                        "slam --force` on the odd layer) so that every row is made the same way")
+    common = dict(firsts["base"][0]) if "base" in firsts else {}
+    if "confidence" in firsts:
+        common.update({f"{k} (layers with a confidence)": v for k, v in firsts["confidence"][0].items()})
+    return common
 
 
 def _row_name(key: tuple[int | None, str]) -> str:

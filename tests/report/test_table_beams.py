@@ -99,6 +99,19 @@ def test_rows_made_with_other_slam_settings_are_refused():
     assert len(table_beams(beams, [64, 16], DRIVES).rows) == 14
 
 
+def test_confidence_use_is_compared_only_among_layers_that_have_a_confidence():
+    def settings_of(key):
+        if key[1].startswith("nconv"):
+            return dict(SETTINGS, confidence="weights", min_confidence=0.0)
+        return dict(SETTINGS, confidence="none", min_confidence=0.0)
+
+    assert len(table_beams(_results(settings_of=settings_of), [64, 16], DRIVES).rows) == 14
+    ignored = _results(settings_of=lambda key: dict(settings_of(key), confidence="ignore") if key == (16, "nconv")
+                       else settings_of(key))
+    with pytest.raises(DcslamError, match="confidence=weights .* but confidence=ignore for nconv at 16 beams"):
+        table_beams(ignored, [64, 16], DRIVES)
+
+
 def test_per_drive_table_has_every_drive_of_every_row():
     table = per_drive_table(_results())
     assert len(table.rows) == 14 * 4

@@ -51,7 +51,8 @@ def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(tmp_path,
     with open(results / "table_beams_per_drive.csv") as f:
         assert len(list(csv.DictReader(f))) == 14  # one test drive
     masked = json.loads((tmp_path / "filtered" / "nconv-sparse16+masked" / "config.json").read_text())
-    assert masked["settings"]["filters"] == [{"filter": "confidence", "min": 0.5}]
+    keep = PROFILES["smoke"].confidence_keep
+    assert masked["settings"]["filters"] == [{"filter": "confidence", "min": 0.0, "keep": keep}]
     assert json.loads((tmp_path / "runs" / "nconv-guided" / "config.json").read_text())["settings"]["model"] == \
         "nconv-guided"
 
