@@ -461,12 +461,18 @@ def read_layer(path: Path | str, expect_frames: int | None = None) -> Layer:
 def load_depth(drive: DriveFile, source: str | Path) -> np.ndarray:
     """All depth frames (N, H, W) float32 of a drive from a depth kind it holds (``sparse``, ``dense``,
     ``sparse@<beams>``, ``exact``) or a layer file path."""
+    return load_depth_and_confidence(drive, source)[0]
+
+
+def load_depth_and_confidence(drive: DriveFile, source: str | Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """As :func:`load_depth`, with the layer's per-pixel confidence (N, H, W) when it has one (a drive's own depth
+    kinds have none): the layer file is read once."""
     if not isinstance(source, Path) and is_depth_kind(str(source)):
-        return np.stack([drive.depth(str(source), i) for i in range(len(drive))])
+        return np.stack([drive.depth(str(source), i) for i in range(len(drive))]), None
     layer = read_layer(source, expect_frames=len(drive))
     if layer.depth.shape[1:] != drive.shape[1:]:
         raise DcslamError(f"{source}: layer frames are {layer.depth.shape[1:]}, drive frames are {drive.shape[1:]}")
-    return layer.depth
+    return layer.depth, layer.confidence
 
 
 def list_drives(drives_dir: Path | str) -> list[Path]:

@@ -228,7 +228,7 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
     says."""
     import torch
 
-    from dcslam.io.drive import DriveFile, load_depth, read_layer
+    from dcslam.io.drive import DriveFile, load_depth_and_confidence
     from dcslam.progress import Bar
 
     with DriveFile(drive_path) as drive:
@@ -236,8 +236,8 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
         if n < 1:
             raise DcslamError(f"{drive_path}: no frames")
         check_timestamps(drive.timestamps[:n], str(drive_path))  # before any work, not after it
-        depth_all = load_depth(drive, depth_source)[:n]
-        confidence_all = read_layer(depth_source).confidence if has_confidence(depth_source) else None
+        depth_all, confidence_all = load_depth_and_confidence(drive, depth_source)
+        depth_all = depth_all[:n]
         if confidence_all is not None:
             confidence_all = confidence_all[:n]
         measured = kept = 0
