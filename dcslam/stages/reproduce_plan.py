@@ -42,15 +42,13 @@ def planned_stages(workspace: Workspace, profile: Profile, table: str = "5.2", k
                    seed: int = 0) -> list[Stage]:
     """The stages :func:`dcslam.stages.reproduce.reproduce` would run, in order, with their configurations (test
     drives from :func:`planned_splits`); nothing is run or written."""
-    if table == "beams":
+    pipe = _Listing(workspace, planned_splits(workspace, profile, kitti_root))
+    if table == "beams":  # ``profile`` is then a :class:`dcslam.stages.reproduce_beams.BeamsProfile`
         from dcslam.stages import reproduce_beams
 
-        profile = reproduce_beams.PROFILES[profile.name]
-        pipe = _Listing(workspace, planned_splits(workspace, profile, kitti_root))
         reproduce_beams.compose(pipe, profile, kitti_root, seed)
-        return pipe.stages
-    pipe = _Listing(workspace, planned_splits(workspace, profile, kitti_root))
-    compose(pipe, profile, table, kitti_root, seed)
+    else:
+        compose(pipe, profile, table, kitti_root, seed)
     return pipe.stages
 
 
@@ -60,7 +58,13 @@ def stage_configs_toml(workspace: Workspace, config: ReproduceConfig) -> str:
     reproduce``; :func:`read_stage_configs` reads them back."""
     from dcslam.stages.config import to_toml
 
-    stages = planned_stages(workspace, PROFILES[config.profile], config.table, config.kitti, config.seed)
+    if config.table == "beams":
+        from dcslam.stages.reproduce_beams import PROFILES as BEAMS_PROFILES
+
+        profile = BEAMS_PROFILES[config.profile]
+    else:
+        profile = PROFILES[config.profile]
+    stages = planned_stages(workspace, profile, config.table, config.kitti, config.seed)
     lines = [f"# the {len(stages)} stages this runs, in order, with their configurations (informative: a stage is "
              "skipped when its outputs are up to date; each line below is TOML after '#> ')"]
     for stage in stages:
