@@ -163,6 +163,23 @@ class Pipeline:
     def _stamp(self, stage: Stage) -> Path:
         return self.state / f"{stage.name}.json"
 
+    def _record(self, stage: Stage) -> dict:
+        """``stage.record()`` with paths inside the workspace written relative to it ("<workspace>/slam-long/…"), so
+        that a moved or renamed workspace keeps its stages up to date."""
+        roots = {str(self.ws.root), str(self.ws.root.resolve())}
+
+        def relative(value):
+            for root in roots:
+                if isinstance(value, str) and (value == root or value.startswith(root + "/")):
+                    return "<workspace>" + value[len(root):]
+            if isinstance(value, list):
+                return [relative(v) for v in value]
+            if isinstance(value, dict):
+                return {k: relative(v) for k, v in value.items()}
+            return value
+
+        return relative(stage.record())
+
     def up_to_date(self, stage: Stage) -> bool:
         stamp = self._stamp(stage)
         if not stamp.exists():
@@ -171,7 +188,7 @@ class Pipeline:
             made = json.loads(stamp.read_text())
         except json.JSONDecodeError:
             return False
-        if {k: made.get(k) for k in ("stage", "config", "dcslam")} != stage.record() or not made.get("complete"):
+        if {k: made.get(k) for k in ("stage", "config", "dcslam")} != self._record(stage) or not made.get("complete"):
             return False
         outputs, inputs = stage.outputs(), stage.inputs()
         if not outputs or not all(p.exists() for p in outputs):
@@ -220,11 +237,11 @@ class Pipeline:
         if foreign is not None:
             raise DcslamError(f"stage {stage.name} would overwrite {foreign}, which `dcslam reproduce` did not make; "
                               "move it away or pass --force to overwrite it")
-        write_json_atomic(self._stamp(stage), {**stage.record(), "complete": False})  # claims nothing until done
+        write_json_atomic(self._stamp(stage), {**self._record(stage), "complete": False})  # claims nothing until done
 
     def _done(self, stage: Stage, seconds: float) -> None:
         self.timings[stage.name] = seconds
-        write_json_atomic(self._stamp(stage), {**stage.record(), "complete": True, "seconds": seconds})
+        write_json_atomic(self._stamp(stage), {**self._record(stage), "complete": True, "seconds": seconds})
 
     def run_all(self, stages: list[Stage], jobs: int = 1) -> None:
         """Run independent ``stages`` (none reads another's outputs), in ``jobs`` worker processes when > 1."""

@@ -64,6 +64,28 @@ def test_stage_runs_once_then_is_skipped_until_its_inputs_config_or_code_change(
     assert len(calls) == 5  # output missing: rerun
 
 
+def test_a_moved_workspace_keeps_its_stages_whose_configs_name_paths_inside_it(tmp_path):
+    def stage_in(root):
+        out = root / "slam-long" / "sparse"
+        made = out / "d.json"
+        return Stage("long", _fake_stage(calls, [made]), SlamStageConfig(out=out), outputs=lambda: [made])
+
+    calls = []
+    first = tmp_path / "first"
+    Pipeline(Workspace(first)).run(stage_in(first))
+    stamp = json.loads((first / ".reproduce" / "long.json").read_text())
+    assert stamp["config"]["out"] == "<workspace>/slam-long/sparse"  # not the absolute path
+
+    moved = tmp_path / "moved"
+    first.rename(moved)
+    assert Pipeline(Workspace(moved)).run(stage_in(moved)) is None and len(calls) == 1  # up to date after the move
+    outside = tmp_path / "elsewhere"
+    pipe = Pipeline(Workspace(moved))
+    made = outside / "d.json"
+    pipe.run(Stage("long", _fake_stage(calls, [made]), SlamStageConfig(out=outside), outputs=lambda: [made]))
+    assert len(calls) == 2  # a path outside the workspace is another configuration
+
+
 def test_code_version_changes_with_the_sources(tmp_path, monkeypatch):
     import dcslam.stages.config as config
 
