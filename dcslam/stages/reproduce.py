@@ -165,7 +165,8 @@ class Pipeline:
 
     def _record(self, stage: Stage) -> dict:
         """``stage.record()`` with paths inside the workspace written relative to it ("<workspace>/slam-long/…"), so
-        that a moved or renamed workspace keeps its stages up to date."""
+        that a moved or renamed workspace keeps its stages up to date; without a ``jobs`` option (how many processes
+        made the outputs is not what they are)."""
         roots = {str(self.ws.root), str(self.ws.root.resolve())}
 
         def relative(value):
@@ -178,7 +179,9 @@ class Pipeline:
                 return {k: relative(v) for k, v in value.items()}
             return value
 
-        return relative(stage.record())
+        record = stage.record()
+        record["config"] = {k: v for k, v in record["config"].items() if k != "jobs"}  # never changes the outputs
+        return relative(record)
 
     def up_to_date(self, stage: Stage) -> bool:
         stamp = self._stamp(stage)
@@ -334,15 +337,15 @@ def _profile_splits(ws: Workspace, kitti: Path, counts: tuple[int, int, int]) ->
 
 
 def make_drives(pipe: Pipeline, *, drives: int, frames: int, split: tuple[int, int, int] | None,
-                kitti_root: Path | None = None, seed: int = 0, beams: tuple[int, ...] = ()
+                kitti_root: Path | None = None, seed: int = 0, beams: tuple[int, ...] = (), jobs: int = 1
                 ) -> tuple[list[Path], list[Path]]:
-    """The synth (unless ``kitti_root``) and prepare-kitti stages (``beams``: the extra sparse inputs of
-    ``prepare-kitti --beams``); returns the drive files (test, train + val). A planning pipeline (``--print-config``)
-    runs nothing and reads the split it plans with."""
+    """The synth (unless ``kitti_root``; ``jobs`` drives at once) and prepare-kitti stages (``beams``: the extra
+    sparse inputs of ``prepare-kitti --beams``); returns the drive files (test, train + val). A planning pipeline
+    (``--print-config``) runs nothing and reads the split it plans with."""
     ws = pipe.ws
     kitti = Path(kitti_root) if kitti_root else ws.kitti
     if kitti_root is None:
-        pipe.run(Stage("synth", synth.run, synth.SynthConfig(drives=drives, frames=frames, seed=seed),
+        pipe.run(Stage("synth", synth.run, synth.SynthConfig(drives=drives, frames=frames, seed=seed, jobs=jobs),
                        outputs=lambda: [ws.kitti / "SYNTHETIC"]))
     elif not kitti.is_dir() and not pipe.planning:  # a plan may name a root that is not mounted here
         raise DcslamError(f"KITTI root {kitti} does not exist or is not a folder; pass --kitti DIR")
@@ -378,28 +381,33 @@ def compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | Non
                           "dcslam.stages.reproduce_beams.reproduce)")
     ws = pipe.ws
     test, learn = make_drives(pipe, drives=profile.drives, frames=profile.frames, split=profile.split,
-                              kitti_root=kitti_root, seed=seed)
+                              kitti_root=kitti_root, seed=seed, jobs=jobs)
 
     runs = {**RECIPES, **POSE_RECIPES}
+    trainings = {}  # run name → its stage; those that fine-tune another run (``init``) wait for it
     for run_name, options in runs.items():
         extra = profile.pose if run_name in POSE_RECIPES else {}
         config = train.TrainStageConfig(**options, **{**profile.train, **extra}, name=run_name, seed=seed)
         init = [ws.runs / options["init"] / "model.pt"] if options.get("init") else []
-        pipe.run(Stage(f"train-{run_name}", train.run, config,
-                       outputs=lambda r=run_name: [ws.runs / r / "model.pt", ws.runs / r / "metrics.jsonl"],
-                       inputs=lambda init=init: learn + init))
+        made = [ws.runs / run_name / "model.pt", ws.runs / run_name / "metrics.jsonl"]
+        trainings[run_name] = Stage(f"train-{run_name}", train.run, config, outputs=lambda made=made: made,
+                                    inputs=lambda init=init: learn + init)
+    pipe.run_all([trainings[r] for r, options in runs.items() if not options.get("init")], jobs)
+    pipe.run_all([trainings[r] for r, options in runs.items() if options.get("init")], jobs)
     if table == "5.1":
         return _tables(pipe, ws, "5.1", inputs=[ws.runs / r / "metrics.jsonl" for r in runs])
 
     layers = {}  # layer name → (files it is made of, the layer's reference)
     for kind in ("sparse", "dense"):
         layers[kind] = (test, kind)
+    predictions = []
     for run_name in [*runs, IP_BASIC]:
         made = [ws.predictions / run_name / p.name for p in test]
         config = predict.PredictConfig(run=run_name) if run_name in runs else predict.PredictConfig(model=run_name)
-        pipe.run(Stage(f"predict-{run_name}", predict.run, config, outputs=lambda made=made: made,
-                       inputs=lambda r=run_name: [ws.runs / r / "model.pt", *test] if r in runs else test))
+        predictions.append(Stage(f"predict-{run_name}", predict.run, config, outputs=lambda made=made: made,
+                                 inputs=lambda r=run_name: [ws.runs / r / "model.pt", *test] if r in runs else test))
         layers[run_name] = (made, f"predicted/{run_name}")
+    pipe.run_all(predictions, jobs)
     for run_name in RECIPES:  # the thesis's recipes only: filtering the pose runs too would not fit the budget
         for fname, specs in profile.filters.items():
             name = f"{run_name}+{fname}"

@@ -148,7 +148,7 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
     """Hand every stage of the beams experiment to ``pipe`` in order; return the Markdown file of its table."""
     ws = pipe.ws
     test, learn = make_drives(pipe, drives=profile.drives, frames=profile.frames, split=profile.split,
-                              kitti_root=kitti_root, seed=seed,
+                              kitti_root=kitti_root, seed=seed, jobs=jobs,
                               beams=tuple(b for b in profile.beams if b != FULL_BEAMS))
     pipe.run_all([Stage(f"train-{run}", train.run, profile.train_config(run, seed),
                         outputs=lambda r=run: [ws.runs / r / "model.pt", ws.runs / r / "metrics.jsonl"],

@@ -33,6 +33,8 @@ class SynthConfig:
                           help="Write indoor sequences in the ICL-NUIM layout instead of KITTI drives.")
     scale: float = option(1.0, min=0.05, max=4.0, help="With --indoor: image size as a fraction of 640 × 480 "
                                                         "(intrinsics scaled to match).")
+    jobs: int = option(1, min=1, help="Street drives written at once, in worker processes (e.g. the number of CPU "
+                                      "cores); the files are the same for any value.")
 
     def __post_init__(self) -> None:
         if self.drives < 1 or self.frames < 1:
@@ -42,6 +44,8 @@ class SynthConfig:
                               f"end); pass --frames {MIN_FRAMES} or more")
         if not 0.05 <= self.scale <= 4.0:
             raise DcslamError(f"--scale must be in [0.05, 4], got {self.scale}")
+        if self.jobs < 1:
+            raise DcslamError(f"--jobs must be >= 1, got {self.jobs}")
         if not self.azimuth_step > 0:
             raise DcslamError(f"--lidar-azimuth-step must be > 0 degrees, got {self.azimuth_step}")
 
@@ -81,5 +85,5 @@ def run(ws: Workspace, config: SynthConfig, *, force: bool = False) -> SynthResu
     notes: list[str] = []
     with Bar("synth", total=config.drives * config.frames) as bar:
         reports = generate(root, drives=config.drives, frames=config.frames, seed=config.seed, force=force,
-                           lidar_azimuth_step_deg=config.azimuth_step, on_frame=bar.advance)
+                           lidar_azimuth_step_deg=config.azimuth_step, on_frame=bar.advance, jobs=config.jobs)
     return SynthResult(root, False, reports, notes)

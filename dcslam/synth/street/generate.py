@@ -188,15 +188,46 @@ def _occupied(path: Path) -> bool:
     return path.exists() and (not path.is_dir() or any(path.iterdir()))
 
 
+def _one_thread() -> None:
+    """Worker initializer: one BLAS / OpenMP thread per process (the workers already use every core)."""
+    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[name] = "1"
+
+
+def _write_one(seed: int, index: int, frames: int, name: str, date_dir: Path, depth_root: Path,
+               lidar_azimuth_step_deg: float, on_frame=None) -> DriveReport:
+    """Write drive ``index`` of ``seed`` into temporary folders, then move them to their names."""
+    calib = street_calibration()
+    truth, rng = make_drive(seed, index, frames, calib)
+    raw_tmp = date_dir / f".{name}.tmp-{os.getpid()}"
+    depth_tmp = depth_root / f".{name}.tmp-{os.getpid()}"
+    try:
+        for tmp in (raw_tmp, depth_tmp):
+            shutil.rmtree(tmp, ignore_errors=True)
+            tmp.mkdir(parents=True)
+        report = write_drive(truth, rng, calib, raw_tmp, depth_tmp, lidar_azimuth_step_deg, on_frame)
+        for tmp, final in ((raw_tmp, date_dir / name), (depth_tmp, depth_root / name)):
+            if final.exists():
+                shutil.rmtree(final)
+            os.replace(tmp, final)
+        return report
+    finally:
+        for tmp in (raw_tmp, depth_tmp):
+            with contextlib.suppress(FileNotFoundError):
+                shutil.rmtree(tmp)
+
+
 def generate(out_root: Path | str, drives: int = 6, frames: int = 60, seed: int = 0, force: bool = False,
-             lidar_azimuth_step_deg: float = 0.08, on_frame=None) -> list[DriveReport]:
+             lidar_azimuth_step_deg: float = 0.08, on_frame=None, jobs: int = 1) -> list[DriveReport]:
     """Generate ``drives`` synthetic drives of ``frames`` raw frames each under the KITTI root ``out_root``.
 
     Refuses (:class:`DcslamError`) to replace a drive folder that exists and is not empty unless ``force``; with
     ``force``, generated drives of an earlier run beyond ``drives`` are removed, so the root holds this run's only.
     ``SYNTHETIC`` and ``synth_config.json`` are written once every drive is complete (removed first), and
     temporary folders of an interrupted run are removed.
-    ``on_frame`` is called after each frame (progress). Returns one :class:`DriveReport` per drive.
+    ``on_frame`` is called after each frame (progress; with ``jobs`` > 1, ``frames`` times as each drive completes).
+    ``jobs`` > 1 writes that many drives at once in worker processes: each drive follows from (seed, drive index)
+    alone, so the files are the same for any ``jobs``. Returns one :class:`DriveReport` per drive.
     """
     if drives < 1:
         raise DcslamError(f"--drives must be at least 1, got {drives}")
@@ -217,7 +248,6 @@ def generate(out_root: Path | str, drives: int = 6, frames: int = 60, seed: int 
         if stale:
             raise DcslamError(f"{out_root} holds generated drives of an earlier run ({', '.join(sorted(stale))}); "
                               "pass --force to replace them, or choose another --out")
-    calib = street_calibration()
     copy_calibration(CALIB_DIR, date_dir, force)
     from dcslam.workspace import stage_config
 
@@ -229,24 +259,23 @@ def generate(out_root: Path | str, drives: int = 6, frames: int = 60, seed: int 
             shutil.rmtree(folder, ignore_errors=True)
     settings = {"out": out_root, "drives": drives, "frames": frames, "seed": seed,
                 "lidar_azimuth_step_deg": lidar_azimuth_step_deg, "groundtruth_window": GT_WINDOW}
-    reports = []
-    for index, name in enumerate(names):
-        truth, rng = make_drive(seed, index, frames, calib)
-        raw_tmp = date_dir / f".{name}.tmp-{os.getpid()}"
-        depth_tmp = depth_root / f".{name}.tmp-{os.getpid()}"
-        try:
-            for tmp in (raw_tmp, depth_tmp):
-                shutil.rmtree(tmp, ignore_errors=True)
-                tmp.mkdir(parents=True)
-            reports.append(write_drive(truth, rng, calib, raw_tmp, depth_tmp, lidar_azimuth_step_deg, on_frame))
-            for tmp, final in ((raw_tmp, date_dir / name), (depth_tmp, depth_root / name)):
-                if final.exists():
-                    shutil.rmtree(final)
-                os.replace(tmp, final)
-        finally:
-            for tmp in (raw_tmp, depth_tmp):
-                with contextlib.suppress(FileNotFoundError):
-                    shutil.rmtree(tmp)
+    work = [(seed, index, frames, name, date_dir, depth_root, lidar_azimuth_step_deg)
+            for index, name in enumerate(names)]
+    if jobs <= 1 or drives == 1:
+        reports = [_write_one(*args, on_frame=on_frame) for args in work]
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=min(jobs, drives), mp_context=context,
+                                 initializer=_one_thread) as pool:
+            futures = [pool.submit(_write_one, *args) for args in work]
+            reports = []
+            for future in futures:  # in drive order; each drive's frames counted as it completes
+                reports.append(future.result())
+                for _ in range(frames if on_frame is not None else 0):
+                    on_frame()
     write_json_atomic(out_root / "synth_config.json", stage_config("synth", settings))
     write_text_atomic(out_root / "SYNTHETIC", f"generated by dcslam synth, seed {seed}, {drives} drives of "
                                               f"{frames} frames ({', '.join(names)})\n")

@@ -203,3 +203,18 @@ def test_an_interrupted_run_claims_no_drive_in_its_marker(tmp_path):
     generate(tmp_path, drives=2, frames=1, seed=7, force=True)  # the rerun completes
     assert _drives(tmp_path) == ["2011_09_26_drive_1000_sync", "2011_09_26_drive_1001_sync"]
     assert "seed 7, 2 drives" in (tmp_path / "SYNTHETIC").read_text()
+
+
+def test_drives_written_in_worker_processes_are_the_same_files(tmp_path):
+    frames = []
+    generate(tmp_path / "one", drives=2, frames=2, seed=4)
+    generate(tmp_path / "two", drives=2, frames=2, seed=4, jobs=2, on_frame=lambda: frames.append(1))
+    assert len(frames) == 4  # every frame counted, as its drive completes
+
+    def files(root):
+        return {p.relative_to(root): p.read_bytes() for p in sorted(root.rglob("*"))
+                if p.is_file() and p.name != "synth_config.json"}  # which names its own --out
+
+    one, two = files(tmp_path / "one"), files(tmp_path / "two")
+    assert len(one) > 10 and one.keys() == two.keys()
+    assert [name for name in one if one[name] != two[name]] == []
