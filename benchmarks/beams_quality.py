@@ -25,7 +25,7 @@ import argparse
 import json
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict
+from dataclasses import MISSING, asdict, fields
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -89,8 +89,12 @@ def train_task(run: Path, config, reuse: bool) -> str:
     start = time.perf_counter()
     if reuse and (run / "model.pt").exists():
         same = json.loads((run / "config.json").read_text())["settings"]
+        # an option added to TrainConfig after the run was trained counts as its default there
+        defaults = json.loads(json.dumps({f.name: f.default if f.default is not MISSING else f.default_factory()
+                                          for f in fields(config) if f.default is not MISSING
+                                          or f.default_factory is not MISSING}, default=str))
         differ = [k for k, v in json.loads(json.dumps(asdict(config), default=str)).items()
-                  if k != "device" and same.get(k) != v]
+                  if k != "device" and same.get(k, defaults.get(k)) != v]
         if differ:
             raise SystemExit(f"{run} was trained with other options ({', '.join(differ)}); drop --reuse")
         result, how = read_result(run), "reused"
