@@ -2,20 +2,22 @@
 
     python benchmarks/beams_quality.py --workspace WS [--seeds 0 1] [--epochs 3] [--models sparse-conv nconv ...]
         [--input-mix sparse sparse@32 sparse@16 sparse@8 | --train-input sparse] [--l1-weight 1]
-        [--lr-schedule cosine] [--fill-holes] [--crop 256] [--lr 1e-2]
+        [--lr-schedule cosine] [--fill-holes] [--crop 256] [--lr 1e-2] [--profile-recipes] [--tag NAME]
 
 WS must hold drives made by ``dcslam prepare-kitti --beams 32 --beams 16 --beams 8`` (from ``dcslam synth``
 drives or real KITTI). Each model is trained once per seed (``--seeds``: the initialisation) through
 :func:`dcslam.stages.train.train`, exactly as ``dcslam train`` does with the same options: dense-mask MSE
 (plus ``--l1-weight`` × L1), AdamW, ``--epochs`` passes over the training drives at full resolution on the bottom
 ``--crop`` rows, keeping the best validation checkpoint; its input is ``--train-input`` or, with ``--input-mix``,
-each frame's input drawn in turn from those kinds (density augmentation). Then, on the test drives and at every beam
-count (``sparse`` = 64, and each ``sparse@B`` the drives hold), it prints MAE / RMSE in millimetres over EVERY
-ground-truth pixel, a hole left at a ground-truth pixel counted as a prediction of 0 m, for: a nearest-neighbour fill
-of the input, IP-Basic (fast), and each model untrained and trained. Rows of models show the mean over the seeds and,
-after ±, half the range (max − min) / 2; a model is marked ``beats`` at a beam count when EVERY seed's trained model
-has a lower MAE and a lower RMSE than both the fill and its own untrained network. Not part of the test suite
-(minutes of CPU); its output is quoted in the README.
+each frame's input drawn in turn from those kinds (density augmentation). With ``--profile-recipes`` each model
+takes its own recipe (lr, input, input mix, L1 weight, schedule, hole filling) from the beams profile
+(:data:`dcslam.stages.reproduce_beams.PROFILES`, ``quick``), the epochs, crop and frames staying this script's.
+Then, on the test drives and at every beam count (``sparse`` = 64, and each ``sparse@B`` the drives hold), it
+prints MAE / RMSE in millimetres over EVERY ground-truth pixel, a hole left at a ground-truth pixel counted as a
+prediction of 0 m, for: a nearest-neighbour fill of the input, IP-Basic (fast), and each model untrained and
+trained. Rows of models show the mean over the seeds and, after ±, half the range (max − min) / 2; a model is marked
+``beats`` at a beam count when EVERY seed's trained model has a lower MAE and a lower RMSE than both the fill and its
+own untrained network. Not part of the test suite (minutes of CPU); its output is quoted in the README.
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ import argparse
 import json
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict
+from dataclasses import MISSING, asdict, fields
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -87,8 +89,12 @@ def train_task(run: Path, config, reuse: bool) -> str:
     start = time.perf_counter()
     if reuse and (run / "model.pt").exists():
         same = json.loads((run / "config.json").read_text())["settings"]
+        # an option added to TrainConfig after the run was trained counts as its default there
+        defaults = json.loads(json.dumps({f.name: f.default if f.default is not MISSING else f.default_factory()
+                                          for f in fields(config) if f.default is not MISSING
+                                          or f.default_factory is not MISSING}, default=str))
         differ = [k for k, v in json.loads(json.dumps(asdict(config), default=str)).items()
-                  if k != "device" and same.get(k) != v]
+                  if k != "device" and same.get(k, defaults.get(k)) != v]
         if differ:
             raise SystemExit(f"{run} was trained with other options ({', '.join(differ)}); drop --reuse")
         result, how = read_result(run), "reused"
@@ -126,6 +132,10 @@ def main() -> None:
     parser.add_argument("--crop", type=int, default=256)
     parser.add_argument("--max-frames", type=int, default=200)
     parser.add_argument("--jobs", type=int, default=2, help="worker processes (training runs and table cells)")
+    parser.add_argument("--profile-recipes", action="store_true",
+                        help="each model's recipe from the beams profile (make reproduce-beams) instead of the options")
+    parser.add_argument("--tag", default="", help="added to the run folders' names (runs/beams-<model>-seed<N><tag>), "
+                        "so that runs of different recipes sit side by side")
     parser.add_argument("--train-only", action="store_true", help="train the runs, print no table")
     parser.add_argument("--reuse", action="store_true",
                         help="take a run that is already there (e.g. trained by parallel --train-only processes with "
@@ -142,19 +152,33 @@ def main() -> None:
     with DriveFile(paths["test"][0]) as drive:
         kinds = sorted((k for k in drive.kinds if k.startswith("sparse")), key=lambda k: -input_beams(k))
     torch.set_num_threads(1)
-    print(f"recipe: dense-mask MSE + {args.l1_weight} x L1, lr {args.lr} ({args.lr_schedule}), {args.epochs} epochs, "
-          f"input {' / '.join(args.input_mix) or args.train_input}, crop {args.crop}"
-          + (", sparse-conv fills its holes" if args.fill_holes else ""), flush=True)
+
+    def recipe(arch: str) -> dict:
+        """The options of ``arch``'s training that differ between recipes."""
+        if args.profile_recipes:
+            from dcslam.stages.reproduce_beams import PROFILES
+
+            given = PROFILES["quick"].train[arch]
+            return {"lr": given.get("lr", 1e-3), "lr_schedule": given.get("lr_schedule", "constant"),
+                    "l1_weight": given.get("l1_weight", 0.0), "input": given.get("input", "sparse"),
+                    "input_mix": list(given.get("input_mix", [])),
+                    "model_hparams": {"fill_holes": True} if given.get("fill_holes") else {}}
+        return {"lr": args.lr, "lr_schedule": args.lr_schedule, "l1_weight": args.l1_weight,
+                "input": args.train_input, "input_mix": list(args.input_mix),
+                "model_hparams": {"fill_holes": True} if args.fill_holes and arch == "sparse-conv" else {}}
 
     def hparams(arch):
-        return {"fill_holes": True} if args.fill_holes and arch == "sparse-conv" else {}
+        return recipe(arch)["model_hparams"]
 
-    runs = {(arch, seed): ws.runs / f"beams-{arch}-seed{seed}" for arch in args.models for seed in args.seeds}
-    configs = {key: TrainConfig(loss="mse", mask="dense", model=key[0], model_hparams=hparams(key[0]),
-                                crop=args.crop, seed=key[1], device="cpu", lr=args.lr, lr_schedule=args.lr_schedule,
-                                l1_weight=args.l1_weight, input=args.train_input, input_mix=list(args.input_mix),
+    for arch in args.models:
+        r = recipe(arch)
+        print(f"{arch}: dense-mask MSE + {r['l1_weight']} x L1, lr {r['lr']} ({r['lr_schedule']}), {args.epochs} "
+              f"epochs, input {' / '.join(r['input_mix']) or r['input']}, crop {args.crop}"
+              + (", holes filled" if r["model_hparams"].get("fill_holes") else ""), flush=True)
+    runs = {(arch, seed): ws.runs / f"beams-{arch}-seed{seed}{args.tag}" for arch in args.models for seed in args.seeds}
+    configs = {key: TrainConfig(loss="mse", mask="dense", model=key[0], crop=args.crop, seed=key[1], device="cpu",
                                 max_frames=args.max_frames, epochs=args.epochs, train_drives=paths["train"],
-                                val_drives=paths["val"]) for key in runs}
+                                val_drives=paths["val"], **recipe(key[0])) for key in runs}
     start = time.perf_counter()
     with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn")) as pool:
         for line in pool.map(train_task, runs.values(), configs.values(), [args.reuse] * len(runs)):

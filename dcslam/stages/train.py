@@ -64,7 +64,8 @@ class TrainStageConfig:
                                                                      "all the run's steps.")
     fill_holes: bool = option(False, flags=("--fill-holes/--no-fill-holes",),
                               help="sparse-conv only: fill what lies beyond its receptive field from coarser scales, "
-                                   "so it leaves no hole (off: the paper's network).")
+                                   "up to the topmost measured pixel of each column (nothing above it: no sky); off: "
+                                   "the paper's network.")
     name: str | None = option(None, help="Run name (default: mse-dense, mse-sparse, chamfer-1, ...; with another "
                                          "input or target, e.g. mse-dense-sparse16, mse-dense-to-exact).")
     resume: bool = option(False, flags=("--resume",), help="Continue an interrupted run from last.pt.")

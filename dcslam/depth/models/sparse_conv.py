@@ -10,7 +10,9 @@ followed by a ReLU. The network is the paper's: six sparse convolutions 1→16 (
 
 The paper's network has no output beyond its receptive field (about 13 pixels from the nearest input): with 8 of 64
 LiDAR beams whole bands between scan lines stay empty. With ``fill_holes`` (not the paper's) those pixels take the
-network's own output brought in from coarser scales by :func:`fill_from_coarser`, so it leaves no hole.
+network's own output brought in from coarser scales by :func:`fill_from_coarser`, but only where the data reach:
+every pixel above the topmost measured pixel of its column (:func:`below_topmost`: the sky, and the far background
+that no LiDAR point saw) is left empty, the network's own output there included.
 """
 from __future__ import annotations
 
@@ -94,9 +96,29 @@ def fill_from_coarser(x: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor
     return x_c, m_c
 
 
+def below_topmost(mask: torch.Tensor, width: int = 1) -> torch.Tensor:
+    """Where the data reach down a column: 1 at and below the topmost valid pixel of each column, 0 above it (and
+    in a column with no valid pixel). A pixel counts as valid in its column when it is within ``width`` // 2 columns
+    of a valid pixel of its row, so that the gaps between one scan line's points do not make ragged edges.
+
+    Shape:
+        mask: (B, 1, H, W) in {0, 1} → (B, 1, H, W) in {0, 1}, of ``mask``'s dtype (not differentiable: a mask)
+    """
+    if mask.ndim != 4 or mask.shape[1] != 1:
+        raise DcslamError(f"mask has shape {tuple(mask.shape)}, expected (B, 1, H, W)")
+    if width < 1 or width % 2 != 1:
+        raise DcslamError(f"width must be an odd number of columns >= 1, got {width}")
+    valid = (mask.detach() > 0).to(torch.float32)
+    if width > 1:
+        valid = F.max_pool2d(valid, (1, width), stride=1, padding=(0, width // 2))
+    return torch.cummax(valid, dim=2).values.to(mask.dtype)
+
+
 class SparseConvNet(nn.Module):
     """The paper's six-layer network: sparse depth and its mask in, dense depth out (same units as the input);
-    with ``fill_holes``, what lies beyond its receptive field is filled by :func:`fill_from_coarser`.
+    with ``fill_holes``, what lies beyond its receptive field is filled by :func:`fill_from_coarser` and what lies
+    above the topmost measured pixel of each column (:func:`below_topmost`, measurements widened by the first
+    kernel's width) is left empty (0).
 
     Shape:
         sparse: (B, 1, H, W) depth (0 where unknown), mask: (B, 1, H, W) → (B, 1, H, W)
@@ -124,4 +146,5 @@ class SparseConvNet(nn.Module):
             x, m = layer(x, m)
         if self.fill_holes:
             x, _ = fill_from_coarser(x, m)
+            x = x * below_topmost(mask, self.layers[0].kernel_size)
         return x

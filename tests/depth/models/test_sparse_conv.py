@@ -1,5 +1,6 @@
 import pytest
 import torch
+import torch.nn.functional as F
 
 from dcslam.depth.models.sparse_conv import SparseConv, SparseConvNet
 from dcslam.errors import DcslamError
@@ -105,15 +106,76 @@ class TestFillFromCoarser:
         m = (torch.rand(1, 1, 5, 6) > 0.7).double()
         assert torch.autograd.gradcheck(lambda x: fill_from_coarser(x, m)[0], (x,))
 
-    def test_network_with_filling_leaves_no_hole_and_keeps_its_output_elsewhere(self):
+    def test_network_with_filling_leaves_no_hole_below_the_data_and_keeps_its_output_elsewhere(self):
         torch.manual_seed(0)
         plain = SparseConvNet()
         filled = SparseConvNet(fill_holes=True)
         filled.load_state_dict(plain.state_dict())
         x = torch.zeros(1, 1, 40, 60)
         x[0, 0, 5, 5] = 3.0
+        x[0, 0, 30, ::4] = 7.0  # a scan line across every column
         inside = torch.zeros(1, 1, 40, 60, dtype=torch.bool)
-        inside[..., :18, :18] = True  # within the receptive field (about 13 pixels) of the one input
+        inside[..., 5:18, :11] = True  # within the receptive field (about 13 pixels) of the first input, below it
         y, y_filled = plain(x), filled(x)
-        assert (y_filled > 0).all() and torch.equal(y[inside], y_filled[inside])
+        assert (y_filled[..., 30:, :] > 0).all() and torch.equal(y[inside], y_filled[inside])
         assert plain.hparams.get("fill_holes") is None and filled.hparams["fill_holes"] is True
+
+    def test_filling_stops_above_the_topmost_measurement_of_each_column(self):
+        from dcslam.depth.models.sparse_conv import fill_from_coarser
+
+        torch.manual_seed(0)
+        net = SparseConvNet(fill_holes=True)
+        x = torch.zeros(1, 1, 48, 64)
+        x[0, 0, 20, ::3] = 9.0  # the top scan line: nothing measured above row 20
+        x[0, 0, 40, 1::3] = 4.0
+        y = net(x)
+        assert y[..., :20, :].eq(0).all()  # the sky stays empty, the network's own output above the line included
+        assert (y[..., 20:, :] > 0).all()  # below the line, no hole
+        plain = SparseConvNet()
+        plain.load_state_dict(net.state_dict())
+        # the filled part is the fill of the network's output, unchanged
+        reference = plain(x)
+        m = (x > 0).float()
+        for layer in plain.layers:
+            m = F.max_pool2d(m, layer.kernel_size, stride=1, padding=layer.kernel_size // 2)
+        assert torch.equal(y[..., 20:, :], fill_from_coarser(reference, m)[0][..., 20:, :])
+
+    def test_network_with_filling_gradcheck_float64(self):
+        torch.manual_seed(0)
+        net = SparseConvNet(channels=2, kernels=(3, 3, 1), fill_holes=True).double()
+        m = torch.zeros(1, 1, 8, 9, dtype=torch.float64)
+        m[0, 0, 3, ::2] = 1
+        m[0, 0, 6, 1::3] = 1
+        x = (torch.rand(1, 1, 8, 9, dtype=torch.float64) + 1).requires_grad_()
+        assert torch.autograd.gradcheck(lambda x: net(x * m, m), (x,))
+
+
+class TestBelowTopmost:
+    def test_known_answer(self):
+        from dcslam.depth.models.sparse_conv import below_topmost
+
+        m = torch.zeros(2, 1, 5, 4)
+        m[0, 0, 2, 0] = m[0, 0, 4, 0] = m[0, 0, 0, 2] = m[0, 0, 3, 3] = 1
+        m[1, 0, 1, 1] = 1
+        out = below_topmost(m)
+        assert out[0, 0, :, 0].tolist() == [0, 0, 1, 1, 1]
+        assert out[0, 0, :, 1].eq(0).all()  # a column without data stays empty
+        assert out[0, 0, :, 2].eq(1).all() and out[0, 0, :, 3].tolist() == [0, 0, 0, 1, 1]
+        assert out[1, 0, :, 1].tolist() == [0, 1, 1, 1, 1] and out[1, 0, :, [0, 2, 3]].eq(0).all()
+
+    def test_width_widens_each_measurement_across_columns(self):
+        from dcslam.depth.models.sparse_conv import below_topmost
+
+        m = torch.zeros(1, 1, 4, 7)
+        m[0, 0, 1, 3] = 1
+        out = below_topmost(m, width=3)
+        assert out[0, 0, :, 2:5].tolist() == [[0, 0, 0], [1, 1, 1], [1, 1, 1], [1, 1, 1]]
+        assert out[0, 0, :, [0, 1, 5, 6]].eq(0).all()
+
+    def test_bad_input(self):
+        from dcslam.depth.models.sparse_conv import below_topmost
+
+        with pytest.raises(DcslamError, match="expected \\(B, 1, H, W\\)"):
+            below_topmost(torch.zeros(1, 2, 4, 4))
+        with pytest.raises(DcslamError, match="odd"):
+            below_topmost(torch.zeros(1, 1, 4, 4), width=2)
