@@ -30,7 +30,10 @@ VERDICTS = ("accepted", "degraded", "rejected")
 class HealthRules:
     """Thresholds of the verdicts.
 
-    min_inlier_fraction: pairs per valid source point below which a step is degraded.
+    min_pairs: a step with fewer pairs (inliers) than this is degraded. A count, not a share of the frame's points:
+        how precisely a step is measured depends on how many pairs constrain it, whatever the depth's density
+        (a dense completed frame pairs 4-10 % of its points with PointFusion's map and still thousands of them; the
+        share of 10 % used before was chosen on sparse depth and flagged most completed-depth runs).
     min_conditioning: normalised conditioning (see :meth:`ICPOdometry._conditioning`) below which a step is
         degraded (the odometry itself rejects below its own, lower, bound).
     max_prediction_gap_m, max_prediction_gap_deg: distance of the estimate from the constant-velocity prediction
@@ -43,7 +46,7 @@ class HealthRules:
     max_rejected: a run with more rejected steps than this is suspect.
     """
 
-    min_inlier_fraction: float = 0.1
+    min_pairs: int = 250
     min_conditioning: float = 2.5e-3
     max_prediction_gap_m: float = 0.5
     max_prediction_gap_deg: float = 3.0
@@ -58,8 +61,8 @@ def assess(accepted: bool, reason: str, inliers: int, sources: int, conditioning
     if not accepted:
         return "rejected", [reason or "rejected by the odometry"]
     reasons = []
-    if sources > 0 and inliers / sources < rules.min_inlier_fraction:
-        reasons.append(f"{inliers} of {sources} points paired")
+    if inliers < rules.min_pairs:
+        reasons.append(f"{inliers} of {sources} points paired (fewer than {rules.min_pairs} pairs)")
     if not math.isnan(conditioning) and conditioning < rules.min_conditioning:
         reasons.append(f"weakly constrained (conditioning {conditioning:.1e})")
     if has_velocity and (gap_m > rules.max_prediction_gap_m or gap_deg > rules.max_prediction_gap_deg):
@@ -67,12 +70,38 @@ def assess(accepted: bool, reason: str, inliers: int, sources: int, conditioning
     return ("degraded" if reasons else "accepted"), reasons
 
 
+def drift_sigma_m(reports) -> float:
+    """First-order standard deviation of the last position accumulated over a run, from each measured step's own
+    uncertainty (``sigma_m``, ``sigma_deg`` of :class:`~dcslam.slam.pipeline.StepReport`): position errors add up as
+    a random walk, and a heading error at frame i moves every later position by the path length still to drive times
+    that angle. Rejected steps and steps without an estimate (NaN) add nothing (they are flagged on their own).
+
+    A drift no single step shows (every step a little short along a street with few facades) adds up here. ICP's
+    covariance treats residuals as independent and so underestimates the true error; :class:`HealthRules` bounds it
+    by measurement.
+    """
+    if not reports:
+        return 0.0
+    import torch
+
+    positions = torch.stack([r.T_world_cam.detach().double()[:3, 3].cpu() for r in reports])
+    lengths = (positions[1:] - positions[:-1]).norm(dim=1)
+    still_to_drive = (lengths.flip(0).cumsum(0).flip(0).tolist() + [0.0]) if len(lengths) else [0.0]
+    variance = 0.0
+    for r in reports:
+        if r.index == 0 or r.verdict == "rejected" or math.isnan(r.sigma_m) or math.isnan(r.sigma_deg):
+            continue
+        lever = still_to_drive[r.index] if r.index < len(still_to_drive) else 0.0
+        variance += r.sigma_m ** 2 + (math.radians(r.sigma_deg) * lever) ** 2
+    return math.sqrt(variance)
+
+
 def summarise(reports, rules: HealthRules = HealthRules()) -> dict:
     """Counts of verdicts over a run's step reports (objects with ``index``, ``verdict`` and ``health``; the first
     frame, which has nothing to align to, is not counted) and whether the trajectory is suspect, with why.
 
     Returns ``{"accepted": n, "degraded": n, "rejected": n, "suspect": bool, "reasons": [str],
-    "flagged_steps": [{"frame": i, "verdict": v, "why": [str]}]}``.
+    "flagged_steps": [{"frame": i, "verdict": v, "why": [str]}], "drift_sigma_m": s}`` (:func:`drift_sigma_m`).
     """
     steps = [r for r in reports if r.index > 0]
     counts = {v: sum(r.verdict == v for r in steps) for v in VERDICTS}
@@ -90,4 +119,5 @@ def summarise(reports, rules: HealthRules = HealthRules()) -> dict:
         reasons.append(f"{longest} consecutive steps degraded")
     flagged = [{"frame": r.index, "verdict": r.verdict, "why": list(r.health)} for r in steps
                if r.verdict != "accepted"]
-    return {**counts, "suspect": bool(reasons), "reasons": reasons, "flagged_steps": flagged}
+    return {**counts, "suspect": bool(reasons), "reasons": reasons, "flagged_steps": flagged,
+            "drift_sigma_m": round(drift_sigma_m(reports), 4)}

@@ -5,7 +5,7 @@ import torch
 
 from dcslam.geometry.se3 import pose_error
 from dcslam.slam.config import SlamSettings, build_slam
-from dcslam.slam.health import HealthRules, assess, summarise
+from dcslam.slam.health import HealthRules, assess, drift_sigma_m, summarise
 from dcslam.slam.pipeline import StepReport
 from dcslam.slam.scene import kitti_K, lidar_mask
 
@@ -82,12 +82,41 @@ class TestAssess:
         verdict, why = assess(True, "", *args)
         assert verdict == "degraded" and word in why[0]
 
+    def test_pairs_are_counted_not_shared(self):
+        """A dense frame pairs a small share of its many points and is still well measured; a sparse one with few
+        pairs is not, whatever its share."""
+        assert assess(True, "", 800, 16000, 0.02, 0.0, 0.0, True)[0] == "accepted"      # 5 % of a dense frame
+        verdict, why = assess(True, "", 200, 400, 0.02, 0.0, 0.0, True)                   # half of a sparse one
+        assert verdict == "degraded" and "fewer than 250 pairs" in why[0]
+
     def test_prediction_gap_needs_a_velocity(self):
         assert assess(True, "", 900, 1000, 0.1, 0.9, 0.0, False)[0] == "accepted"
 
 
-def _report(index, verdict):
-    return StepReport(index, torch.eye(4), verdict != "rejected", "", 0, 0, 0.0, 0, 0.0, verdict, ("x",))
+def _report(index, verdict, sigma_m=math.nan, sigma_deg=math.nan, x=0.0):
+    T = torch.eye(4)
+    T[0, 3] = x
+    return StepReport(index, T, verdict != "rejected", "", 0, 0, 0.0, 0, 0.0, verdict, ("x",),
+                      sigma_m=sigma_m, sigma_deg=sigma_deg)
+
+
+class TestDriftSigma:
+    def test_position_errors_add_as_a_random_walk(self):
+        reports = [_report(i, "accepted", 0.1, 0.0, float(i)) for i in range(5)]
+        assert drift_sigma_m(reports) == pytest.approx(0.2)      # 4 steps of 0.1 m: sqrt(4) * 0.1
+
+    def test_heading_errors_grow_with_the_road_still_to_drive(self):
+        """1 m steps along x: the heading error of step i moves the last pose by (4 - i) m times the angle."""
+        deg = 0.5
+        reports = [_report(i, "accepted", 0.0, deg, float(i)) for i in range(5)]
+        expected = math.radians(deg) * math.sqrt(3 ** 2 + 2 ** 2 + 1 ** 2 + 0 ** 2)
+        assert drift_sigma_m(reports) == pytest.approx(expected, rel=1e-6)
+
+    def test_rejected_and_unmeasured_steps_add_nothing(self):
+        reports = [_report(0, "accepted", 0.1, 0.0), _report(1, "rejected", 5.0, 0.0), _report(2, "accepted"),
+                   _report(3, "accepted", 0.3, 0.0)]
+        assert drift_sigma_m(reports) == pytest.approx(0.3)
+        assert summarise(reports)["drift_sigma_m"] == pytest.approx(0.3)
 
 
 class TestSummarise:
