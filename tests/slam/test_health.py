@@ -56,6 +56,18 @@ def test_good_drive_is_not_flagged(street_drive):
     assert summary["accepted"] == len(T) - 1
 
 
+def test_too_few_pairs_to_measure_is_flagged(street_drive):
+    """The good street drive seen through a few scan lines (every 24th row, as 8 beams at this size): each step rests
+    on fewer pairs than the health rule trusts, and the run says so, whatever share of its points paired."""
+    depth, K, T = street_drive
+    sparse = depth * lidar_mask(depth.shape[-2], depth.shape[-1], row_step=24, col_step=2)
+    slam = build_slam(SlamSettings())
+    slam.run(sparse, K)
+    summary = slam.health_summary()
+    assert summary["suspect"]
+    assert any("pairs" in why for step in summary["flagged_steps"] for why in step["why"])
+
+
 @pytest.fixture(scope="module")
 def street_drive():
     from dcslam.slam.scene import StreetScene, street_trajectory
