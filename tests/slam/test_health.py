@@ -124,6 +124,16 @@ class TestDriftSigma:
         expected = math.radians(deg) * math.sqrt(3 ** 2 + 2 ** 2 + 1 ** 2 + 0 ** 2)
         assert drift_sigma_m(reports) == pytest.approx(expected, rel=1e-6)
 
+    def test_slow_drift_no_step_shows_makes_a_run_suspect(self):
+        """Every step accepted, each a little uncertain: 100 steps of 0.06 m add up to 0.6 m (0.15 m with
+        0.015 m steps), and three sigma of that is past the 0.5 m bound (0.45 m is not)."""
+        slow = [_report(i, "accepted", 0.06, 0.0, float(i)) for i in range(101)]
+        fine = [_report(i, "accepted", 0.015, 0.0, float(i)) for i in range(101)]
+        s = summarise(slow)
+        assert s["suspect"] and "3 sigma" in s["reasons"][0] and s["accepted"] == 100
+        assert not summarise(fine)["suspect"]
+        assert not summarise(slow, HealthRules(max_drift_m=0))["suspect"]
+
     def test_rejected_and_unmeasured_steps_add_nothing(self):
         reports = [_report(0, "accepted", 0.1, 0.0), _report(1, "rejected", 5.0, 0.0), _report(2, "accepted"),
                    _report(3, "accepted", 0.3, 0.0)]
