@@ -16,7 +16,7 @@ steps were. The defaults of
 ``benchmarks/slam_sweep.py --steps``): on the 7 drives that tracked, no step had conditioning below 3.3e-3; on the
 drive that failed (a stretch with little structure along the road), the 7 steps that added 0.2-2 m of error each had
 conditioning 2e-4-1.8e-3. The conditioning bound sits between the two. The pair bound comes from all 100 frames of
-the same 8 drives at 64, 32, 16 and 8 beams: with 8 beams a step has 143-197 pairs (median per drive) and every
+the same 8 drives at 64, 32, 16 and 8 beams: with 8 beams a step has 133-197 pairs (median per drive) and every
 drive ended 1-31 m off; with 16 beams no step of a drive that ended within 0.5 m had fewer than 280 pairs; dense
 frames have thousands.
 
