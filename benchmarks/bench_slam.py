@@ -94,12 +94,44 @@ def _rss_mb() -> float:
         return float("nan")
 
 
+def _malloc_mb() -> tuple[float, float, float] | None:
+    """glibc's view of this process's heap: (held by malloc's arenas, of that in use, mmapped blocks) in MB, from
+    ``mallinfo2``; None where the C library has no ``mallinfo2`` (not glibc >= 2.33). Arena bytes not in use are
+    memory malloc keeps after ``free``: resident, yet no structure of ours holds them."""
+    import ctypes
+
+    class MallInfo2(ctypes.Structure):
+        _fields_ = [(name, ctypes.c_size_t) for name in
+                    ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
+                     "keepcost")]
+
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallinfo2.restype = MallInfo2
+    except (OSError, AttributeError):
+        return None
+    info = libc.mallinfo2()
+    return info.arena / 2 ** 20, info.uordblks / 2 ** 20, info.hblkhd / 2 ** 20
+
+
+def _malloc_trim() -> bool:
+    """Ask glibc to return the free memory of its arenas to the system (``malloc_trim(0)``); False if unavailable."""
+    import ctypes
+
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        return False
+    return True
+
+
 def memory(args) -> None:
     """Each memory run in a fresh child process, so that its peak is the SLAM's own and not the accuracy runs'."""
     runs = [("sparse", True), ("sparse", False)] + ([("dense", False)] if args.long_dense else [])
     for kind, keep in runs:
         cmd = [sys.executable, __file__, "--memory-child", kind, "--long-frames", str(args.long_frames),
-               "--threads", str(args.threads), "--device", args.device, "--dense-scale", str(args.dense_scale)]
+               "--threads", str(args.threads), "--device", args.device, "--dense-scale", str(args.dense_scale),
+               "--malloc-trim-every", str(args.malloc_trim_every)] + (["--probe-trim"] if args.probe_trim else [])
         if subprocess.call(cmd + (["--keep-global-map"] if keep else [])) != 0:
             raise SystemExit(f"memory run ({kind}, keep_global_map={keep}) failed")
 
@@ -123,19 +155,27 @@ def memory_child(args) -> None:
           + (" (LiDAR-like: every 4th row and column)" if kind == "sparse" else "")
           + f", dcslam defaults but keep_global_map={settings.keep_global_map} (local map "
           f"{settings.local_map_frames} frames), {args.threads} thread(s), fresh process", flush=True)
+    if args.malloc_trim_every:
+        print(f"  malloc_trim(0) after every {args.malloc_trim_every} frames", flush=True)
     print("  frame   local map points   map MB   archived points   archive file MB   RSS MB   peak RSS MB   "
-          "s/frame (SLAM, last 50)", flush=True)
+          "malloc arena MB (in use)   mmapped MB   RSS after malloc_trim MB   s/frame (SLAM, last 50)", flush=True)
     times, peaks = [], {}
     for i in range(n):
         depth = scene.render(T[i], K, H, W, mask=mask).float().to(args.device)[None, None]
         start = time.perf_counter()
         slam.step(depth, K.to(args.device))
         times.append(time.perf_counter() - start)
+        if args.malloc_trim_every and (i + 1) % args.malloc_trim_every == 0:
+            _malloc_trim()
         if i + 1 in marks:
             archived, archive_mb = len(slam.mapper.archived), slam.mapper.archived.nbytes / 2 ** 20
             peaks[i + 1] = peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+            rss, heap = _rss_mb(), _malloc_mb()
+            arena = f"{heap[0]:8.0f} ({heap[1]:5.0f})   {heap[2]:10.0f}" if heap else f"{'n/a':>15}   {'n/a':>10}"
+            trimmed = f"{_rss_mb():24.0f}" if args.probe_trim and _malloc_trim() else f"{'-':>24}"
             print(f"  {i + 1:5d}   {len(slam.map):16d}   {slam.map.nbytes() / 2 ** 20:6.1f}   {archived:15d}   "
-                  f"{archive_mb:15.1f}   {_rss_mb():6.0f}   {peak:11.0f}   {np.mean(times[-50:]):.3f}", flush=True)
+                  f"{archive_mb:15.1f}   {rss:6.0f}   {peak:11.0f}   {arena}   {trimmed}   "
+                  f"{np.mean(times[-50:]):.3f}", flush=True)
     first, last = peaks[marks[0]], peaks[marks[-1]]
     print(f"  peak RSS frame {marks[0]} -> {marks[-1]}: {first:.0f} -> {last:.0f} MB "
           f"({100 * (last / first - 1):+.1f} %, {'' if last <= 1.1 * first else 'NOT '}flat within 10 %)", flush=True)
@@ -153,6 +193,10 @@ def main() -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--long-dense", action="store_true", help="also a dense memory run (slow: every pixel cast)")
     parser.add_argument("--dense-scale", type=float, default=1 / 3, help="image scale of the dense memory run")
+    parser.add_argument("--malloc-trim-every", type=int, default=0,
+                        help="memory run: call glibc's malloc_trim(0) after every N frames (0 = never)")
+    parser.add_argument("--probe-trim", action="store_true",
+                        help="memory run: at each mark, also the RSS after malloc_trim(0) (how much malloc held free)")
     parser.add_argument("--memory-child", choices=("sparse", "dense"), help=argparse.SUPPRESS)
     parser.add_argument("--skip", choices=("accuracy", "memory"), action="append", default=[])
     args, _ = parser.parse_known_args()

@@ -74,9 +74,17 @@ def run_dcslam(drive_path: Path, depth: str, settings, frames: int | None = None
                 steps.append({"drive": drive_path.stem, "depth": depth, "frame": r.index, "verdict": r.verdict,
                               "sources": r.sources, "inliers": r.inliers, "conditioning": r.conditioning,
                               "gap_m": r.gap_m, "gap_deg": r.gap_deg, "rmse": r.rmse,
+                              "sigma_m": r.sigma_m, "sigma_deg": r.sigma_deg,
+                              "step_rot_error_deg": _angle_deg(np.linalg.solve(X_gt, X_est)),
+                              "final_error_m": float(np.linalg.norm(T_est[-1, :3, 3] - T_gt[-1, :3, 3])),
+                              "step_length_m": float(np.linalg.norm(X_est[:3, 3])),
                               "step_error_m": float(np.linalg.norm(X_est[:3, 3] - X_gt[:3, 3]))})
     return score(drive_path.stem, str(depth), T_gt, T_est, seconds, health["degraded"], health["rejected"],
                  health["suspect"], cpu_seconds)
+
+
+def _angle_deg(X: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(X[:3, :3]) - 1) / 2, -1.0, 1.0))))
 
 
 def parse_settings(text: str):

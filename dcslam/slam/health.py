@@ -4,7 +4,7 @@ Each odometry step gets one verdict:
 
 - ``rejected``: the odometry refused the estimate (too few points or pairs, degenerate geometry, non-finite, a
   divergence) and the pose is the constant-velocity prediction;
-- ``degraded``: the estimate was kept but the evidence is weak: few of the frame's points found a partner, the pairs
+- ``degraded``: the estimate was kept but the evidence is weak: few pairs (a count of them) constrain it, the pairs
   barely constrain some direction of motion (a tunnel, a plane), or the estimate ended far from the
   constant-velocity prediction (a car cannot change its velocity by metres in 0.1 s);
 - ``accepted``: none of that.
@@ -13,10 +13,15 @@ Each odometry step gets one verdict:
 any step was rejected, when more than a small fraction of its steps were degraded, or when several consecutive
 steps were. The defaults of
 :class:`HealthRules` come from every step of 8 generated drives x 40 frames (seed 2026, sparse depth, voxel 0.2 m;
-``benchmarks/slam_sweep.py --steps``): on the 7 drives that tracked, no step had conditioning below 3.3e-3 or fewer
-than 15 % of its points paired (projective association pairs few points of sparse depth); on the drive that failed
-(a stretch with little structure along the road), the 7 steps that added 0.2-2 m of error each had conditioning
-2e-4-1.8e-3. The conditioning bound sits between the two.
+``benchmarks/slam_sweep.py --steps``): on the 7 drives that tracked, no step had conditioning below 3.3e-3; on the
+drive that failed (a stretch with little structure along the road), the 7 steps that added 0.2-2 m of error each had
+conditioning 2e-4-1.8e-3. The conditioning bound sits between the two. The pair bound comes from all 100 frames of
+the same 8 drives at 64, 32, 16 and 8 beams: with 8 beams a step has 133-197 pairs (median per drive) and every
+drive ended 1-31 m off; with 16 beams no step of a drive that ended within 0.5 m had fewer than 280 pairs; dense
+frames have thousands.
+
+A run is also suspect when its accumulated first-order uncertainty (:func:`drift_sigma_m`, three sigma) says it may
+end more than ``max_drift_m`` from the truth: slow drift that no single step shows.
 """
 from __future__ import annotations
 
@@ -30,7 +35,10 @@ VERDICTS = ("accepted", "degraded", "rejected")
 class HealthRules:
     """Thresholds of the verdicts.
 
-    min_inlier_fraction: pairs per valid source point below which a step is degraded.
+    min_pairs: a step with fewer pairs (inliers) than this is degraded. A count, not a share of the frame's points:
+        how precisely a step is measured depends on how many pairs constrain it, whatever the depth's density
+        (a dense completed frame pairs 4-10 % of its points with PointFusion's map and still thousands of them; the
+        share of 10 % used before was chosen on sparse depth and flagged most completed-depth runs).
     min_conditioning: normalised conditioning (see :meth:`ICPOdometry._conditioning`) below which a step is
         degraded (the odometry itself rejects below its own, lower, bound).
     max_prediction_gap_m, max_prediction_gap_deg: distance of the estimate from the constant-velocity prediction
@@ -41,15 +49,23 @@ class HealthRules:
         degraded steps 1 and 2 alone, while no drive that ended within 0.5 m had two degraded steps anywhere, in
         any of the 64/32/16-beam or dense tables of ``benchmarks/results/slam_seed2026.md``).
     max_rejected: a run with more rejected steps than this is suspect.
+    max_drift_m: a run whose accumulated uncertainty (three times :func:`drift_sigma_m`) exceeds this may end
+        further than this from the truth, and is suspect (0: never). It catches the slow drift that no single step
+        shows: on the 8 drives x 100 frames of seed 2026, the 16-beam drive that ended 0.65 m off with every step
+        accepted had 3 sigma 0.78 m; every drive of 64 beams (icp, gradicp) or dense depth (icp) that ended within
+        0.5 m had at most 0.22 m, and two 16-beam drives that ended 0.33 and 0.38 m off are flagged by it (0.56 and
+        0.70 m: they may have ended further off). The bound is absolute, as the question it answers ("may this
+        trajectory be more than 0.5 m off?"): a drive ten times longer accumulates more and is flagged sooner.
     """
 
-    min_inlier_fraction: float = 0.1
+    min_pairs: int = 250
     min_conditioning: float = 2.5e-3
     max_prediction_gap_m: float = 0.5
     max_prediction_gap_deg: float = 3.0
     max_degraded_fraction: float = 0.1
     max_degraded_run: int = 1
     max_rejected: int = 0
+    max_drift_m: float = 0.5
 
 
 def assess(accepted: bool, reason: str, inliers: int, sources: int, conditioning: float, gap_m: float,
@@ -58,8 +74,8 @@ def assess(accepted: bool, reason: str, inliers: int, sources: int, conditioning
     if not accepted:
         return "rejected", [reason or "rejected by the odometry"]
     reasons = []
-    if sources > 0 and inliers / sources < rules.min_inlier_fraction:
-        reasons.append(f"{inliers} of {sources} points paired")
+    if inliers < rules.min_pairs:
+        reasons.append(f"{inliers} of {sources} points paired (fewer than {rules.min_pairs} pairs)")
     if not math.isnan(conditioning) and conditioning < rules.min_conditioning:
         reasons.append(f"weakly constrained (conditioning {conditioning:.1e})")
     if has_velocity and (gap_m > rules.max_prediction_gap_m or gap_deg > rules.max_prediction_gap_deg):
@@ -67,12 +83,38 @@ def assess(accepted: bool, reason: str, inliers: int, sources: int, conditioning
     return ("degraded" if reasons else "accepted"), reasons
 
 
+def drift_sigma_m(reports) -> float:
+    """First-order standard deviation of the last position accumulated over a run, from each measured step's own
+    uncertainty (``sigma_m``, ``sigma_deg`` of :class:`~dcslam.slam.pipeline.StepReport`): position errors add up as
+    a random walk, and a heading error at frame i moves every later position by the path length still to drive times
+    that angle. Rejected steps and steps without an estimate (NaN) add nothing (they are flagged on their own).
+
+    A drift no single step shows (every step a little short along a street with few facades) adds up here. ICP's
+    covariance treats residuals as independent and so underestimates the true error; :class:`HealthRules` bounds it
+    by measurement.
+    """
+    if not reports:
+        return 0.0
+    import torch
+
+    positions = torch.stack([r.T_world_cam.detach().double()[:3, 3].cpu() for r in reports])
+    lengths = (positions[1:] - positions[:-1]).norm(dim=1)
+    still_to_drive = (lengths.flip(0).cumsum(0).flip(0).tolist() + [0.0]) if len(lengths) else [0.0]
+    variance = 0.0
+    for r in reports:
+        if r.index == 0 or r.verdict == "rejected" or math.isnan(r.sigma_m) or math.isnan(r.sigma_deg):
+            continue
+        lever = still_to_drive[r.index] if r.index < len(still_to_drive) else 0.0
+        variance += r.sigma_m ** 2 + (math.radians(r.sigma_deg) * lever) ** 2
+    return math.sqrt(variance)
+
+
 def summarise(reports, rules: HealthRules = HealthRules()) -> dict:
     """Counts of verdicts over a run's step reports (objects with ``index``, ``verdict`` and ``health``; the first
     frame, which has nothing to align to, is not counted) and whether the trajectory is suspect, with why.
 
     Returns ``{"accepted": n, "degraded": n, "rejected": n, "suspect": bool, "reasons": [str],
-    "flagged_steps": [{"frame": i, "verdict": v, "why": [str]}]}``.
+    "flagged_steps": [{"frame": i, "verdict": v, "why": [str]}], "drift_sigma_m": s}`` (:func:`drift_sigma_m`).
     """
     steps = [r for r in reports if r.index > 0]
     counts = {v: sum(r.verdict == v for r in steps) for v in VERDICTS}
@@ -88,6 +130,10 @@ def summarise(reports, rules: HealthRules = HealthRules()) -> dict:
         longest = max(longest, run)
     if longest > rules.max_degraded_run:
         reasons.append(f"{longest} consecutive steps degraded")
+    sigma = drift_sigma_m(reports)
+    if rules.max_drift_m > 0 and 3 * sigma > rules.max_drift_m:
+        reasons.append(f"accumulated uncertainty {3 * sigma:.2f} m (3 sigma) exceeds {rules.max_drift_m:g} m")
     flagged = [{"frame": r.index, "verdict": r.verdict, "why": list(r.health)} for r in steps
                if r.verdict != "accepted"]
-    return {**counts, "suspect": bool(reasons), "reasons": reasons, "flagged_steps": flagged}
+    return {**counts, "suspect": bool(reasons), "reasons": reasons, "flagged_steps": flagged,
+            "drift_sigma_m": round(sigma, 4)}

@@ -37,6 +37,8 @@ class OdometryResult:
     sources: int = 0
     conditioning: float = math.nan
     gate: float = math.nan
+    sigma_m: float = math.nan
+    sigma_deg: float = math.nan
 
 
 class GroundTruthOdometry:
@@ -124,6 +126,23 @@ class PointToPlane:
         if self.hold_below > 0 and r.numel() >= 6:
             lin.H_step = self._hold(lin)
         return lin
+
+    def covariance(self, T: torch.Tensor, lin: Linearization) -> torch.Tensor:
+        """First-order covariance of the twist (translation, rotation; camera frame) estimated at T from the pairs
+        of ``lin`` (the linearization at T): ``s^2 (J^T W J)^-1`` with ``s^2`` the weighted residual variance
+        ``sum w r^2 / (sum w - 6)``. It treats residuals as independent, so it is a lower bound on the true
+        uncertainty (ICP's errors are correlated); :mod:`dcslam.slam.health` calibrates it. Shape: (6, 6) float64."""
+        src = self.pairs[0]
+        r = self._fixed_residuals(T.detach()).detach().double()
+        w = self.kernel.weight(r, self.max_distance)
+        pw = self._pair_weights(src)
+        if pw is not None:
+            w = w * pw.detach()
+        dof = max(float(w.sum()) - 6.0, 1.0)
+        s2 = float((w * r * r).sum()) / dof
+        H = lin.H.detach().double()
+        jitter = 1e-12 * float(torch.diagonal(H).sum()) + 1e-300
+        return s2 * torch.linalg.inv(H + jitter * torch.eye(6, dtype=H.dtype, device=H.device))
 
     def _hold(self, lin: Linearization) -> torch.Tensor:
         """H plus a stiff prior along the directions the pairs do not constrain (normalised eigenvalue below
@@ -228,6 +247,9 @@ class ICPOdometry:
         if lin.count < self.min_inliers:
             return OdometryResult(T_init, False, f"{lin.count} inliers", **base)
         base["conditioning"] = conditioning = self._conditioning(lin, source)
+        cov = problem.covariance(T, lin)
+        base["sigma_m"] = math.sqrt(max(float(torch.linalg.eigvalsh(cov[:3, :3])[-1]), 0.0))
+        base["sigma_deg"] = math.degrees(math.sqrt(max(float(torch.linalg.eigvalsh(cov[3:, 3:])[-1]), 0.0)))
         if conditioning < self.min_conditioning:
             return OdometryResult(T_init, False, f"degenerate geometry (conditioning {conditioning:.1e})", **base)
         X = torch.linalg.solve(T_init.detach().double(), T.detach().double())

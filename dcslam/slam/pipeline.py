@@ -53,7 +53,8 @@ class StepReport:
 
     verdict: accepted, degraded or rejected; health: the reasons. sources: valid points of the frame; inliers: of
     them, paired within the gates; conditioning: see ``ICPOdometry._conditioning``; gap_m / gap_deg: distance of
-    the estimate from the constant-velocity prediction.
+    the estimate from the constant-velocity prediction; sigma_m / sigma_deg: the step's first-order standard
+    deviation of position / rotation along its worst direction (``PointToPlane.covariance``; NaN when not measured).
     """
 
     index: int
@@ -71,6 +72,8 @@ class StepReport:
     conditioning: float = math.nan
     gap_m: float = 0.0
     gap_deg: float = 0.0
+    sigma_m: float = math.nan
+    sigma_deg: float = math.nan
 
 
 class SLAM:
@@ -172,7 +175,8 @@ class SLAM:
             has_velocity=index >= 2, rules=self.health)
         report = StepReport(index, result.T_world_cam, result.accepted, result.reason, result.iterations,
                             result.inliers, result.rmse, len(self.mapper.map), time.perf_counter() - start,
-                            verdict, tuple(why), result.sources, result.conditioning, gap_m, gap_deg)
+                            verdict, tuple(why), result.sources, result.conditioning, gap_m, gap_deg,
+                            result.sigma_m, result.sigma_deg)
         self.reports.append(report)
         return report
 

@@ -5,7 +5,7 @@ import torch
 
 from dcslam.geometry.se3 import pose_error
 from dcslam.slam.config import SlamSettings, build_slam
-from dcslam.slam.health import HealthRules, assess, summarise
+from dcslam.slam.health import HealthRules, assess, drift_sigma_m, summarise
 from dcslam.slam.pipeline import StepReport
 from dcslam.slam.scene import kitti_K, lidar_mask
 
@@ -56,6 +56,18 @@ def test_good_drive_is_not_flagged(street_drive):
     assert summary["accepted"] == len(T) - 1
 
 
+def test_too_few_pairs_to_measure_is_flagged(street_drive):
+    """The good street drive seen through a few scan lines (every 24th row, as 8 beams at this size): each step rests
+    on fewer pairs than the health rule trusts, and the run says so, whatever share of its points paired."""
+    depth, K, T = street_drive
+    sparse = depth * lidar_mask(depth.shape[-2], depth.shape[-1], row_step=24, col_step=2)
+    slam = build_slam(SlamSettings())
+    slam.run(sparse, K)
+    summary = slam.health_summary()
+    assert summary["suspect"]
+    assert any("pairs" in why for step in summary["flagged_steps"] for why in step["why"])
+
+
 @pytest.fixture(scope="module")
 def street_drive():
     from dcslam.slam.scene import StreetScene, street_trajectory
@@ -82,12 +94,51 @@ class TestAssess:
         verdict, why = assess(True, "", *args)
         assert verdict == "degraded" and word in why[0]
 
+    def test_pairs_are_counted_not_shared(self):
+        """A dense frame pairs a small share of its many points and is still well measured; a sparse one with few
+        pairs is not, whatever its share."""
+        assert assess(True, "", 800, 16000, 0.02, 0.0, 0.0, True)[0] == "accepted"      # 5 % of a dense frame
+        verdict, why = assess(True, "", 200, 400, 0.02, 0.0, 0.0, True)                   # half of a sparse one
+        assert verdict == "degraded" and "fewer than 250 pairs" in why[0]
+
     def test_prediction_gap_needs_a_velocity(self):
         assert assess(True, "", 900, 1000, 0.1, 0.9, 0.0, False)[0] == "accepted"
 
 
-def _report(index, verdict):
-    return StepReport(index, torch.eye(4), verdict != "rejected", "", 0, 0, 0.0, 0, 0.0, verdict, ("x",))
+def _report(index, verdict, sigma_m=math.nan, sigma_deg=math.nan, x=0.0):
+    T = torch.eye(4)
+    T[0, 3] = x
+    return StepReport(index, T, verdict != "rejected", "", 0, 0, 0.0, 0, 0.0, verdict, ("x",),
+                      sigma_m=sigma_m, sigma_deg=sigma_deg)
+
+
+class TestDriftSigma:
+    def test_position_errors_add_as_a_random_walk(self):
+        reports = [_report(i, "accepted", 0.1, 0.0, float(i)) for i in range(5)]
+        assert drift_sigma_m(reports) == pytest.approx(0.2)      # 4 steps of 0.1 m: sqrt(4) * 0.1
+
+    def test_heading_errors_grow_with_the_road_still_to_drive(self):
+        """1 m steps along x: the heading error of step i moves the last pose by (4 - i) m times the angle."""
+        deg = 0.5
+        reports = [_report(i, "accepted", 0.0, deg, float(i)) for i in range(5)]
+        expected = math.radians(deg) * math.sqrt(3 ** 2 + 2 ** 2 + 1 ** 2 + 0 ** 2)
+        assert drift_sigma_m(reports) == pytest.approx(expected, rel=1e-6)
+
+    def test_slow_drift_no_step_shows_makes_a_run_suspect(self):
+        """Every step accepted, each a little uncertain: 100 steps of 0.06 m add up to 0.6 m (0.15 m with
+        0.015 m steps), and three sigma of that is past the 0.5 m bound (0.45 m is not)."""
+        slow = [_report(i, "accepted", 0.06, 0.0, float(i)) for i in range(101)]
+        fine = [_report(i, "accepted", 0.015, 0.0, float(i)) for i in range(101)]
+        s = summarise(slow)
+        assert s["suspect"] and "3 sigma" in s["reasons"][0] and s["accepted"] == 100
+        assert not summarise(fine)["suspect"]
+        assert not summarise(slow, HealthRules(max_drift_m=0))["suspect"]
+
+    def test_rejected_and_unmeasured_steps_add_nothing(self):
+        reports = [_report(0, "accepted", 0.1, 0.0), _report(1, "rejected", 5.0, 0.0), _report(2, "accepted"),
+                   _report(3, "accepted", 0.3, 0.0)]
+        assert drift_sigma_m(reports) == pytest.approx(0.3)
+        assert summarise(reports)["drift_sigma_m"] == pytest.approx(0.3)
 
 
 class TestSummarise:

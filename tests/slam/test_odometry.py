@@ -108,3 +108,51 @@ def test_unconstrained_directions_are_held_at_the_prediction():
     T = held.T_world_cam
     assert abs(float(T[2, 3])) < 1e-3                                     # depth corrected
     assert torch.allclose(T[:2, 3], start[:2, 3], atol=1e-3)              # slide kept at the prediction
+
+
+def _box_pairs(n: int, residual: float):
+    """Points on the six faces of a box centred on the camera, paired with themselves moved along their normals
+    by +-``residual`` in turn: translation and rotation decouple, so the translation covariance is known."""
+    g = torch.linspace(-1.0, 1.0, n, dtype=torch.float64)
+    a, b = [t.reshape(-1) for t in torch.meshgrid(g, g, indexing="ij")]
+    points, normals = [], []
+    for axis in range(3):
+        for side in (-2.0, 2.0):
+            p = torch.zeros(a.numel(), 3, dtype=torch.float64)
+            p[:, axis], p[:, (axis + 1) % 3], p[:, (axis + 2) % 3] = side, a, b
+            nrm = torch.zeros_like(p)
+            nrm[:, axis] = 1.0
+            points.append(p)
+            normals.append(nrm)
+    points, normals = torch.cat(points), torch.cat(normals)
+    signs = torch.ones(len(points), dtype=torch.float64)
+    signs[1::2] = -1
+    targets = points + residual * signs[:, None] * normals
+    index = torch.arange(len(points))
+    return points, normals, lambda p: (index, targets, normals)
+
+
+def test_covariance_known_answer():
+    """s^2 (J^T J)^-1 with s^2 = sum r^2 / (M - 6): on the box, each translation axis is fixed by the 2 n^2 points
+    of the two faces across it, so its standard deviation is s / sqrt(2 n^2)."""
+    from dcslam.slam.odometry import PointToPlane
+
+    n, e = 5, 0.01
+    source, normals, associate = _box_pairs(n, e)
+    problem = PointToPlane(source, normals, associate, max_distance=1.0, cos_max_angle=0.5)
+    T = torch.eye(4, dtype=torch.float64)
+    lin = problem.linearize(T)
+    cov = problem.covariance(T, lin)
+    M = len(source)
+    s2 = M * e ** 2 / (M - 6)
+    assert cov.shape == (6, 6)
+    assert torch.allclose(torch.diagonal(cov)[:3], torch.full((3,), s2 / (2 * n * n), dtype=torch.float64),
+                          rtol=1e-6)
+    assert torch.allclose(cov[:3, 3:], torch.zeros(3, 3, dtype=torch.float64), atol=1e-12)
+
+
+def test_step_reports_its_uncertainty(pair):
+    """An accepted step carries its first-order standard deviations of position and rotation."""
+    (f0, f1), T, _ = pair
+    result = ICPOdometry().estimate(f1, view_from_frame(f0, T[0]), T[0])
+    assert result.accepted and 0 < result.sigma_m < 0.05 and 0 < result.sigma_deg < 1.0
