@@ -57,7 +57,7 @@ def _validation_pose(ws, model_file: Path, config) -> dict:
     from dcslam.io.drive import read_splits
 
     train_config = config.train_config([], [])
-    model = load_model(model_file)
+    model, _ = load_model(model_file)
     splits = read_splits(ws.splits)
     frames = [DriveFrames(ws.drives / f"{name}.h5", max_frames=config.max_frames, scale=config.scale)
               for name in splits["val"]]
