@@ -6,7 +6,7 @@ Run, in order (each step skips what a previous call made; the steps after ``driv
 
     python benchmarks/pose_beams.py drives --workspace WS            # the beams quick profile's drives (+ 16 beams)
     python benchmarks/pose_beams.py train --workspace WS --run nconv  # then --run nconv-pose [--lr 1e-2 --name N]
-    python benchmarks/pose_beams.py slam --workspace WS --run nconv --beams 64 [--frames 30]
+    python benchmarks/pose_beams.py slam --workspace WS --run nconv --beams 64 [--frames 30] [--drives 1004 1005]
     python benchmarks/pose_beams.py score --workspace WS --runs nconv nconv-pose --beams 64 16
 
 Trainings use the beams quick profile's options (:data:`dcslam.stages.reproduce_beams.PROFILES`), so ``nconv`` and
@@ -85,7 +85,7 @@ def train(ws, run: str, lr: float | None, name: str | None) -> None:
                   f"{v['pose_rotation_rad'] * 1000:.2f} mrad per step (loss {v['pose']:.4f})")
 
 
-def slam(ws, run: str, beams: int, frames: int) -> None:
+def slam(ws, run: str, beams: int, frames: int, only: list[str]) -> None:
     from dcslam.io.drive import read_splits
     from dcslam.report.table_beams import prediction_name, sparse_kind
     from dcslam.stages import predict
@@ -97,7 +97,7 @@ def slam(ws, run: str, beams: int, frames: int) -> None:
         _timed(f"predict {layer}", predict.run, ws,
                predict.PredictConfig(run=run, input=sparse_kind(beams), output=ws.predictions / layer,
                                      drive=[ws.drives / f"{d}.h5" for d in test]))
-    for drive in test:
+    for drive in (d for d in test if not only or any(part in d for part in only)):
         if not (ws.slam / layer / f"{drive}.txt").exists():
             _timed(f"slam {layer} {drive} ({frames} frames)", slam_stage.run, ws,
                    slam_stage.SlamStageConfig(odometry="icp", depth=f"predicted/{layer}", drive=[drive],
@@ -151,6 +151,8 @@ def main() -> None:
     parser.add_argument("--lr", type=float, default=None, help="train: learning rate other than the profile's")
     parser.add_argument("--beams", type=int, nargs="*", default=[64])
     parser.add_argument("--frames", type=int, default=30)
+    parser.add_argument("--drives", nargs="*", default=[], help="slam: only the test drives whose names hold one "
+                                                                 "of these (processes in parallel)")
     args = parser.parse_args()
 
     import torch
@@ -165,7 +167,7 @@ def main() -> None:
         train(ws, args.run, args.lr, args.name)
     elif args.step == "slam":
         for b in args.beams:
-            slam(ws, args.run, b, args.frames)
+            slam(ws, args.run, b, args.frames, args.drives)
     else:
         score(ws, args.runs, args.beams)
 
