@@ -40,8 +40,9 @@ reproduce-table-5-1: setup
 	$(DCSLAM) reproduce --table 5.1 $(REPRO_ARGS)
 
 # The beams experiment (issue 13): every input (sparse, IP-Basic, SparseConvNet, nconv unmasked and masked by its
-# confidence, nconv-guided, annotated dense, exact) at 64/32/16/8 LiDAR beams; table, per-drive CSV and a PNG of
-# localisation against beam count under $(WORKSPACE)/results/ (table_beams.*, beams_localisation.png).
+# confidence, nconv-guided, nconv fine-tuned through the pose loss, annotated dense, exact) at 64/32/16/8 LiDAR
+# beams; table, per-drive CSV and a PNG of localisation against beam count under $(WORKSPACE)/results/
+# (table_beams.*, beams_localisation.png).
 reproduce-beams: setup
 	$(DCSLAM) reproduce --table beams $(REPRO_ARGS)
 

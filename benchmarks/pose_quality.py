@@ -40,7 +40,8 @@ def main() -> None:
 
     from dcslam.depth.data import DriveFrames, frame_windows
     from dcslam.depth.models import load_model
-    from dcslam.depth.train import TrainConfig, pose_loss_of, run_model_with_confidence
+    from dcslam.depth.train import TrainConfig
+    from dcslam.depth.train_pose import pose_loss_of, run_model_with_confidence
     from dcslam.io.drive import read_splits
     from dcslam.workspace import Workspace
 

@@ -3,10 +3,11 @@
 Losses: masked MSE (``sparse`` or ``dense`` mask), chamfer between maps of predicted and ground-truth depth built
 with ground-truth poses (``map_frames`` frames per map), or the pose loss (:mod:`dcslam.depth.pose`: the relative-pose
 error of differentiable frame-to-model ICP over windows of ``pose_frames`` frames, plus optional MSE and chamfer
-terms); ``init`` starts from another run's model file (fine-tuning). AdamW (lr 1e-3, weight decay 0.01); at most
-200 frames per drive; the training drives in turn; after each epoch a validation pass without back-propagation
-averaged over the validation drives (chamfer, MSE, MAE, RMSE; and the pose error for pose runs); the best validation
-checkpoint (by the run's own loss) is kept. Beyond the thesis: an L1
+terms; its loss object, confidence weights and validation pass are in :mod:`dcslam.depth.train_pose`); ``init``
+starts from another run's model file (fine-tuning). AdamW (lr 1e-3, weight decay 0.01); at most 200 frames per
+drive; the training drives in turn; after each epoch a validation pass without back-propagation averaged over the
+validation drives (chamfer, MSE, MAE, RMSE; and the pose error for pose runs); the best validation checkpoint (by the
+run's own loss) is kept. Beyond the thesis: an L1
 term added to the MSE (``l1_weight``), a cosine learning-rate schedule over the run's steps (``lr_schedule``), and
 density augmentation (``input_mix``: each frame's input drawn in turn from several depth kinds, e.g. the sparse
 depth of 64, 32, 16 and 8 LiDAR beams; see :class:`dcslam.depth.data.DriveFrames`).
@@ -33,6 +34,7 @@ from dcslam.depth.data import DriveFrames, check_view, frame_windows
 from dcslam.depth.losses import MASKS, MaskedMSE, batch_depth_errors
 from dcslam.depth.maps import MapChamfer
 from dcslam.depth.recipes import LOSSES, LR_SCHEDULES, check_pose_options, map_frames_of, selection_key
+from dcslam.depth.train_pose import pose_loss_of, run_model_with_confidence, validate_pose
 from dcslam.depth.models import architectures, build_model, model_record, save_model
 from dcslam.errors import DcslamError
 from dcslam.progress import Bar
@@ -175,26 +177,6 @@ def run_model(model, batch):
     return model(batch.sparse, mask) if batch.rgb is None else model(batch.sparse, mask, batch.rgb)
 
 
-def run_model_with_confidence(model, batch, use_confidence: bool = True):
-    """(prediction (B, 1, h, w), confidence (B, 1, h, w) in [0, 1] or None): the confidence of networks that give
-    one (``forward_with_confidence``, e.g. nconv) when ``use_confidence``, else None."""
-    if not use_confidence or not hasattr(model, "forward_with_confidence"):
-        return run_model(model, batch), None
-    mask = (batch.sparse > 0).to(batch.sparse.dtype)
-    args = (batch.sparse, mask) if batch.rgb is None else (batch.sparse, mask, batch.rgb)
-    pred, confidence = model.forward_with_confidence(*args)
-    return pred, confidence.clamp(0.0, 1.0)
-
-
-def pose_loss_of(config: TrainConfig):
-    """The :class:`dcslam.depth.pose.PoseLoss` of a configuration."""
-    from dcslam.depth.pose import PoseLoss, PoseLossSettings, default_odometry
-
-    odometry = default_odometry(config.pose_iterations, config.pose_grad_iterations, config.pose_source_voxel)
-    return PoseLoss(odometry, settings=PoseLossSettings(config.pose_translation_weight, config.pose_rotation_weight,
-                                                        config.pose_max_sources))
-
-
 class Objective:
     """The training loss of a configuration: ``objective(pred, batch)`` → scalar; :attr:`parts` holds the terms of
     the last call (pose loss: ``pose``, its mean ``pose_translation_m`` and ``pose_rotation_rad`` per step, and
@@ -224,33 +206,6 @@ class Objective:
                       "pose_translation_m": float(details["translation_m"].mean()),
                       "pose_rotation_rad": float(details["rotation_rad"].mean()), "pose_rejected": details["rejected"]}
         return sum(self.weights[k] * v for k, v in terms.items())
-
-
-def validate_pose(model, drives: list[DriveFrames], pose, frames_per_window: int, device,
-                  use_confidence: bool = True) -> dict:
-    """The pose loss of the validation drives without back-propagation: its mean over the windows of
-    ``frames_per_window`` frames (those of >= 2 frames) of each drive, averaged over the drives, with the mean
-    translation (m) and rotation (rad) error per step."""
-    per_drive = []
-    model.eval()
-    with torch.no_grad():
-        for frames in drives:
-            rows = []
-            for window in frame_windows(len(frames), frames_per_window):
-                if len(window) < 2:
-                    continue
-                batch = frames.load(window).to(device)
-                pred, confidence = run_model_with_confidence(model, batch, use_confidence)
-                loss, details = pose(pred, batch.K, batch.T_world_cam, confidence)
-                rows.append((float(loss), float(details["translation_m"].mean()),
-                             float(details["rotation_rad"].mean())))
-            if rows:
-                per_drive.append(np.mean(rows, axis=0))
-    model.train()
-    if not per_drive:
-        raise DcslamError(f"no validation drive has {frames_per_window} frames for the pose loss")
-    mean = np.mean(per_drive, axis=0)
-    return {"pose": float(mean[0]), "pose_translation_m": float(mean[1]), "pose_rotation_rad": float(mean[2])}
 
 
 def validate(model, drives: list[DriveFrames], map_frames: int, device, map_builder=None) -> dict:

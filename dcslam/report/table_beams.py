@@ -1,16 +1,18 @@
 """The beams experiment's table: depth and localisation of every input at every LiDAR beam count (issue 13).
 
 For each beam count B and each input made from the B-beam sparse depth — the sparse depth itself, IP-Basic's
-completion, SparseConvNet, nconv unmasked and masked by its confidence, nconv-guided — and for the inputs that do not
+completion, SparseConvNet, nconv unmasked and masked by its confidence, nconv-guided, nconv fine-tuned through the
+pose loss (issue 14; its confidence as ICP weights) — and for the inputs that do not
 depend on B (annotated dense depth, the generator's exact depth): MAE / RMSE against the annotated depth and
 localisation (the thesis's metric, ATE, RPE) as the mean over the test drives ± the half-width of the 95 % t-interval
 (:mod:`dcslam.report.spread`), the median, the failures, whether the row differs from the sparse input of its beam
 count beyond the spread (paired by drive), and the share of the gap from that sparse input to exact depth that it
-closes. Rows made with different SLAM settings are refused: a comparison across them would mean nothing.
+closes; a fine-tuned input is also compared with the input it was fine-tuned from. Rows made with different SLAM
+settings are refused: a comparison across them would mean nothing.
 
 Layer names (one function, :func:`layer_name`, used by the pipeline that makes them and by this table):
 ``sparse`` / ``sparse@B`` (the drive files' depth), ``ip-basic-fast-sparseB``, ``<run>-sparseB`` (a trained
-completer's predictions of the B-beam input), ``nconv-sparseB+masked`` (those predictions filtered by confidence),
+completer's predictions of the B-beam input), ``nconv-sparseB+masked`` (those predictions filtered by confidence), ``nconv-pose-sparseB`` (the pose-loss run's),
 ``dense``, ``exact``.
 """
 from __future__ import annotations
@@ -33,11 +35,13 @@ MASKED = "masked"  # name of the confidence filter's output (``<run>-sparseB+mas
 @dataclass(frozen=True)
 class BeamsInput:
     """One input of the table: its label, the completer behind it (``None``: the sparse depth itself; ``""``: none,
-    a layer of the drive files that does not depend on the beam count), and whether it is masked by confidence."""
+    a layer of the drive files that does not depend on the beam count), whether it is masked by confidence, and the
+    label of the input it was fine-tuned from (``tuned_from``; its findings line compares the two)."""
 
     label: str
     completer: str | None
     masked: bool = False
+    tuned_from: str | None = None
 
     @property
     def per_beam(self) -> bool:
@@ -47,6 +51,7 @@ class BeamsInput:
 INPUTS = (BeamsInput("sparse", None), BeamsInput("IP-Basic", IP_BASIC_RUN),
           BeamsInput("SparseConvNet", "sparse-conv"), BeamsInput("nconv", "nconv"),
           BeamsInput("nconv masked", "nconv", masked=True), BeamsInput("nconv-guided", "nconv-guided"),
+          BeamsInput("nconv pose", "nconv-pose", tuned_from="nconv"),
           BeamsInput("annotated dense", ""), BeamsInput("exact", ""))
 TRAINED = tuple(dict.fromkeys(i.completer for i in INPUTS if i.completer not in (None, "", IP_BASIC_RUN)))
 """Run names of the learned completers the table expects (``runs/<name>/``)."""
@@ -220,7 +225,8 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
 
 def findings(results: dict[tuple[int | None, str], LayerResult], beams: list[int]) -> list[str]:
     """One line per beam count: the completed inputs that localise better than sparse beyond the spread, the best
-    one's share of the sparse → exact gap, and whether masking nconv by its confidence differs beyond the spread."""
+    one's share of the sparse → exact gap, whether masking nconv by its confidence differs beyond the spread, and
+    whether each fine-tuned input (``tuned_from``) differs from the input it was fine-tuned from."""
     lines = []
     exact = results.get((None, "exact"))
     for b in sorted(beams, reverse=True):
@@ -240,6 +246,10 @@ def findings(results: dict[tuple[int | None, str], LayerResult], beams: list[int
         masked, plain = results.get((b, "nconv masked")), results.get((b, "nconv"))
         if masked is not None and plain is not None and masked.pairs and plain.pairs:
             text += f"; nconv masked vs unmasked: {_verdict(masked, plain)}"
+        for item in (i for i in INPUTS if i.tuned_from):
+            tuned, base = results.get((b, item.label)), results.get((b, item.tuned_from))
+            if tuned is not None and base is not None and tuned.pairs and base.pairs:
+                text += f"; {item.label} vs {item.tuned_from}: {_verdict(tuned, base)}"
         lines.append(text)
     return lines
 
@@ -265,24 +275,25 @@ def plot_localisation_vs_beams(path: Path | str, results: dict[tuple[int | None,
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 5))
     xs = sorted(beams)
-    for i, item in enumerate(INPUTS):
-        if not item.per_beam:
-            continue
+    per_beam = [item for item in INPUTS if item.per_beam]
+    for i, item in enumerate(per_beam):
         points = [(b, spread([s.localisation for s in results[(b, item.label)].scores.values()]))
                   for b in xs if (b, item.label) in results and results[(b, item.label)].pairs]
         if not points:
             continue
-        x = [b * (1 + 0.03 * (i - 2.5)) for b, _ in points]  # the bars of different inputs a little apart
+        offset = 0.03 * (i - (len(per_beam) - 1) / 2)  # the bars of different inputs a little apart
+        x = [b * (1 + offset) for b, _ in points]
         mean = [s.mean for _, s in points]
         low = [0.0 if s.ci_low is None else s.mean - max(s.ci_low, 0.05 * s.mean) for _, s in points]
         high = [0.0 if s.ci_high is None else s.ci_high - s.mean for _, s in points]
-        ax.errorbar(x, mean, yerr=[low, high], marker="os^vDP"[i % 6], capsize=3, lw=1.4, label=item.label)
+        ax.errorbar(x, mean, yerr=[low, high], marker="os^vDPX"[i % 7], color=f"C{i}", capsize=3, lw=1.4,
+                    label=item.label)
     for j, item in enumerate(i for i in INPUTS if not i.per_beam):
         result = results.get((None, item.label))
         if result is None or not result.pairs:
             continue
         s = spread([v.localisation for v in result.scores.values()])
-        colour = f"C{6 + j}"
+        colour = f"C{len(per_beam) + j}"
         ax.axhline(s.mean, color=colour, ls="--", lw=1.2, label=f"{item.label} (any beam count)")
         if s.ci_low is not None:
             ax.axhspan(max(s.ci_low, 0.05 * s.mean), s.ci_high, color=colour, alpha=0.12)

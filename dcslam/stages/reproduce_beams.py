@@ -5,13 +5,14 @@ The experiment composes the other stages as :mod:`dcslam.stages.reproduce` does 
 finished stages, same ``jobs``)::
 
     synth (unless a KITTI root is given) → prepare-kitti --beams 32,16,8 (plus depth/exact on generated drives)
-    → train SparseConvNet, nconv, nconv-guided → predict each (and IP-Basic) at every beam count
+    → train SparseConvNet, nconv, nconv-guided, then nconv-pose (nconv fine-tuned through the pose loss, its
+      confidence as ICP weights; issue 14) → predict each (and IP-Basic) at every beam count
     → filter nconv's predictions by confidence ("masked") → slam over every (input, beam count, test drive)
     → score: the beams table, its per-drive CSV and a plot of localisation against beam count
 
-The trainings, the predictions and the SLAM runs are each independent of one another, so ``jobs`` > 1 runs each
-group in that many worker processes (one torch thread each). A profile sets the scale; its ``train`` is the one dict
-of training options (run name → options of ``dcslam train``).
+The trainings (those fine-tuned from another run after the others), the predictions and the SLAM runs are each
+independent of one another, so ``jobs`` > 1 runs each group in that many worker processes (one torch thread each). A
+profile sets the scale; its ``train`` is the one dict of training options (run name → options of ``dcslam train``).
 """
 from __future__ import annotations
 
@@ -38,7 +39,8 @@ class BeamsProfile:
     name: str
     drives: int                          # generated drives
     frames: int                          # raw frames per generated drive (depth exists for frames 5 … N−6)
-    train: dict[str, dict]               # run name (sparse-conv, nconv, nconv-guided) → `dcslam train` options
+    train: dict[str, dict]               # run name (sparse-conv, nconv, nconv-guided, nconv-pose) → `dcslam train`
+                                         # options; a run with ``init`` is trained after the run it starts from
     slam_frames: int                     # frames of each test drive fed to SLAM
     beams: tuple[int, ...] = (64, 32, 16, 8)
     # nconv's "masked" rows keep each frame's most confident quarter of pixels: a fixed threshold (0.5) emptied the
@@ -58,6 +60,11 @@ class BeamsProfile:
                               "drive's own sparse depth, the reference of the others)")
         for b in self.beams:
             prepare.check_beams(b)
+        for run, options in self.train.items():
+            if options.get("init") is not None and (options["init"] not in self.train or
+                                                    self.train[options["init"]].get("init") is not None):
+                raise DcslamError(f"beams profile {self.name}: run {run} starts from {options['init']}, which is "
+                                  "not a run of the profile trained from scratch")
         if self.split is not None and (sum(self.split) != self.drives or min(self.split) < 1):
             raise DcslamError(f"beams profile {self.name}: split {self.split} must be >= 1 drive each and add up "
                               f"to {self.drives} drives")
@@ -66,6 +73,11 @@ class BeamsProfile:
         """The ``dcslam train`` configuration of run ``run`` (its ``model`` defaults to the run's name)."""
         return train.TrainStageConfig(**{"model": run, **self.train[run]}, name=run, seed=seed)
 
+    def stages_of_training(self) -> list[list[str]]:
+        """The runs in the order they can be trained: those from scratch, then those fine-tuned from them."""
+        first = [run for run in TRAINED if self.train[run].get("init") is None]
+        return [first, [run for run in TRAINED if run not in first]]
+
 
 _QUICK = {"epochs": 2, "max_frames": 31, "scale": 0.5}  # as the Table 5.2 quick profile
 # SparseConvNet with its holes filled from coarser levels, trained on every beam count in turn (density augmentation)
@@ -73,18 +85,26 @@ _QUICK = {"epochs": 2, "max_frames": 31, "scale": 0.5}  # as the Table 5.2 quick
 # and 8 beams in benchmarks/beams_quality.py (2 seeds); nconv did better trained on 64 beams alone (README)
 _SPARSE_CONV = {"lr": 1e-2, "input_mix": ["sparse", "sparse@32", "sparse@16", "sparse@8"], "l1_weight": 1.0,
                 "lr_schedule": "cosine", "fill_holes": True}
+# nconv fine-tuned through the pose loss (issue 14): the network's confidence is each pixel's ICP weight, so this
+# loss is the one that can teach the confidence which pixels ICP should trust
+_POSE = {"model": "nconv", "loss": "pose", "init": "nconv"}
+# its scale in the quick profile, as Table 5.2's quick pose runs: 1 epoch of 16 frames per drive (12 windows of 4),
+# the last 2 LM iterations with gradient, at most 2000 sources per frame
+_POSE_QUICK = {"epochs": 1, "max_frames": 16, "scale": 0.5, "lr": 1e-3, "pose_grad_iterations": 2,
+               "pose_max_sources": 2000}
 PROFILES = {
     "quick": BeamsProfile(
         name="quick", drives=8, frames=42, split=(3, 1, 4), slam_frames=30,
         train={"sparse-conv": {**_QUICK, **_SPARSE_CONV}, "nconv": {**_QUICK, "lr": 1e-2},
-               "nconv-guided": {**_QUICK, "lr": 1e-2}},
+               "nconv-guided": {**_QUICK, "lr": 1e-2}, "nconv-pose": {**_POSE, **_POSE_QUICK}},
         description="8 generated drives of 42 frames (3 train / 1 val / 4 test, the drives of the Table 5.2 quick "
                     "profile), 64/32/16/8 beams, completers trained 2 epochs at half resolution (nconv on the "
-                    "64-beam input, SparseConvNet on all four beam counts), SLAM on the first 30 frames of each "
-                    "test drive"),
+                    "64-beam input, SparseConvNet on all four beam counts), nconv then fine-tuned 1 epoch through "
+                    "the pose loss, SLAM on the first 30 frames of each test drive"),
     "smoke": BeamsProfile(
         name="smoke", drives=3, frames=12, beams=(64, 16), slam_frames=2,
-        train={run: {"epochs": 1, "max_frames": 2, "scale": 0.25} for run in TRAINED},
+        train={run: {"epochs": 1, "max_frames": 2, "scale": 0.25, **(_POSE if run == "nconv-pose" else {})}
+               for run in TRAINED},
         slam={"iterations": 3, "voxel_size": 0.2},
         description="a check that every stage runs (3 drives of 12 frames, 64 and 16 beams, tiny training, SLAM "
                     "over 2 frames): numbers mean nothing"),
@@ -92,7 +112,8 @@ PROFILES = {
         name="thesis", drives=24, frames=211, slam_frames=30,
         train={"sparse-conv": {"epochs": 5, "max_frames": 200, **_SPARSE_CONV},
                "nconv": {"epochs": 5, "max_frames": 200, "lr": 1e-2},
-               "nconv-guided": {"epochs": 5, "max_frames": 200, "lr": 1e-2}},
+               "nconv-guided": {"epochs": 5, "max_frames": 200, "lr": 1e-2},
+               "nconv-pose": {**_POSE, "epochs": 1, "max_frames": 200}},
         description="the thesis's scale: 15 / 4 / 5 drives of 200 frames, full resolution (use a GPU)"),
 }
 
@@ -125,6 +146,11 @@ def run_table(ws: Workspace, config: BeamsTableConfig, *, force: bool = False):
     return report
 
 
+def _init_model(ws: Workspace, options: dict) -> list[Path]:
+    """The model file a run fine-tunes (``init``), as a list of inputs of its stage (empty for a run from scratch)."""
+    return [ws.runs / options["init"] / "model.pt"] if options.get("init") is not None else []
+
+
 def _have_exact(drives: list[Path]) -> bool:
     """Whether every drive file holds the generator's exact depth (``depth/exact``)."""
     from dcslam.io.drive import EXACT, DriveFile
@@ -150,9 +176,10 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
     test, learn = make_drives(pipe, drives=profile.drives, frames=profile.frames, split=profile.split,
                               kitti_root=kitti_root, seed=seed, jobs=jobs,
                               beams=tuple(b for b in profile.beams if b != FULL_BEAMS))
-    pipe.run_all([Stage(f"train-{run}", train.run, profile.train_config(run, seed),
-                        outputs=lambda r=run: [ws.runs / r / "model.pt", ws.runs / r / "metrics.jsonl"],
-                        inputs=lambda: learn) for run in TRAINED], jobs)
+    for runs in profile.stages_of_training():
+        pipe.run_all([Stage(f"train-{run}", train.run, profile.train_config(run, seed),
+                            outputs=lambda r=run: [ws.runs / r / "model.pt", ws.runs / r / "metrics.jsonl"],
+                            inputs=lambda r=run: learn + _init_model(ws, profile.train[r])) for run in runs], jobs)
     predictions = []
     for b in profile.beams:
         for completer in (IP_BASIC_RUN, *TRAINED):

@@ -8,7 +8,8 @@ import torch
 from dcslam.depth.data import DriveFrames
 from dcslam.depth.models import load_model
 from dcslam.depth.recipes import recipe_label, run_name
-from dcslam.depth.train import TrainConfig, initial_model, pose_loss_of, run_model
+from dcslam.depth.train import TrainConfig, initial_model, run_model
+from dcslam.depth.train_pose import pose_loss_of
 from dcslam.errors import DcslamError
 from dcslam.stages.train import train
 

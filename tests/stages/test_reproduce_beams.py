@@ -42,19 +42,29 @@ def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(tmp_path,
     assert "The beams experiment" in result.stdout
     with open(results / "table_beams.csv") as f:
         rows = list(csv.DictReader(f))
-    assert [(r["beams"], r["input"]) for r in rows][:6] == [("64", label) for label in (
-        "sparse", "IP-Basic", "SparseConvNet", "nconv", "nconv masked", "nconv-guided")]
-    assert len(rows) == 2 * 6 + 2 and not any(r["missing"] for r in rows)
+    assert [(r["beams"], r["input"]) for r in rows][:7] == [("64", label) for label in (
+        "sparse", "IP-Basic", "SparseConvNet", "nconv", "nconv masked", "nconv-guided", "nconv pose")]
+    assert len(rows) == 2 * 7 + 2 and not any(r["missing"] for r in rows)
     assert all(r["drives"] == "1" and r["localisation"] for r in rows)
-    for layer in ("sparse", "sparse@16", "nconv-sparse16+masked", "nconv-guided-sparse64", "exact", "dense"):
+    for layer in ("sparse", "sparse@16", "nconv-sparse16+masked", "nconv-guided-sparse64", "nconv-pose-sparse16",
+                  "exact", "dense"):
         assert (tmp_path / "slam" / layer / "drive_d.txt").exists(), layer
     with open(results / "table_beams_per_drive.csv") as f:
-        assert len(list(csv.DictReader(f))) == 14  # one test drive
+        assert len(list(csv.DictReader(f))) == 16  # one test drive
     masked = json.loads((tmp_path / "filtered" / "nconv-sparse16+masked" / "config.json").read_text())
     keep = PROFILES["smoke"].confidence_keep
     assert masked["settings"]["filters"] == [{"filter": "confidence", "min": 0.0, "keep": keep}]
     assert json.loads((tmp_path / "runs" / "nconv-guided" / "config.json").read_text())["settings"]["model"] == \
         "nconv-guided"
+    # the pose-loss run fine-tunes nconv, its confidence as ICP weights, and its SLAM runs use that confidence
+    pose = json.loads((tmp_path / "runs" / "nconv-pose" / "config.json").read_text())["settings"]
+    assert (pose["loss"], pose["model"], pose["pose_weights"]) == ("pose", "nconv", "confidence")
+    assert pose["init"].endswith("runs/nconv/model.pt")
+    val = [json.loads(line) for line in (tmp_path / "runs" / "nconv-pose" / "metrics.jsonl").read_text().splitlines()
+           if '"val"' in line]
+    assert val and "pose_translation_m" in val[-1]
+    slam_summary = json.loads((tmp_path / "slam" / "nconv-pose-sparse16" / "drive_d.json").read_text())
+    assert slam_summary["settings"]["confidence"] == "weights"
 
     # the rows scored in worker processes give the same table
     from dcslam.report.table_beams import build_beams_report
@@ -80,10 +90,17 @@ def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(tmp_path,
 def test_profiles_hold_the_training_options_of_every_completer_and_the_full_beam_count():
     quick = PROFILES["quick"]
     assert quick.beams == (64, 32, 16, 8) and quick.split[2] >= 4 and set(quick.train) == {
-        "sparse-conv", "nconv", "nconv-guided"}
+        "sparse-conv", "nconv", "nconv-guided", "nconv-pose"}
+    assert quick.stages_of_training() == [["sparse-conv", "nconv", "nconv-guided"], ["nconv-pose"]]
+    tuned = quick.train_config("nconv-pose", seed=0)
+    assert (tuned.loss, tuned.model, tuned.init, tuned.name) == ("pose", "nconv", "nconv", "nconv-pose")
     assert quick.train_config("nconv", seed=3).model == "nconv" and quick.train_config("nconv", 3).seed == 3
-    with pytest.raises(DcslamError, match="exactly sparse-conv, nconv, nconv-guided"):
+    with pytest.raises(DcslamError, match="exactly sparse-conv, nconv, nconv-guided, nconv-pose"):
         BeamsProfile(name="bad", drives=3, frames=12, train={"nconv": {}}, slam_frames=2)
+    for init in ("nconv-guided-x", "nconv-pose"):  # not a run of the profile; a run that is itself fine-tuned
+        chained = {**quick.train, "nconv-pose": {**quick.train["nconv-pose"], "init": init}}
+        with pytest.raises(DcslamError, match=f"starts from {init}"):
+            BeamsProfile(name="bad", drives=3, frames=12, train=chained, slam_frames=2)
     with pytest.raises(DcslamError, match="must include 64"):
         BeamsProfile(name="bad", drives=3, frames=12, train=quick.train, slam_frames=2, beams=(32, 16))
     with pytest.raises(DcslamError, match="divisor"):

@@ -1,0 +1,65 @@
+"""The pose loss inside training (issue 14): the :class:`dcslam.depth.pose.PoseLoss` of a training configuration,
+a network's prediction with its confidence (the pose loss's per-pixel ICP weights), and the validation pass of the
+pose loss. :mod:`dcslam.depth.train` composes them into its objective and its validation.
+"""
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import torch
+
+from dcslam.depth.data import DriveFrames, frame_windows
+from dcslam.errors import DcslamError
+
+if TYPE_CHECKING:
+    from dcslam.depth.train import TrainConfig
+
+
+def run_model_with_confidence(model, batch, use_confidence: bool = True):
+    """(prediction (B, 1, h, w), confidence (B, 1, h, w) in [0, 1] or None): the confidence of networks that give
+    one (``forward_with_confidence``, e.g. nconv) when ``use_confidence``, else None."""
+    if not use_confidence or not hasattr(model, "forward_with_confidence"):
+        from dcslam.depth.train import run_model
+
+        return run_model(model, batch), None
+    mask = (batch.sparse > 0).to(batch.sparse.dtype)
+    args = (batch.sparse, mask) if batch.rgb is None else (batch.sparse, mask, batch.rgb)
+    pred, confidence = model.forward_with_confidence(*args)
+    return pred, confidence.clamp(0.0, 1.0)
+
+
+def pose_loss_of(config: TrainConfig):
+    """The :class:`dcslam.depth.pose.PoseLoss` of a configuration."""
+    from dcslam.depth.pose import PoseLoss, PoseLossSettings, default_odometry
+
+    odometry = default_odometry(config.pose_iterations, config.pose_grad_iterations, config.pose_source_voxel)
+    return PoseLoss(odometry, settings=PoseLossSettings(config.pose_translation_weight, config.pose_rotation_weight,
+                                                        config.pose_max_sources))
+
+
+def validate_pose(model, drives: list[DriveFrames], pose, frames_per_window: int, device,
+                  use_confidence: bool = True) -> dict:
+    """The pose loss of the validation drives without back-propagation: its mean over the windows of
+    ``frames_per_window`` frames (those of >= 2 frames) of each drive, averaged over the drives, with the mean
+    translation (m) and rotation (rad) error per step."""
+    per_drive = []
+    model.eval()
+    with torch.no_grad():
+        for frames in drives:
+            rows = []
+            for window in frame_windows(len(frames), frames_per_window):
+                if len(window) < 2:
+                    continue
+                batch = frames.load(window).to(device)
+                pred, confidence = run_model_with_confidence(model, batch, use_confidence)
+                loss, details = pose(pred, batch.K, batch.T_world_cam, confidence)
+                rows.append((float(loss), float(details["translation_m"].mean()),
+                             float(details["rotation_rad"].mean())))
+            if rows:
+                per_drive.append(np.mean(rows, axis=0))
+    model.train()
+    if not per_drive:
+        raise DcslamError(f"no validation drive has {frames_per_window} frames for the pose loss")
+    mean = np.mean(per_drive, axis=0)
+    return {"pose": float(mean[0]), "pose_translation_m": float(mean[1]), "pose_rotation_rad": float(mean[2])}
