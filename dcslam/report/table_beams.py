@@ -12,8 +12,8 @@ settings are refused: a comparison across them would mean nothing.
 
 Layer names (one function, :func:`layer_name`, used by the pipeline that makes them and by this table):
 ``sparse`` / ``sparse@B`` (the drive files' depth), ``ip-basic-fast-sparseB``, ``<run>-sparseB`` (a trained
-completer's predictions of the B-beam input), ``nconv-sparseB+masked`` (those predictions filtered by confidence), ``nconv-pose-sparseB`` (the pose-loss run's),
-``dense``, ``exact``.
+completer's predictions of the B-beam input), ``nconv-sparseB+masked`` (those predictions filtered by confidence),
+``nconv-pose-sparseB`` (the pose-loss run's), ``dense``, ``exact``.
 """
 from __future__ import annotations
 
