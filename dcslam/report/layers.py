@@ -127,8 +127,9 @@ def slam_trajectory(ws: Workspace, layer: str, drive: str, root: Path | None = N
 def slam_settings(ws: Workspace, layer: str, drive: str, root: Path | None = None) -> dict:
     """The settings of the SLAM run behind ``slam/<layer>/<drive>.txt`` (:data:`RUN_SETTINGS`, from the summary
     ``<drive>.json`` beside it; ``frames`` is the number asked for, 0 = all: a drive shorter than that runs fewer,
-    which its pose count shows), plus ``suspect``: whether the run rejected steps. Empty when the summary is
-    missing (a trajectory made elsewhere). ``root``: the folder of the layers' SLAM outputs (default ``slam/``)."""
+    which its pose count shows), plus ``suspect``: whether the run rejected steps or its health verdicts flagged it
+    as suspect. Empty when the summary is missing (a trajectory made elsewhere). ``root``: the folder of the layers'
+    SLAM outputs (default ``slam/``)."""
     import json
 
     path = (ws.slam if root is None else root) / layer / f"{drive}.json"

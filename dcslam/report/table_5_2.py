@@ -287,7 +287,8 @@ def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str], devki
         "localisation accuracy: the thesis's metric, mean over poses of ‖t_X‖ + acos((tr R_X − 1)/2), "
         "X = T_gt⁻¹ T_est (m + rad); lower is better. Every figure of ours: mean over the test drives ± the half-"
         "width of its 95 % t-interval (the CSV holds std, interval and median)",
-        f"failed: drives whose SLAM run rejected steps or whose localisation error exceeds "
+        f"failed: drives whose SLAM run was flagged suspect (rejected or degraded steps, drift bound) or whose "
+        f"localisation error exceeds "
         f"{(results[0].failure_threshold if results else FAILURE_THRESHOLD):g} (they stay in the means); "
         "vs sparse: whether the localisation differs from sparse depth's beyond the spread (paired t-interval of the "
         "per-drive differences, 95 %)",

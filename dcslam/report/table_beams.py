@@ -214,7 +214,8 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
         GAP_NOTE,
         "MAE / RMSE: against the annotated depth, KITTI devkit with dcslam's two departures (predictions below 0.1 m "
         "are holes; pixels the devkit cannot interpolate are left out)",
-        f"failed: drives whose SLAM run rejected steps or whose localisation exceeds "
+        f"failed: drives whose SLAM run was flagged suspect (rejected or degraded steps, drift bound) or whose "
+        f"localisation exceeds "
         f"{next(iter(results.values())).failure_threshold:g} m + rad (kept in the means)" if results else "",
         "SLAM settings of every row: " + (", ".join(f"{k}={settings[k]}" for k in sorted(settings)) or "none "
                                            "recorded"),

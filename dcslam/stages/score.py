@@ -16,8 +16,9 @@ from dcslam.workspace import Workspace
 DRIVE_HELP = "Drive name (repeatable); default: the test split of splits.json."
 MAX_TIME_DIFF_HELP = ("Largest timestamp difference (seconds) at which an estimated pose is paired with a reference "
                       "pose, as evo's --t_max_diff (default evo's 0.01); only the paired poses are scored.")
-FAILURE_HELP = ("A drive counts as a SLAM failure when its run rejected steps or its thesis localisation error "
-                "exceeds this (m + rad).")
+FAILURE_HELP = ("A drive counts as a SLAM failure when its run was flagged suspect (rejected steps, too many degraded "
+                "steps, or a drift bound; see `dcslam slam --help`) or its thesis localisation error exceeds this "
+                "(m + rad).")
 OUT_HELP = "CSV file to write (default under results/)."
 
 
