@@ -34,6 +34,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 from slam_drives import DriveScore, run_dcslam  # noqa: E402
 from slam_references import kiss_icp_available, run_kiss_icp, run_open3d  # noqa: E402
 
+from dcslam.allocator import SLAM_MMAP_THRESHOLD  # noqa: E402
+
 
 def _drives(args) -> tuple[list[Path], Path]:
     """Drive files and the KITTI root they came from (generated when none are given or found)."""
@@ -131,17 +133,20 @@ def memory(args) -> None:
     for kind, keep in runs:
         cmd = [sys.executable, __file__, "--memory-child", kind, "--long-frames", str(args.long_frames),
                "--threads", str(args.threads), "--device", args.device, "--dense-scale", str(args.dense_scale),
-               "--malloc-trim-every", str(args.malloc_trim_every)] + (["--probe-trim"] if args.probe_trim else [])
+               "--malloc-trim-every", str(args.malloc_trim_every), "--mmap-threshold-mb", str(args.mmap_threshold_mb)
+               ] + (["--probe-trim"] if args.probe_trim else [])
         if subprocess.call(cmd + (["--keep-global-map"] if keep else [])) != 0:
             raise SystemExit(f"memory run ({kind}, keep_global_map={keep}) failed")
 
 
 def memory_child(args) -> None:
     """One long drive in this process: RSS now and the peak so far (ru_maxrss) at frames 200, 400, ... ."""
+    from dcslam.allocator import fix_mmap_threshold
     from dcslam.slam.config import SlamSettings, build_slam
     from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
 
     kind, n = args.memory_child, args.long_frames
+    fixed = fix_mmap_threshold(round(args.mmap_threshold_mb * 2 ** 20))   # as `dcslam slam` does
     H, W = 375, 1242
     if kind == "dense":                                    # every pixel ray-cast: reduced size to stay affordable
         H, W = round(H * args.dense_scale), round(W * args.dense_scale)
@@ -155,6 +160,9 @@ def memory_child(args) -> None:
           + (" (LiDAR-like: every 4th row and column)" if kind == "sparse" else "")
           + f", dcslam defaults but keep_global_map={settings.keep_global_map} (local map "
           f"{settings.local_map_frames} frames), {args.threads} thread(s), fresh process", flush=True)
+    print(f"  glibc mmap threshold: {f'fixed at {args.mmap_threshold_mb:g} MB' if fixed else 'not fixed by dcslam'}"
+          + (f" (MALLOC_MMAP_THRESHOLD_={os.environ['MALLOC_MMAP_THRESHOLD_']})"
+             if 'MALLOC_MMAP_THRESHOLD_' in os.environ else ""), flush=True)
     if args.malloc_trim_every:
         print(f"  malloc_trim(0) after every {args.malloc_trim_every} frames", flush=True)
     print("  frame   local map points   map MB   archived points   archive file MB   RSS MB   peak RSS MB   "
@@ -195,6 +203,8 @@ def main() -> None:
     parser.add_argument("--dense-scale", type=float, default=1 / 3, help="image scale of the dense memory run")
     parser.add_argument("--malloc-trim-every", type=int, default=0,
                         help="memory run: call glibc's malloc_trim(0) after every N frames (0 = never)")
+    parser.add_argument("--mmap-threshold-mb", type=float, default=SLAM_MMAP_THRESHOLD / 2 ** 20,
+                        help="memory run: glibc mmap threshold fixed as `dcslam slam` fixes it (0 = glibc's own)")
     parser.add_argument("--probe-trim", action="store_true",
                         help="memory run: at each mark, also the RSS after malloc_trim(0) (how much malloc held free)")
     parser.add_argument("--memory-child", choices=("sparse", "dense"), help=argparse.SUPPRESS)

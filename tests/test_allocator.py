@@ -1,0 +1,64 @@
+"""dcslam.allocator: the fixed glibc mmap threshold of SLAM processes (each check in a fresh interpreter, so that this
+test process's allocator keeps glibc's defaults)."""
+import ctypes
+import subprocess
+import sys
+
+import pytest
+
+from dcslam.allocator import ENV, SLAM_MMAP_THRESHOLD, fix_mmap_threshold
+
+
+def _glibc_with_mallinfo2() -> bool:
+    try:
+        return hasattr(ctypes.CDLL("libc.so.6"), "mallinfo2")
+    except OSError:
+        return False
+
+
+# Frees an 8 MB block that glibc served by mmap (glibc then raises its own threshold to 8 MB), then allocates 6 MB
+# and prints whether that block was mmapped too (mallinfo2's hblkhd: bytes in mmapped blocks).
+PROBE = """
+import ctypes, sys
+from dcslam.allocator import fix_mmap_threshold
+class MallInfo2(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
+                                                "fsmblks", "uordblks", "fordblks", "keepcost")]
+libc = ctypes.CDLL("libc.so.6")
+libc.mallinfo2.restype = MallInfo2
+libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
+libc.free.argtypes = [ctypes.c_void_p]
+fixed = fix_mmap_threshold() if sys.argv[1] == "fix" else False
+libc.free(libc.malloc(8 << 20))
+before = libc.mallinfo2().hblkhd
+block = libc.malloc(6 << 20)
+print(fixed, libc.mallinfo2().hblkhd - before >= 6 << 20)
+libc.free(block)
+"""
+
+
+def _probe(mode: str, env: dict | None = None) -> str:
+    import os
+
+    environ = {k: v for k, v in os.environ.items() if k != ENV} | (env or {})
+    out = subprocess.run([sys.executable, "-c", PROBE, mode], capture_output=True, text=True, env=environ, check=True)
+    return out.stdout.strip()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or not _glibc_with_mallinfo2(),
+                    reason="needs glibc >= 2.33 (mallinfo2)")
+def test_a_fixed_threshold_keeps_serving_large_blocks_by_mmap_after_glibc_would_have_raised_it():
+    assert SLAM_MMAP_THRESHOLD < 6 << 20
+    assert _probe("default") == "False False"   # glibc's own threshold rose to 8 MB: 6 MB came from the heap
+    assert _probe("fix") == "True True"         # fixed at 4 MB: 6 MB is its own mmap, returned at free
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or not _glibc_with_mallinfo2(),
+                    reason="needs glibc >= 2.33 (mallinfo2)")
+def test_the_environment_variable_wins():
+    # glibc applied MALLOC_MMAP_THRESHOLD_ itself (here 16 MB, so the 6 MB block is from the heap); dcslam leaves it
+    assert _probe("fix", {ENV: str(16 << 20)}) == "False False"
+
+
+def test_nothing_is_set_for_a_threshold_of_zero():
+    assert fix_mmap_threshold(0) is False and fix_mmap_threshold(-1) is False
