@@ -38,14 +38,21 @@ def pose_loss_of(config: TrainConfig):
                                                         config.pose_max_sources))
 
 
+#: Seed of the random pixel subsets that the pose loss aligns during validation (see :func:`validate_pose`).
+VALIDATION_SEED = 0
+
+
 def validate_pose(model, drives: list[DriveFrames], pose, frames_per_window: int, device,
                   use_confidence: bool = True) -> dict:
     """The pose loss of the validation drives without back-propagation: its mean over the windows of
     ``frames_per_window`` frames (those of >= 2 frames) of each drive, averaged over the drives, with the mean
-    translation (m) and rotation (rad) error per step."""
+    translation (m) and rotation (rad) error per step. The pose loss aligns a random subset of each frame's pixels
+    (``pose_max_sources``); validation draws it from a fixed seed, so that two checkpoints (or a model before and
+    after fine-tuning) are compared on the same pixels, and the caller's random stream is left as it was."""
     per_drive = []
     model.eval()
-    with torch.no_grad():
+    with torch.no_grad(), torch.random.fork_rng(devices=[]):
+        torch.manual_seed(VALIDATION_SEED)
         for frames in drives:
             rows = []
             for window in frame_windows(len(frames), frames_per_window):

@@ -108,3 +108,24 @@ def test_nconv_confidence_weights_the_icp(workspace):
     assert losses["confidence"] != pytest.approx(losses["none"], rel=1e-6)
     with pytest.raises(DcslamError, match="--pose-weights"):
         _config(workspace, pose_weights="depth").check()
+
+
+def test_pose_validation_draws_its_pixel_subsets_from_a_fixed_seed(workspace):
+    # pose_max_sources keeps a random subset of each frame's pixels: two validations of the same model must agree
+    # (a model before and after fine-tuning is compared on the same pixels), and the caller's stream is untouched
+    from dcslam.depth.train_pose import validate_pose
+
+    config = _config(workspace, pose_max_sources=200)
+    model = initial_model(config)
+    frames = DriveFrames(config.train_drives[0], config.max_frames, 1, 1.0, 0, "sparse", "dense")
+    try:
+        torch.manual_seed(1)
+        first = validate_pose(model, [frames], pose_loss_of(config), 3, torch.device("cpu"))
+        after_first = torch.rand(3)
+        torch.manual_seed(2)
+        second = validate_pose(model, [frames], pose_loss_of(config), 3, torch.device("cpu"))
+        torch.manual_seed(1)
+        assert torch.equal(torch.rand(3), after_first)
+    finally:
+        frames.close()
+    assert first == second
