@@ -89,13 +89,9 @@ def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_d
     if jobs <= 1:
         scored = [_score(*args) for args in work]
     else:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
+        from dcslam.workers import process_pool
 
-        from dcslam.stages.reproduce import _one_thread
-
-        with ProcessPoolExecutor(max_workers=min(jobs, len(work)), mp_context=multiprocessing.get_context("spawn"),
-                                 initializer=_one_thread) as pool:
+        with process_pool(jobs, len(work)) as pool:
             scored = list(pool.map(_score, *zip(*work)))
     return {(b, item.label): result for (b, item), result in zip(keys, scored)}
 

@@ -258,12 +258,11 @@ class Pipeline:
             for stage in todo:
                 self.run(stage)
             return
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+        from concurrent.futures import as_completed
 
-        context = multiprocessing.get_context("spawn")  # no fork of a process that has run torch
-        with ProcessPoolExecutor(max_workers=min(jobs, len(todo)), mp_context=context,
-                                 initializer=_one_thread) as pool:
+        from dcslam.workers import process_pool
+
+        with process_pool(jobs, len(todo)) as pool:
             futures = {}
             for stage in todo:
                 self._claim(stage)
@@ -280,16 +279,6 @@ class Pipeline:
                     raise DcslamError(f"stage {stage.name} failed ({error}); fix it and rerun: finished stages "
                                       "will be skipped") from None
                 self._done(stage, seconds)
-
-
-def _one_thread() -> None:
-    """Worker initializer: one torch (OpenMP) thread per process."""
-    import os
-
-    os.environ["OMP_NUM_THREADS"] = "1"
-    import torch
-
-    torch.set_num_threads(1)
 
 
 def _timed(run: Callable, ws: Workspace, config) -> float:

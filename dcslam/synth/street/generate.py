@@ -188,12 +188,6 @@ def _occupied(path: Path) -> bool:
     return path.exists() and (not path.is_dir() or any(path.iterdir()))
 
 
-def _one_thread() -> None:
-    """Worker initializer: one BLAS / OpenMP thread per process (the workers already use every core)."""
-    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[name] = "1"
-
-
 def _write_one(seed: int, index: int, frames: int, name: str, date_dir: Path, depth_root: Path,
                lidar_azimuth_step_deg: float, on_frame=None) -> DriveReport:
     """Write drive ``index`` of ``seed`` into temporary folders, then move them to their names."""
@@ -264,12 +258,9 @@ def generate(out_root: Path | str, drives: int = 6, frames: int = 60, seed: int 
     if jobs <= 1 or drives == 1:
         reports = [_write_one(*args, on_frame=on_frame) for args in work]
     else:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
+        from dcslam.workers import process_pool
 
-        context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=min(jobs, drives), mp_context=context,
-                                 initializer=_one_thread) as pool:
+        with process_pool(jobs, drives) as pool:
             futures = [pool.submit(_write_one, *args) for args in work]
             reports = []
             for future in futures:  # in drive order; each drive's frames counted as it completes

@@ -1,0 +1,29 @@
+"""Worker processes for independent work (drives to generate, stages to run, table rows to score): a pool of
+spawned processes (no fork of a process that has run torch), each with one BLAS / OpenMP / torch thread, since the
+workers already use every core.
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+#: Environment variables that set the thread count of the numeric libraries a worker may load.
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def one_thread() -> None:
+    """Worker initializer: one thread per library in this process (torch, loaded later, reads OMP_NUM_THREADS)."""
+    for name in THREAD_VARIABLES:
+        os.environ[name] = "1"
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.set_num_threads(1)
+
+
+def process_pool(jobs: int, tasks: int):
+    """A :class:`~concurrent.futures.ProcessPoolExecutor` of ``min(jobs, tasks)`` spawned, one-thread workers."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    return ProcessPoolExecutor(max_workers=max(1, min(jobs, tasks)), mp_context=multiprocessing.get_context("spawn"),
+                               initializer=one_thread)
