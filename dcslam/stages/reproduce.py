@@ -325,6 +325,13 @@ def _profile_splits(ws: Workspace, kitti: Path, counts: tuple[int, int, int]) ->
     return path
 
 
+def training_rounds(runs: dict[str, dict]) -> list[list[str]]:
+    """Run names (keys of ``runs``: name → training options) in the order they can be trained, as two rounds of
+    independent runs: those from scratch, then those that fine-tune one of them (``init``)."""
+    first = [name for name, options in runs.items() if options.get("init") is None]
+    return [first, [name for name in runs if name not in first]]
+
+
 def make_drives(pipe: Pipeline, *, drives: int, frames: int, split: tuple[int, int, int] | None,
                 kitti_root: Path | None = None, seed: int = 0, beams: tuple[int, ...] = (), jobs: int = 1
                 ) -> tuple[list[Path], list[Path]]:
@@ -381,8 +388,8 @@ def compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | Non
         made = [ws.runs / run_name / "model.pt", ws.runs / run_name / "metrics.jsonl"]
         trainings[run_name] = Stage(f"train-{run_name}", train.run, config, outputs=lambda made=made: made,
                                     inputs=lambda init=init: learn + init)
-    pipe.run_all([trainings[r] for r, options in runs.items() if not options.get("init")], jobs)
-    pipe.run_all([trainings[r] for r, options in runs.items() if options.get("init")], jobs)
+    for names in training_rounds(runs):
+        pipe.run_all([trainings[r] for r in names], jobs)
     if table == "5.1":
         return _tables(pipe, ws, "5.1", inputs=[ws.runs / r / "metrics.jsonl" for r in runs])
 

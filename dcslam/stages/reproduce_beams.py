@@ -28,7 +28,7 @@ from dcslam.report.table_beams import (FULL_BEAMS, INPUTS, IP_BASIC_RUN, TRAINED
 from dcslam.stages import filter as filter_stage
 from dcslam.stages import predict, prepare, slam, train
 from dcslam.stages.config import option
-from dcslam.stages.reproduce import Pipeline, Stage, make_drives
+from dcslam.stages.reproduce import Pipeline, Stage, make_drives, training_rounds
 from dcslam.workspace import Workspace
 
 
@@ -75,8 +75,7 @@ class BeamsProfile:
 
     def stages_of_training(self) -> list[list[str]]:
         """The runs in the order they can be trained: those from scratch, then those fine-tuned from them."""
-        first = [run for run in TRAINED if self.train[run].get("init") is None]
-        return [first, [run for run in TRAINED if run not in first]]
+        return training_rounds({run: self.train[run] for run in TRAINED})
 
 
 _QUICK = {"epochs": 2, "max_frames": 31, "scale": 0.5}  # as the Table 5.2 quick profile
