@@ -127,13 +127,14 @@ class PointToPlane:
             lin.H_step = self._hold(lin)
         return lin
 
-    def covariance(self, T: torch.Tensor, lin: Linearization) -> torch.Tensor:
+    def covariance(self, T: torch.Tensor, lin: Linearization, residuals: torch.Tensor | None = None) -> torch.Tensor:
         """First-order covariance of the twist (translation, rotation; camera frame) estimated at T from the pairs
         of ``lin`` (the linearization at T): ``s^2 (J^T W J)^-1`` with ``s^2`` the weighted residual variance
         ``sum w r^2 / (sum w - 6)``. It treats residuals as independent, so it is a lower bound on the true
-        uncertainty (ICP's errors are correlated); :mod:`dcslam.slam.health` calibrates it. Shape: (6, 6) float64."""
+        uncertainty (ICP's errors are correlated); :mod:`dcslam.slam.health` calibrates it. ``residuals``: those
+        pairs' residuals at T when the caller has them (computed here otherwise). Shape: (6, 6) float64."""
         src = self.pairs[0]
-        r = self._fixed_residuals(T.detach()).detach().double()
+        r = (self._fixed_residuals(T.detach()) if residuals is None else residuals).detach().double()
         w = self.kernel.weight(r, self.max_distance)
         pw = self._pair_weights(src)
         if pw is not None:
@@ -247,7 +248,7 @@ class ICPOdometry:
         if lin.count < self.min_inliers:
             return OdometryResult(T_init, False, f"{lin.count} inliers", **base)
         base["conditioning"] = conditioning = self._conditioning(lin, source)
-        cov = problem.covariance(T, lin)
+        cov = problem.covariance(T, lin, r)
         base["sigma_m"] = math.sqrt(max(float(torch.linalg.eigvalsh(cov[:3, :3])[-1]), 0.0))
         base["sigma_deg"] = math.degrees(math.sqrt(max(float(torch.linalg.eigvalsh(cov[3:, 3:])[-1]), 0.0)))
         if conditioning < self.min_conditioning:

@@ -149,6 +149,7 @@ def test_covariance_known_answer():
     assert torch.allclose(torch.diagonal(cov)[:3], torch.full((3,), s2 / (2 * n * n), dtype=torch.float64),
                           rtol=1e-6)
     assert torch.allclose(cov[:3, 3:], torch.zeros(3, 3, dtype=torch.float64), atol=1e-12)
+    assert torch.equal(problem.covariance(T, lin, problem._fixed_residuals(T)), cov)  # the caller's residuals
 
 
 def test_step_reports_its_uncertainty(pair):
