@@ -34,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from slam_drives import DriveScore, run_dcslam  # noqa: E402
 from slam_references import kiss_icp_available, run_kiss_icp, run_open3d  # noqa: E402
 
-from dcslam.allocator import SLAM_MMAP_THRESHOLD  # noqa: E402
+from dcslam.allocator import SLAM_MMAP_THRESHOLD, heap_mb, trim  # noqa: E402
 
 
 def _drives(args) -> tuple[list[Path], Path]:
@@ -96,37 +96,6 @@ def _rss_mb() -> float:
         return float("nan")
 
 
-def _malloc_mb() -> tuple[float, float, float] | None:
-    """glibc's view of this process's heap: (held by malloc's arenas, of that in use, mmapped blocks) in MB, from
-    ``mallinfo2``; None where the C library has no ``mallinfo2`` (not glibc >= 2.33). Arena bytes not in use are
-    memory malloc keeps after ``free``: resident, yet no structure of ours holds them."""
-    import ctypes
-
-    class MallInfo2(ctypes.Structure):
-        _fields_ = [(name, ctypes.c_size_t) for name in
-                    ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
-                     "keepcost")]
-
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        libc.mallinfo2.restype = MallInfo2
-    except (OSError, AttributeError):
-        return None
-    info = libc.mallinfo2()
-    return info.arena / 2 ** 20, info.uordblks / 2 ** 20, info.hblkhd / 2 ** 20
-
-
-def _malloc_trim() -> bool:
-    """Ask glibc to return the free memory of its arenas to the system (``malloc_trim(0)``); False if unavailable."""
-    import ctypes
-
-    try:
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):
-        return False
-    return True
-
-
 def memory(args) -> None:
     """Each memory run in a fresh child process, so that its peak is the SLAM's own and not the accuracy runs'."""
     runs = [("sparse", True), ("sparse", False)] + ([("dense", False)] if args.long_dense else [])
@@ -174,13 +143,13 @@ def memory_child(args) -> None:
         slam.step(depth, K.to(args.device))
         times.append(time.perf_counter() - start)
         if args.malloc_trim_every and (i + 1) % args.malloc_trim_every == 0:
-            _malloc_trim()
+            trim()
         if i + 1 in marks:
             archived, archive_mb = len(slam.mapper.archived), slam.mapper.archived.nbytes / 2 ** 20
             peaks[i + 1] = peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-            rss, heap = _rss_mb(), _malloc_mb()
+            rss, heap = _rss_mb(), heap_mb()
             arena = f"{heap[0]:8.0f} ({heap[1]:5.0f})   {heap[2]:10.0f}" if heap else f"{'n/a':>15}   {'n/a':>10}"
-            trimmed = f"{_rss_mb():24.0f}" if args.probe_trim and _malloc_trim() else f"{'-':>24}"
+            trimmed = f"{_rss_mb():24.0f}" if args.probe_trim and trim() else f"{'-':>24}"
             print(f"  {i + 1:5d}   {len(slam.map):16d}   {slam.map.nbytes() / 2 ** 20:6.1f}   {archived:15d}   "
                   f"{archive_mb:15.1f}   {rss:6.0f}   {peak:11.0f}   {arena}   {trimmed}   "
                   f"{np.mean(times[-50:]):.3f}", flush=True)

@@ -25,15 +25,49 @@ SLAM_MMAP_THRESHOLD = 4 * 2 ** 20
 ENV = "MALLOC_MMAP_THRESHOLD_"
 
 
+def _libc():
+    """glibc, or None off Linux or where it cannot be loaded."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        return ctypes.CDLL("libc.so.6")
+    except OSError:
+        return None
+
+
+class _MallInfo2(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
+                                                     "fsmblks", "uordblks", "fordblks", "keepcost")]
+
+
+def heap_mb() -> tuple[float, float, float] | None:
+    """glibc's view of this process's heap, in MB: (held by malloc's arenas, of that in use, in mmapped blocks), from
+    ``mallinfo2``; None without it (not glibc >= 2.33). Arena bytes not in use are memory malloc keeps after
+    ``free``: resident, yet no structure of ours holds them."""
+    libc = _libc()
+    if libc is None or not hasattr(libc, "mallinfo2"):
+        return None
+    libc.mallinfo2.restype = _MallInfo2
+    info = libc.mallinfo2()
+    return info.arena / 2 ** 20, info.uordblks / 2 ** 20, info.hblkhd / 2 ** 20
+
+
+def trim() -> bool:
+    """Ask glibc to return the free memory of its arenas to the system (``malloc_trim(0)``); False if unavailable."""
+    libc = _libc()
+    if libc is None or not hasattr(libc, "malloc_trim"):
+        return False
+    libc.malloc_trim(0)
+    return True
+
+
 def fix_mmap_threshold(nbytes: int = SLAM_MMAP_THRESHOLD) -> bool:
     """Serve every allocation of ``nbytes`` or more by its own mmap from now on, in this process. Returns whether it
     was set: not for ``nbytes`` <= 0, when ``MALLOC_MMAP_THRESHOLD_`` is in the environment (glibc has applied it
     already), or off glibc / Linux."""
-    if nbytes <= 0 or ENV in os.environ or not sys.platform.startswith("linux"):
+    libc = _libc()
+    if nbytes <= 0 or ENV in os.environ or libc is None or not hasattr(libc, "mallopt"):
         return False
-    try:
-        mallopt = ctypes.CDLL("libc.so.6").mallopt
-    except (OSError, AttributeError):
-        return False
+    mallopt = libc.mallopt
     mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
     return mallopt(M_MMAP_THRESHOLD, int(nbytes)) == 1

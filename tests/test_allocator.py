@@ -17,25 +17,20 @@ def _glibc_with_mallinfo2() -> bool:
 
 
 # Frees an 8 MB block that glibc served by mmap (glibc then raises its own threshold to 8 MB), then allocates 6 MB
-# and prints whether that block was mmapped too (mallinfo2's hblkhd: bytes in mmapped blocks).
+# and prints whether that block was mmapped too (heap_mb's third figure: MB in mmapped blocks).
 PROBE = """
 import ctypes, sys
-from dcslam.allocator import fix_mmap_threshold
-class MallInfo2(ctypes.Structure):
-    _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
-                                                "fsmblks", "uordblks", "fordblks", "keepcost")]
+from dcslam.allocator import fix_mmap_threshold, heap_mb
 libc = ctypes.CDLL("libc.so.6")
-libc.mallinfo2.restype = MallInfo2
 libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
 libc.free.argtypes = [ctypes.c_void_p]
 fixed = fix_mmap_threshold() if sys.argv[1] == "fix" else False
 libc.free(libc.malloc(8 << 20))
-before = libc.mallinfo2().hblkhd
+before = heap_mb()[2]
 block = libc.malloc(6 << 20)
-print(fixed, libc.mallinfo2().hblkhd - before >= 6 << 20)
+print(fixed, heap_mb()[2] - before >= 6)
 libc.free(block)
 """
-
 
 def _probe(mode: str, env: dict | None = None) -> str:
     import os
@@ -62,3 +57,20 @@ def test_the_environment_variable_wins():
 
 def test_nothing_is_set_for_a_threshold_of_zero():
     assert fix_mmap_threshold(0) is False and fix_mmap_threshold(-1) is False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or not _glibc_with_mallinfo2(),
+                    reason="needs glibc >= 2.33 (mallinfo2)")
+def test_heap_figures_see_a_block_in_use():
+    from dcslam.allocator import heap_mb, trim
+
+    libc = ctypes.CDLL("libc.so.6")
+    libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
+    libc.free.argtypes = [ctypes.c_void_p]
+    held, used, mapped = heap_mb()
+    block = libc.malloc(64 << 20)  # far above any mmap threshold: its own mapping
+    try:
+        assert heap_mb()[2] - mapped >= 64 and 0 <= used <= held
+    finally:
+        libc.free(block)
+    assert trim() is True
