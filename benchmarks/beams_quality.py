@@ -2,7 +2,7 @@
 
     python benchmarks/beams_quality.py --workspace WS [--seeds 0 1] [--epochs 3] [--models sparse-conv nconv ...]
         [--input-mix sparse sparse@32 sparse@16 sparse@8 | --train-input sparse] [--l1-weight 1]
-        [--lr-schedule cosine] [--fill-holes] [--crop 256] [--lr 1e-2] [--profile-recipes] [--tag NAME]
+        [--lr-schedule cosine] [--fill-holes] [--correct-fill] [--crop 256] [--lr 1e-2] [--profile-recipes] [--tag NAME]
 
 WS must hold drives made by ``dcslam prepare-kitti --beams 32 --beams 16 --beams 8`` (from ``dcslam synth``
 drives or real KITTI). Each model is trained once per seed (``--seeds``: the initialisation) through
@@ -128,6 +128,8 @@ def main() -> None:
     parser.add_argument("--l1-weight", type=float, default=0.0)
     parser.add_argument("--lr-schedule", default="constant")
     parser.add_argument("--fill-holes", action="store_true", help="sparse-conv leaves no hole")
+    parser.add_argument("--correct-fill", action="store_true",
+                        help="every model outputs a correction of the nearest-neighbour fill of its input")
     parser.add_argument("--lr", type=float, default=1e-2)
     parser.add_argument("--crop", type=int, default=256)
     parser.add_argument("--max-frames", type=int, default=200)
@@ -162,10 +164,11 @@ def main() -> None:
             return {"lr": given.get("lr", 1e-3), "lr_schedule": given.get("lr_schedule", "constant"),
                     "l1_weight": given.get("l1_weight", 0.0), "input": given.get("input", "sparse"),
                     "input_mix": list(given.get("input_mix", [])),
-                    "model_hparams": {"fill_holes": True} if given.get("fill_holes") else {}}
+                    "model_hparams": {name: True for name in ("fill_holes", "correct_fill") if given.get(name)}}
         return {"lr": args.lr, "lr_schedule": args.lr_schedule, "l1_weight": args.l1_weight,
                 "input": args.train_input, "input_mix": list(args.input_mix),
-                "model_hparams": {"fill_holes": True} if args.fill_holes and arch == "sparse-conv" else {}}
+                "model_hparams": {**({"fill_holes": True} if args.fill_holes and arch == "sparse-conv" else {}),
+                                  **({"correct_fill": True} if args.correct_fill else {})}}
 
     def hparams(arch):
         return recipe(arch)["model_hparams"]
@@ -174,7 +177,8 @@ def main() -> None:
         r = recipe(arch)
         print(f"{arch}: dense-mask MSE + {r['l1_weight']} x L1, lr {r['lr']} ({r['lr_schedule']}), {args.epochs} "
               f"epochs, input {' / '.join(r['input_mix']) or r['input']}, crop {args.crop}"
-              + (", holes filled" if r["model_hparams"].get("fill_holes") else ""), flush=True)
+              + (", holes filled" if r["model_hparams"].get("fill_holes") else "")
+              + (", correcting the fill" if r["model_hparams"].get("correct_fill") else ""), flush=True)
     runs = {(arch, seed): ws.runs / f"beams-{arch}-seed{seed}{args.tag}" for arch in args.models for seed in args.seeds}
     configs = {key: TrainConfig(loss="mse", mask="dense", model=key[0], crop=args.crop, seed=key[1], device="cpu",
                                 max_frames=args.max_frames, epochs=args.epochs, train_drives=paths["train"],

@@ -18,6 +18,7 @@ from dcslam.io.atomic import write_json_atomic
 from dcslam.workspace import Workspace, stage_config
 
 MODELS = tuple(ARCHITECTURES)
+CORRECTABLE = ("sparse-conv", "nconv", "nconv-guided")  # the networks with a correct_fill option
 
 
 def _check_kind(kind: str) -> str:
@@ -66,6 +67,10 @@ class TrainStageConfig:
                               help="sparse-conv only: fill what lies beyond its receptive field from coarser scales, "
                                    "up to the topmost measured pixel of each column (nothing above it: no sky); off: "
                                    "the paper's network.")
+    correct_fill: bool = option(False, flags=("--correct-fill/--no-correct-fill",),
+                                help="sparse-conv, nconv, nconv-guided: output a correction of the nearest-neighbour "
+                                     "fill of the input, learned from the network's own output (untrained: the "
+                                     "fill); off: the network's own depth.")
     name: str | None = option(None, help="Run name (default: mse-dense, mse-sparse, chamfer-1, ...; with another "
                                          "input or target, e.g. mse-dense-sparse16, mse-dense-to-exact).")
     resume: bool = option(False, flags=("--resume",), help="Continue an interrupted run from last.pt.")
@@ -101,6 +106,8 @@ class TrainStageConfig:
             raise DcslamError(f"--l1-weight must be a non-negative number, got {self.l1_weight}")
         if self.fill_holes and self.model != "sparse-conv":
             raise DcslamError(f"--fill-holes is an option of sparse-conv, not of {self.model}")
+        if self.correct_fill and self.model not in CORRECTABLE:
+            raise DcslamError(f"--correct-fill is an option of {', '.join(CORRECTABLE)}, not of {self.model}")
         if not 0 <= self.weight_decay < float("inf"):
             raise DcslamError(f"--weight-decay must be a non-negative number, got {self.weight_decay}")
         if self.name is not None:
@@ -131,6 +138,11 @@ class TrainStageConfig:
             name += "-" + self.input.replace("@", "")
         return name + (f"-to-{self.target}" if self.target != "dense" else "")
 
+    def model_hparams(self) -> dict:
+        """The network's options that differ from its defaults (recorded in its model file)."""
+        return {**({"fill_holes": True} if self.fill_holes else {}),
+                **({"correct_fill": True} if self.correct_fill else {})}
+
     def train_config(self, train_drives: list[Path], val_drives: list[Path], init: Path | None = None):
         """The :class:`dcslam.depth.train.TrainConfig` of this run (``init``: the model file of ``--init``)."""
         from dcslam.depth.train import TrainConfig
@@ -143,7 +155,7 @@ class TrainStageConfig:
                            batch_size=self.batch_size, seed=self.seed, device=self.device, input=self.input,
                            target=self.target, input_mix=list(self.input_mix), l1_weight=self.l1_weight,
                            lr_schedule=self.lr_schedule,
-                           model_hparams={"fill_holes": True} if self.fill_holes else {},
+                           model_hparams=self.model_hparams(),
                            train_drives=train_drives, val_drives=val_drives)
 
 

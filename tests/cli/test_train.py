@@ -85,3 +85,15 @@ def test_train_with_density_mix_l1_cosine_and_filled_holes(tmp_path):
         (["sparse", "sparse@16"], 1.0, "cosine", {"fill_holes": True})
     bad = _run("train", "-w", str(ws), "--device", "cpu", "--lr-schedule", "step")
     assert bad.exit_code == 2
+
+
+def test_train_correcting_the_fill(tmp_path):
+    ws = fixtures.write_workspace(tmp_path / "cf", n=2)
+    result = _run("train", "-w", str(ws), "--device", "cpu", "--model", "nconv", "--correct-fill", "--scale", "0.5",
+                  "--name", "nconv-cf")
+    assert result.exit_code == 0, result.output
+    run_dir = ws / "runs" / "nconv-cf"
+    assert json.loads((run_dir / "config.json").read_text())["settings"]["model_hparams"] == {"correct_fill": True}
+    assert (run_dir / "model.pt").is_file()
+    bad = _run("train", "-w", str(ws), "--device", "cpu", "--model", "dncnn", "--correct-fill")
+    assert bad.exit_code == 1 and "--correct-fill is an option of" in bad.stderr

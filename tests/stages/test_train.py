@@ -100,9 +100,31 @@ def test_density_mix_l1_cosine_and_hole_filling_are_recorded(tmp_path):
     assert rates[0] == pytest.approx(1e-2) and all(a > b for a, b in zip(rates, rates[1:])) and rates[-1] < 1e-3
 
 
+def test_fill_correcting_nconv_trains_from_the_fill_and_is_recorded(tmp_path):
+    import torch
+
+    from dcslam.depth.models import build_model, load_model
+    from dcslam.workspace import Workspace
+    from tests.fixtures.depth import write_workspace
+
+    ws = Workspace(write_workspace(tmp_path / "ws", extra=True))
+    config = TrainStageConfig(model="nconv", correct_fill=True, max_frames=4, scale=0.5, device="cpu", lr=1e-2)
+    result = run(ws, config)
+    settings = json.loads((result.run_dir / "config.json").read_text())["settings"]
+    assert settings["model_hparams"] == {"correct_fill": True}
+    model, _ = load_model(result.run_dir / "model.pt")
+    start = build_model("nconv", correct_fill=True)
+    assert model.hparams["correct_fill"] and model.correction is not None
+    # training moved the correction head off zero (untrained, the network is the fill itself)
+    assert not torch.equal(model.correction.net[-1].weight, start.correction.net[-1].weight)
+
+
 def test_new_options_are_checked():
     with pytest.raises(DcslamError, match="--fill-holes is an option of sparse-conv"):
         TrainStageConfig(model="nconv", fill_holes=True)
+    with pytest.raises(DcslamError, match="--correct-fill is an option of sparse-conv, nconv, nconv-guided, not of "
+                                          "dncnn"):
+        TrainStageConfig(model="dncnn", correct_fill=True)
     with pytest.raises(DcslamError, match="--l1-weight"):
         TrainStageConfig(l1_weight=-1.0)
     with pytest.raises(DcslamError, match="unknown lr_schedule"):

@@ -13,6 +13,9 @@ encoder-decoder in miniature: three normalized convolutions at full resolution, 
 ``scales`` confidence-driven down-samplings (each 2 × 2 block keeps its most confident pixel), then each coarser
 result is brought up (nearest) and fused with the finer one by a 3 × 3 normalized convolution over both, and a
 1 × 1 one makes one depth channel. Its output confidence is what lets later stages drop what the network guessed.
+With ``correct_fill`` (both networks; not the paper's) the depth and confidence feed
+:class:`dcslam.depth.models.fill.FillCorrection`: the network outputs a correction of the nearest-neighbour fill of
+its input (untrained: the fill itself), and its confidence gated by the head.
 """
 from __future__ import annotations
 
@@ -20,6 +23,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from dcslam.depth.models.fill import FillCorrection, depth_scale
 from dcslam.depth.models.sparse_conv import _check_pair
 from dcslam.errors import DcslamError
 
@@ -69,12 +73,17 @@ class NConvCNN(nn.Module):
 
     ARCH = "nconv"
 
-    def __init__(self, channels: int = 2, kernel_size: int = 5, scales: int = 3, eps: float = 1e-8):
+    def __init__(self, channels: int = 2, kernel_size: int = 5, scales: int = 3, eps: float = 1e-8,
+                 correct_fill: bool = False):
         super().__init__()
         if channels < 1 or scales < 0:
             raise DcslamError(f"nconv needs channels >= 1 and scales >= 0, got {channels} and {scales}")
         self.hparams = {"channels": int(channels), "kernel_size": int(kernel_size), "scales": int(scales),
                         "eps": float(eps)}
+        if correct_fill:  # recorded only when set, so that earlier model files stay as they were
+            self.hparams["correct_fill"] = True
+        # the network's depth (scale-free) and confidence
+        self.correction = FillCorrection(2) if correct_fill else None
         self.scales = int(scales)
         self.encode = nn.ModuleList([NConv2d(1, channels, kernel_size, eps), NConv2d(channels, channels, kernel_size,
                                                                                      eps),
@@ -105,7 +114,11 @@ class NConvCNN(nn.Module):
             x_up = F.interpolate(x, size=size, mode="nearest")
             c_up = F.interpolate(c, size=size, mode="nearest")
             x, c = fuse(torch.cat([x_fine, x_up], 1), torch.cat([c_fine, c_up], 1))
-        return self.out(x, c)
+        x, c = self.out(x, c)
+        if self.correction is None:
+            return x, c
+        depth, gate = self.correction(sparse, mask, torch.cat([x / depth_scale(sparse, mask), c], 1))
+        return depth, c * torch.sigmoid(gate)
 
     def forward(self, sparse: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
         return self.forward_with_confidence(sparse, mask)[0]
@@ -127,11 +140,16 @@ class GuidedNConvCNN(nn.Module):
     GUIDED = True
 
     def __init__(self, channels: int = 2, kernel_size: int = 5, scales: int = 3, features: int = 8,
-                 eps: float = 1e-8):
+                 eps: float = 1e-8, correct_fill: bool = False):
         super().__init__()
         self.hparams = {"channels": int(channels), "kernel_size": int(kernel_size), "scales": int(scales),
                         "features": int(features), "eps": float(eps)}
         self.nconv = NConvCNN(channels, kernel_size, scales, eps)
+        if correct_fill:  # the colour image, the unguided depth (scale-free) and confidence correct the fill
+            self.hparams["correct_fill"] = True
+            self.correction = FillCorrection(5)
+            return
+        self.correction = None
         self.refine = nn.Sequential(nn.Conv2d(5, features, 3, padding=1), nn.ReLU(),
                                     nn.Conv2d(features, features, 3, padding=1), nn.ReLU(),
                                     nn.Conv2d(features, 2, 3, padding=1))
@@ -150,8 +168,10 @@ class GuidedNConvCNN(nn.Module):
         if mask is None:
             mask = (sparse > 0).to(sparse.dtype)
         depth, confidence = self.nconv.forward_with_confidence(sparse, mask)
-        valid = mask.sum(dim=(1, 2, 3), keepdim=True)
-        scale = ((sparse * mask).sum(dim=(1, 2, 3), keepdim=True) / valid.clamp(min=1)).clamp(min=1e-3)
+        scale = depth_scale(sparse, mask.to(sparse.dtype))
+        if self.correction is not None:
+            out, gate = self.correction(sparse, mask, torch.cat([rgb.to(depth.dtype), depth / scale, confidence], 1))
+            return out, confidence * torch.sigmoid(gate)
         correction, gate = self.refine(torch.cat([rgb.to(depth.dtype), depth / scale, confidence], 1)).unbind(1)
         return depth + scale * correction[:, None], confidence * torch.sigmoid(gate[:, None])
 

@@ -12,7 +12,9 @@ The paper's network has no output beyond its receptive field (about 13 pixels fr
 LiDAR beams whole bands between scan lines stay empty. With ``fill_holes`` (not the paper's) those pixels take the
 network's own output brought in from coarser scales by :func:`fill_from_coarser`, but only where the data reach:
 every pixel above the topmost measured pixel of its column (:func:`below_topmost`: the sky, and the far background
-that no LiDAR point saw) is left empty, the network's own output there included.
+that no LiDAR point saw) is left empty, the network's own output there included. With ``correct_fill`` (not the
+paper's either) the network's output and reach feed :class:`dcslam.depth.models.fill.FillCorrection`, and the
+network outputs a correction of the nearest-neighbour fill of its input (untrained: the fill itself).
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from dcslam.depth.models.fill import FillCorrection, depth_scale
 from dcslam.errors import DcslamError
 
 
@@ -118,7 +121,8 @@ class SparseConvNet(nn.Module):
     """The paper's six-layer network: sparse depth and its mask in, dense depth out (same units as the input);
     with ``fill_holes``, what lies beyond its receptive field is filled by :func:`fill_from_coarser` and what lies
     above the topmost measured pixel of each column (:func:`below_topmost`, measurements widened by the first
-    kernel's width) is left empty (0).
+    kernel's width) is left empty (0); with ``correct_fill``, the nearest-neighbour fill of the input corrected by a
+    head that sees the network's output (:mod:`dcslam.depth.models.fill`).
 
     Shape:
         sparse: (B, 1, H, W) depth (0 where unknown), mask: (B, 1, H, W) → (B, 1, H, W)
@@ -127,15 +131,19 @@ class SparseConvNet(nn.Module):
     ARCH = "sparse-conv"
 
     def __init__(self, channels: int = 16, kernels: tuple[int, ...] = (11, 7, 5, 3, 3, 1), eps: float = 1e-8,
-                 fill_holes: bool = False):
+                 fill_holes: bool = False, correct_fill: bool = False):
         super().__init__()
         kernels = tuple(int(k) for k in kernels)
         sizes = [1] + [channels] * (len(kernels) - 1) + [1]
         self.hparams = {"channels": int(channels), "kernels": list(kernels), "eps": float(eps)}
         if fill_holes:  # recorded only when set, so that model files of the paper's network stay as they were
             self.hparams["fill_holes"] = True
+        if correct_fill:  # likewise
+            self.hparams["correct_fill"] = True
         self.fill_holes = bool(fill_holes)
         self.layers = nn.ModuleList(SparseConv(sizes[i], sizes[i + 1], k, eps=eps) for i, k in enumerate(kernels))
+        # the network's depth (scale-free) and where it reached
+        self.correction = FillCorrection(2) if correct_fill else None
 
     def forward(self, sparse: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
         if mask is None:
@@ -147,4 +155,7 @@ class SparseConvNet(nn.Module):
         if self.fill_holes:
             x, _ = fill_from_coarser(x, m)
             x = x * below_topmost(mask, self.layers[0].kernel_size)
+        if self.correction is not None:
+            features = torch.cat([x / depth_scale(sparse, mask.to(sparse.dtype)), m.to(x.dtype)], 1)
+            x = self.correction(sparse, mask, features)[0]
         return x
