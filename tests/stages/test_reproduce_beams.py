@@ -54,8 +54,8 @@ def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(tmp_path,
     masked = json.loads((tmp_path / "filtered" / "nconv-sparse16+masked" / "config.json").read_text())
     keep = PROFILES["smoke"].confidence_keep
     assert masked["settings"]["filters"] == [{"filter": "confidence", "min": 0.0, "keep": keep}]
-    assert json.loads((tmp_path / "runs" / "nconv-guided" / "config.json").read_text())["settings"]["model"] == \
-        "nconv-guided"
+    guided = json.loads((tmp_path / "runs" / "nconv-guided" / "config.json").read_text())["settings"]
+    assert (guided["model"], guided["model_hparams"]) == ("nconv-guided", {"correct_fill": True})
     # the pose-loss run fine-tunes nconv, its confidence as ICP weights, and its SLAM runs use that confidence
     pose = json.loads((tmp_path / "runs" / "nconv-pose" / "config.json").read_text())["settings"]
     assert (pose["loss"], pose["model"], pose["pose_weights"]) == ("pose", "nconv", "confidence")
@@ -95,6 +95,10 @@ def test_profiles_hold_the_training_options_of_every_completer_and_the_full_beam
     tuned = quick.train_config("nconv-pose", seed=0)
     assert (tuned.loss, tuned.model, tuned.init, tuned.name) == ("pose", "nconv", "nconv", "nconv-pose")
     assert quick.train_config("nconv", seed=3).model == "nconv" and quick.train_config("nconv", 3).seed == 3
+    for run in ("sparse-conv", "nconv", "nconv-guided"):  # each corrects a fill, on every beam count, 64 the most
+        config = quick.train_config(run, seed=0)
+        assert config.model_hparams() == {"correct_fill": True} and config.input_mix.count("sparse") == 3
+        assert {"sparse@32", "sparse@16", "sparse@8"} < set(config.input_mix)
     with pytest.raises(DcslamError, match="exactly sparse-conv, nconv, nconv-guided, nconv-pose"):
         BeamsProfile(name="bad", drives=3, frames=12, train={"nconv": {}}, slam_frames=2)
     for init in ("nconv-guided-x", "nconv-pose"):  # not a run of the profile; a run that is itself fine-tuned
