@@ -228,16 +228,15 @@ class ICPOdometry:
         T_init = T_init.to(frame.vertex.dtype)
         if model is None:
             return OdometryResult(T_init, False, "empty model")
-        flat = frame.valid.reshape(-1)
-        source = frame.vertex.reshape(-1, 3)[flat]
+        pixels = torch.nonzero(frame.valid.reshape(-1)).squeeze(1)
+        source = frame.vertex.reshape(-1, 3).index_select(0, pixels)
         if source.shape[0] < self.min_inliers:
             return OdometryResult(T_init, False, f"{source.shape[0]} valid source points", sources=source.shape[0])
-        normals = frame.normal.reshape(-1, 3)[flat]
-        weights = None if frame.weight is None else frame.weight.reshape(-1)[flat]
-        if self.source_voxel > 0:
+        if self.source_voxel > 0:                   # gather the kept pixels' normals and weights only
             keep = voxel_representatives(source, self.source_voxel)
-            source, normals = source[keep], normals[keep]
-            weights = None if weights is None else weights[keep]
+            source, pixels = source.index_select(0, keep), pixels.index_select(0, keep)
+        normals = frame.normal.reshape(-1, 3).index_select(0, pixels)
+        weights = None if frame.weight is None else frame.weight.reshape(-1).index_select(0, pixels)
         associate = self.association.prepare(model)
         gate = self.adaptive.gate() if self.adaptive is not None else self.max_distance
         T, iterations = T_init, 0

@@ -83,10 +83,13 @@ def voxel_keys(points: torch.Tensor, voxel_size: float) -> torch.Tensor:
 def voxel_representatives(points: torch.Tensor, voxel_size: float) -> torch.Tensor:
     """Indices of one point per occupied voxel (the first in input order), sorted. Shape: (P, 3) -> (Q,) int64."""
     keys = voxel_keys(points, voxel_size)
-    unique, inverse = torch.unique(keys, return_inverse=True)
-    first = torch.full((unique.shape[0],), points.shape[0], dtype=torch.int64, device=points.device)
-    first.scatter_reduce_(0, inverse, torch.arange(points.shape[0], device=points.device), reduce="amin")
-    return torch.sort(first).values
+    if keys.numel() == 0:
+        return torch.zeros(0, dtype=torch.int64, device=points.device)
+    # a stable sort by voxel: the first entry of each run of equal keys is the voxel's first point in input order
+    sorted_keys, order = torch.sort(keys, stable=True)
+    starts = torch.ones_like(sorted_keys, dtype=torch.bool)
+    starts[1:] = sorted_keys[1:] != sorted_keys[:-1]
+    return torch.sort(order[starts]).values
 
 
 @dataclass
