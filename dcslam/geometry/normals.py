@@ -13,28 +13,28 @@ import torch
 from dcslam.errors import DcslamError
 
 
-def _neighbours(key: torch.Tensor, line: torch.Tensor, step: torch.Tensor, search: int):
-    """For points sorted by ``key`` (their position along scan lines), the previous and next point on the same line
-    within ``search`` pixels. Shape: key, line, step (N,) -> (order (N,), prev (N,), next (N,), prev_steps (N,),
-    next_steps (N,)) where prev / next index into the sorted order, -1 = none."""
-    order = torch.argsort(key)
-    line_s, step_s = line[order], step[order]
-    n = key.shape[0]
-    same = (line_s[1:] == line_s[:-1]) & (step_s[1:] - step_s[:-1] <= search)
-    ar = torch.arange(n, device=key.device)
-    none = torch.full((1,), -1, dtype=torch.int64, device=key.device)
+def _neighbours(line: torch.Tensor, step: torch.Tensor, search: int):
+    """For points in scan-line order (sorted by line, then by step along the line), the previous and next point on
+    the same line within ``search`` pixels. Shape: line, step (N,) -> (prev (N,), next (N,), prev_steps (N,),
+    next_steps (N,)) where prev / next index into that order, -1 = none."""
+    n = line.shape[0]
+    gap = step[1:] - step[:-1]
+    same = (line[1:] == line[:-1]) & (gap <= search)
+    ar = torch.arange(n, device=line.device)
+    none = torch.full((1,), -1, dtype=torch.int64, device=line.device)
     nxt = torch.cat([torch.where(same, ar[1:], -1), none])
     prv = torch.cat([none, torch.where(same, ar[:-1], -1)])
-    gap = torch.cat([step_s[1:] - step_s[:-1], torch.zeros(1, dtype=step.dtype, device=step.device)])
-    return order, prv, nxt, torch.cat([gap[-1:] * 0, gap[:-1]]), gap
+    zero = torch.zeros(1, dtype=step.dtype, device=step.device)
+    return prv, nxt, torch.cat([zero, gap]), torch.cat([gap, zero])
 
 
-def _tangent(points: torch.Tensor, key: torch.Tensor, line: torch.Tensor, step: torch.Tensor, search: int,
+def _tangent(points: torch.Tensor, order: torch.Tensor | None, line: torch.Tensor, step: torch.Tensor, search: int,
              max_relative_gap: float) -> tuple[torch.Tensor, torch.Tensor]:
     """Central (or one-sided) difference along scan lines of valid points, skipping neighbours across a depth edge.
-    Shape: points (N, 3) -> (tangents (N, 3) in the input order, ok (N,) bool)."""
-    order, prv, nxt, prv_steps, nxt_steps = _neighbours(key, line, step, search)
-    p = points[order]
+    ``order`` puts the points in scan-line order (None: they already are); ``line`` and ``step`` are given in that
+    order. Shape: points (N, 3) -> (tangents (N, 3) in the input order, ok (N,) bool)."""
+    prv, nxt, prv_steps, nxt_steps = _neighbours(line, step, search)
+    p = points if order is None else points[order]
     z = p[:, 2].detach()
 
     def side(index, steps):
@@ -44,11 +44,49 @@ def _tangent(points: torch.Tensor, key: torch.Tensor, line: torch.Tensor, step: 
 
     fwd, ok_f = side(nxt, nxt_steps)
     bwd, ok_b = side(prv, prv_steps)
-    t = torch.where((ok_f & ok_b)[:, None], fwd - bwd,
-                    torch.where(ok_f[:, None], fwd - p, torch.where(ok_b[:, None], p - bwd, torch.zeros_like(p))))
-    out = torch.empty_like(t).index_copy(0, order, t)
-    ok = torch.empty_like(ok_f).index_copy(0, order, ok_f | ok_b)
-    return out, ok
+    # both sides: fwd - bwd; one side: fwd - p or p - bwd; none: p - p = 0
+    t = torch.where(ok_f[:, None], fwd, p) - torch.where(ok_b[:, None], bwd, p)
+    ok = ok_f | ok_b
+    if order is None:
+        return t, ok
+    return torch.empty_like(t).index_copy(0, order, t), torch.empty_like(ok).index_copy(0, order, ok)
+
+
+def _grid_tangent(P: torch.Tensor, z: torch.Tensor, valid: torch.Tensor, dim: int,
+                  max_relative_gap: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`_tangent` for ``search`` = 1 on the pixel grid: the neighbours are the adjacent pixels along ``dim``
+    (2: rows, 1: columns), taken by shifting the image instead of gathering. The same arithmetic on the same values
+    as :func:`_tangent`. Shape: P (B, H, W, 3), z and valid (B, H, W) -> (tangents (B, H, W, 3), ok (B, H, W))."""
+    n = P.shape[dim]
+    fwd = torch.cat([P.narrow(dim, 1, n - 1), P.narrow(dim, n - 1, 1)], dim)
+    bwd = torch.cat([P.narrow(dim, 0, 1), P.narrow(dim, 0, n - 1)], dim)
+    edge = torch.zeros_like(valid.narrow(dim, 0, 1))
+    has_f = torch.cat([valid.narrow(dim, 1, n - 1), edge], dim)
+    has_b = torch.cat([edge, valid.narrow(dim, 0, n - 1)], dim)
+    limit = max_relative_gap * torch.ones((), dtype=z.dtype, device=z.device) * z   # as _tangent (one pixel apart)
+    ok_f = has_f & ((fwd[..., 2].detach() - z).abs() <= limit)
+    ok_b = has_b & ((bwd[..., 2].detach() - z).abs() <= limit)
+    t = torch.where(ok_f[..., None], fwd, P) - torch.where(ok_b[..., None], bwd, P)
+    return t, ok_f | ok_b
+
+
+def _grid_normals(vertex: torch.Tensor, valid: torch.Tensor,
+                  max_relative_gap: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`vertex_normals` for ``search`` = 1 (dense depth) without sorting or gathering: each pixel's
+    neighbours are the adjacent pixels. The same arithmetic per valid pixel as the general path."""
+    v = valid[:, 0]
+    P = torch.where(v[..., None], vertex.permute(0, 2, 3, 1), torch.zeros((), dtype=vertex.dtype,
+                                                                          device=vertex.device))
+    z = P[..., 2].detach()
+    tx, ok_x = _grid_tangent(P, z, v, 2, max_relative_gap)
+    ty, ok_y = _grid_tangent(P, z, v, 1, max_relative_gap)
+    n = torch.cross(tx, ty, dim=-1)
+    norm2 = (n * n).sum(-1, keepdim=True)
+    ok = v & ok_x & ok_y & (norm2[..., 0] > 1e-20)
+    n = torch.where(ok[..., None], n / torch.sqrt(torch.where(ok[..., None], norm2, torch.ones_like(norm2))),
+                    torch.zeros_like(n))
+    n = torch.where(((n * P).sum(-1, keepdim=True) > 0), -n, n)
+    return n.permute(0, 3, 1, 2), ok[:, None]
 
 
 def vertex_normals(vertex: torch.Tensor, valid: torch.Tensor | None = None, search: int = 1,
@@ -79,14 +117,26 @@ def vertex_normals(vertex: torch.Tensor, valid: torch.Tensor | None = None, sear
     if search < 1:
         raise DcslamError(f"search must be >= 1, got {search}")
     B, _, H, W = vertex.shape
+    if search == 1 and H > 1 and W > 1:
+        return _grid_normals(vertex, valid, max_relative_gap)
     idx = torch.nonzero(valid.reshape(-1)).squeeze(1)                 # (b, v, u) raster order
     if idx.numel() == 0:
         return torch.zeros_like(vertex), torch.zeros_like(valid)
     b, rem = torch.div(idx, H * W, rounding_mode="floor"), idx % (H * W)
     v, u = torch.div(rem, W, rounding_mode="floor"), rem % W
     points = vertex.permute(0, 2, 3, 1).reshape(-1, 3)[idx]
-    tx, ok_x = _tangent(points, idx, b * H + v, u, search, max_relative_gap)
-    ty, ok_y = _tangent(points, (b * W + u) * H + v, b * W + u, v, search, max_relative_gap)
+    # Rows: the raster order of idx is already scan-line order. Columns: sorted by (b, u, v); every key is unique,
+    # so the order is the same however it is found: for dense depth, by transposing the mask (linear in the image
+    # size), for sparse depth by sorting the few valid pixels' keys.
+    tx, ok_x = _tangent(points, None, b * H + v, u, search, max_relative_gap)
+    if 8 * idx.numel() < B * H * W:
+        order = torch.argsort((b * W + u) * H + v)
+    else:
+        rank = torch.empty(B * H * W, dtype=torch.int64, device=idx.device).index_put_(
+            (idx,), torch.arange(idx.numel(), device=idx.device))
+        raster = torch.arange(B * H * W, device=idx.device).view(B, H, W).transpose(1, 2)
+        order = rank[raster[valid[:, 0].transpose(1, 2)]]
+    ty, ok_y = _tangent(points, order, (b * W + u)[order], v[order], search, max_relative_gap)
     n = torch.cross(tx, ty, dim=1)
     norm2 = (n * n).sum(1, keepdim=True)
     ok = ok_x & ok_y & (norm2[:, 0] > 1e-20)

@@ -41,7 +41,7 @@ def pixel_weights(frame: Frame, pixels: torch.Tensor) -> torch.Tensor:
     frame has none. Shape: pixels (F,) flat indices -> (F,)."""
     if frame.weight is None:
         return torch.ones(pixels.shape[0], dtype=frame.vertex.dtype, device=pixels.device)
-    return frame.weight.reshape(-1)[pixels]
+    return frame.weight.reshape(-1).index_select(0, pixels)
 
 
 def surfel_radius(frame: Frame, points_cam: torch.Tensor, normals_cam: torch.Tensor) -> torch.Tensor:
@@ -57,11 +57,11 @@ def frame_surfels(frame: Frame, T_world_cam: torch.Tensor):
     """Valid pixels of a frame as world-frame surfels: (pixels (F,), points (F, 3), normals (F, 3), colors (F, 3),
     radius (F,), points in the camera frame (F, 3))."""
     pixels = torch.nonzero(frame.valid.reshape(-1)).squeeze(1)
-    v_cam = frame.vertex.reshape(-1, 3)[pixels]
-    n_cam = frame.normal.reshape(-1, 3)[pixels]
+    v_cam = frame.vertex.reshape(-1, 3).index_select(0, pixels)
+    n_cam = frame.normal.reshape(-1, 3).index_select(0, pixels)
     T = T_world_cam.to(v_cam.dtype)
     if frame.rgb is not None:
-        colors = frame.rgb.reshape(-1, 3)[pixels]
+        colors = frame.rgb.reshape(-1, 3).index_select(0, pixels)
     else:
         colors = torch.full_like(v_cam, 0.5)
     return pixels, transform_points(T, v_cam), rotate(T, n_cam), colors, surfel_radius(frame, v_cam, n_cam), v_cam
@@ -134,19 +134,24 @@ class PointFusion(Mapper):
         slot_of_pixel = torch.full((H * W,), -1, dtype=torch.int64, device=device)
         slot_of_pixel[pixels] = torch.arange(len(pixels), device=device)
         j = torch.nonzero(inside).squeeze(1)
-        i = slot_of_pixel[px[j, 1] * W + px[j, 0]]
-        j, i = j[i >= 0], i[i >= 0]
-        z_frame = v_cam[i, 2].detach()
+        pj = px.index_select(0, j)
+        i = slot_of_pixel.index_select(0, pj[:, 1] * W + pj[:, 0])
+        kept = torch.nonzero(i >= 0).squeeze(1)
+        j, i = j.index_select(0, kept), i.index_select(0, kept)
+        v_i = v_cam.detach().index_select(0, i)
+        z_frame = v_i[:, 2]
         gate = torch.clamp(self.max_relative_distance * z_frame, min=self.max_distance)
-        dist = (p_cam[j] - v_cam[i].detach()).norm(dim=1)
-        agree = (pm.normals[j].detach() * n_w[i].detach()).sum(1) > self.cos_max_angle
+        dist = (p_cam.index_select(0, j) - v_i).norm(dim=1)
+        agree = (pm.normals.detach().index_select(0, j) * n_w.detach().index_select(0, i)).sum(1) > self.cos_max_angle
         ok = (dist < gate) & agree
         free_space = torch.zeros(len(pm), dtype=torch.bool, device=device)
-        free_space[j[z[j] < z_frame - gate]] = True
+        free_space[j[z.index_select(0, j) < z_frame - gate]] = True
         target = torch.full_like(pixels, -1)
-        if bool(ok.any()):
-            i_ok, j_ok = i[ok], j[ok]
-            score = pm.confidence[j_ok].detach() - dist[ok] / (2 * gate[ok])
+        ok = torch.nonzero(ok).squeeze(1)
+        if ok.numel():
+            i_ok, j_ok = i.index_select(0, ok), j.index_select(0, ok)
+            score = pm.confidence.detach().index_select(0, j_ok) - dist.index_select(0, ok) / (
+                2 * gate.index_select(0, ok))
             best = torch.full((len(pixels),), -float("inf"), dtype=score.dtype, device=device)
             best.scatter_reduce_(0, i_ok, score, reduce="amax")
             win = score >= best[i_ok]

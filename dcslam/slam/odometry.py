@@ -83,20 +83,23 @@ class PointToPlane:
         """(residuals (M,), inlier source index (M,), target points (M, 3), target normals (M, 3)) at pose T."""
         p = transform_points(T, self.source)
         src, q, n = self.associate(p)
-        diff = p[src] - q
+        diff = p.index_select(0, src) - q
         ok = ((diff.detach() ** 2).sum(1) < self.max_distance ** 2) & \
-             ((rotate(T.detach(), self.source_normals[src].detach()) * n.detach()).sum(1) > self.cos_max_angle)
+             ((rotate(T.detach(), self.source_normals.detach().index_select(0, src)) * n.detach()).sum(1)
+              > self.cos_max_angle)
         if self.weights is not None:
-            ok &= self.weights[src].detach() > 0
-        return (diff[ok] * n[ok]).sum(1), src[ok], q[ok], n[ok]
+            ok &= self.weights.detach().index_select(0, src) > 0
+        keep = torch.nonzero(ok).squeeze(1)         # one nonzero and index_select: cheaper than four masks
+        n = n.index_select(0, keep)
+        return (diff.index_select(0, keep) * n).sum(1), src.index_select(0, keep), q.index_select(0, keep), n
 
     def _pair_weights(self, src: torch.Tensor) -> torch.Tensor | None:
         """Weights of the paired source points (float64), or None when every point counts fully."""
-        return None if self.weights is None else self.weights[src].double()
+        return None if self.weights is None else self.weights.index_select(0, src).double()
 
     def _fixed_residuals(self, T: torch.Tensor) -> torch.Tensor:
         src, q, n = self.pairs
-        return ((transform_points(T, self.source[src]) - q) * n).sum(1)
+        return ((transform_points(T, self.source.index_select(0, src)) - q) * n).sum(1)
 
     def _mean_rho(self, r: torch.Tensor, pair_weights: torch.Tensor | None) -> torch.Tensor:
         rho = self.kernel.rho(r, self.max_distance)
@@ -115,14 +118,18 @@ class PointToPlane:
         r, src, q, n = self.residuals(T)
         self.pairs = (src, q, n)
         m = n @ T[:3, :3]                           # R^T n: the normal in the camera frame
-        J = torch.cat([m, torch.cross(self.source[src], m, dim=1)], 1).double()
+        J = torch.cat([m, torch.cross(self.source.index_select(0, src), m, dim=1)], 1).double()
         rd = r.double()
         pw = self._pair_weights(src)
-        w = self.kernel.weight(rd, self.max_distance)
-        if pw is not None:
-            w = w * pw
-        lin = Linearization(J.T @ (w[:, None] * J), J.T @ (w * rd), self._mean_rho(rd, pw), r.numel(),
-                            float(w.detach().sum()))
+        if pw is None and type(self.kernel) is Quadratic:
+            # every weight is exactly 1: J^T W J and J^T W r are J^T J and J^T r, bit for bit
+            lin = Linearization(J.T @ J, J.T @ rd, self._mean_rho(rd, pw), r.numel(), float(r.numel()))
+        else:
+            w = self.kernel.weight(rd, self.max_distance)
+            if pw is not None:
+                w = w * pw
+            lin = Linearization(J.T @ (w[:, None] * J), J.T @ (w * rd), self._mean_rho(rd, pw), r.numel(),
+                                float(w.detach().sum()))
         if self.hold_below > 0 and r.numel() >= 6:
             lin.H_step = self._hold(lin)
         return lin
@@ -221,16 +228,15 @@ class ICPOdometry:
         T_init = T_init.to(frame.vertex.dtype)
         if model is None:
             return OdometryResult(T_init, False, "empty model")
-        flat = frame.valid.reshape(-1)
-        source = frame.vertex.reshape(-1, 3)[flat]
+        pixels = torch.nonzero(frame.valid.reshape(-1)).squeeze(1)
+        source = frame.vertex.reshape(-1, 3).index_select(0, pixels)
         if source.shape[0] < self.min_inliers:
             return OdometryResult(T_init, False, f"{source.shape[0]} valid source points", sources=source.shape[0])
-        normals = frame.normal.reshape(-1, 3)[flat]
-        weights = None if frame.weight is None else frame.weight.reshape(-1)[flat]
-        if self.source_voxel > 0:
+        if self.source_voxel > 0:                   # gather the kept pixels' normals and weights only
             keep = voxel_representatives(source, self.source_voxel)
-            source, normals = source[keep], normals[keep]
-            weights = None if weights is None else weights[keep]
+            source, pixels = source.index_select(0, keep), pixels.index_select(0, keep)
+        normals = frame.normal.reshape(-1, 3).index_select(0, pixels)
+        weights = None if frame.weight is None else frame.weight.reshape(-1).index_select(0, pixels)
         associate = self.association.prepare(model)
         gate = self.adaptive.gate() if self.adaptive is not None else self.max_distance
         T, iterations = T_init, 0

@@ -48,7 +48,9 @@ class PointMap:
 
     def select(self, index: torch.Tensor) -> "PointMap":
         """The points at ``index`` (a (P,) bool mask or (Q,) int64 indices)."""
-        return PointMap(*(getattr(self, f.name)[index] for f in fields(self)))
+        if index.dtype == torch.bool:                  # one nonzero for the eight fields
+            index = torch.nonzero(index).squeeze(1)
+        return PointMap(*(getattr(self, f.name).index_select(0, index) for f in fields(self)))
 
     def detach(self) -> "PointMap":
         return PointMap(*(getattr(self, f.name).detach() for f in fields(self)))
@@ -81,10 +83,13 @@ def voxel_keys(points: torch.Tensor, voxel_size: float) -> torch.Tensor:
 def voxel_representatives(points: torch.Tensor, voxel_size: float) -> torch.Tensor:
     """Indices of one point per occupied voxel (the first in input order), sorted. Shape: (P, 3) -> (Q,) int64."""
     keys = voxel_keys(points, voxel_size)
-    unique, inverse = torch.unique(keys, return_inverse=True)
-    first = torch.full((unique.shape[0],), points.shape[0], dtype=torch.int64, device=points.device)
-    first.scatter_reduce_(0, inverse, torch.arange(points.shape[0], device=points.device), reduce="amin")
-    return torch.sort(first).values
+    if keys.numel() == 0:
+        return torch.zeros(0, dtype=torch.int64, device=points.device)
+    # a stable sort by voxel: the first entry of each run of equal keys is the voxel's first point in input order
+    sorted_keys, order = torch.sort(keys, stable=True)
+    starts = torch.ones_like(sorted_keys, dtype=torch.bool)
+    starts[1:] = sorted_keys[1:] != sorted_keys[:-1]
+    return torch.sort(order[starts]).values
 
 
 @dataclass
@@ -140,9 +145,9 @@ def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int
     normal = torch.zeros(height * width, 3, dtype=dtype, device=device)
     if len(pm):                                   # gather at the covered pixels only (few for a sparse map)
         pix = torch.nonzero(valid.reshape(-1)).squeeze(1)
-        hit = index.reshape(-1)[pix]
-        vertex = vertex.index_put((pix,), pm.points[hit])
-        normal = normal.index_put((pix,), pm.normals[hit])
+        hit = index.reshape(-1).index_select(0, pix)
+        vertex = vertex.index_put((pix,), pm.points.index_select(0, hit))
+        normal = normal.index_put((pix,), pm.normals.index_select(0, hit))
     vertex, normal = vertex.view(height, width, 3), normal.view(height, width, 3)
     return ModelView(index, vertex, normal, valid, T_world_cam.to(dtype), K.to(dtype))
 
