@@ -24,7 +24,6 @@ train_command = stage_command(app, "train", train.TrainStageConfig, train.run, r
                               examples=("dcslam train --loss chamfer --map-frames 8 --scale 0.5 --epochs 3",
                                         "dcslam train --loss mse --mask dense --resume    # after Ctrl-C: continue "
                                         "from last.pt",
-                                        "dcslam train --model nconv --input-mix sparse --input-mix sparse@16 "
-                                        "--input-mix sparse@8 --l1-weight 1 --lr-schedule cosine --crop 256",
-                                        "dcslam train --model nconv --correct-fill --l1-weight 30 --lr 1e-3 "
-                                        "--lr-schedule cosine --name nconv-cf    # correct a nearest-neighbour fill"))
+                                        "dcslam train --model nconv --correct-fill --input-mix sparse --input-mix "
+                                        "sparse@16 --l1-weight 30 --lr 1e-3 --lr-schedule cosine --name nconv-cf    "
+                                        "# correct a nearest-neighbour fill"))
