@@ -27,6 +27,19 @@ class TestVertexNormals:
         torch.testing.assert_close(normals[0].permute(1, 2, 0).reshape(-1, 3),
                                    n.to(device, dtype).expand(24 * 32, 3), atol=tol, rtol=0)
 
+    def test_dense_shortcut_matches_the_scan_line_path(self):
+        """search = 1 takes each pixel's neighbours by shifting the grid; without holes the scan-line path with a
+        wider search finds the same (adjacent) neighbours, so both must give the same bits, depth edges included."""
+        g = torch.Generator().manual_seed(0)
+        for dtype in (torch.float32, torch.float64):
+            depth = 3 + torch.rand(2, 1, 13, 17, generator=g, dtype=torch.float64).to(dtype)
+            depth[..., 5:, 9:] += 6.0                 # depth edges that the relative-gap test must not cross
+            vertex = backproject(depth, K.to(dtype))
+            grid, grid_ok = vertex_normals(vertex, search=1)
+            lines, lines_ok = vertex_normals(vertex, search=2)
+            assert torch.equal(grid_ok, lines_ok) and torch.equal(grid, lines)
+            assert grid_ok.any() and not grid_ok.all()  # the edges left pixels without a normal
+
     def test_faces_camera(self):
         depth = torch.full((2, 1, 8, 9), 3.0, dtype=torch.float64)
         normals, _ = vertex_normals(backproject(depth, K))
