@@ -101,13 +101,16 @@ class FillCorrection(nn.Module):
             self.net[-1].weight.zero_()
             self.net[-1].bias.copy_(torch.tensor([0.0, 4.0]))
 
-    def forward(self, sparse: torch.Tensor, mask: torch.Tensor, features: torch.Tensor
-                ) -> tuple[torch.Tensor, torch.Tensor]:
+    def forward(self, sparse: torch.Tensor, mask: torch.Tensor, features: torch.Tensor,
+                scale: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """``scale``: :func:`depth_scale` of the input, when the caller has it already (it divided its features by
+        it)."""
         if features.ndim != 4 or features.shape[1] != self.features or features.shape[2:] != sparse.shape[2:]:
             raise DcslamError(f"features have shape {tuple(features.shape)}, expected ({sparse.shape[0]}, "
                               f"{self.features}, {sparse.shape[2]}, {sparse.shape[3]})")
         mask = mask.to(sparse.dtype)
-        scale = depth_scale(sparse, mask)
+        if scale is None:
+            scale = depth_scale(sparse, mask)
         fill, distance = nearest_fill_with_distance(sparse, mask)
         correction, gate = self.net(torch.cat([fill / scale, mask, torch.log1p(distance), features.to(sparse.dtype)],
                                               1)).unbind(1)

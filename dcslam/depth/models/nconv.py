@@ -117,7 +117,8 @@ class NConvCNN(nn.Module):
         x, c = self.out(x, c)
         if self.correction is None:
             return x, c
-        depth, gate = self.correction(sparse, mask, torch.cat([x / depth_scale(sparse, mask), c], 1))
+        scale = depth_scale(sparse, mask)
+        depth, gate = self.correction(sparse, mask, torch.cat([x / scale, c], 1), scale)
         return depth, c * torch.sigmoid(gate)
 
     def forward(self, sparse: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
@@ -170,7 +171,8 @@ class GuidedNConvCNN(nn.Module):
         depth, confidence = self.nconv.forward_with_confidence(sparse, mask)
         scale = depth_scale(sparse, mask.to(sparse.dtype))
         if self.correction is not None:
-            out, gate = self.correction(sparse, mask, torch.cat([rgb.to(depth.dtype), depth / scale, confidence], 1))
+            out, gate = self.correction(sparse, mask, torch.cat([rgb.to(depth.dtype), depth / scale, confidence], 1),
+                                        scale)
             return out, confidence * torch.sigmoid(gate)
         correction, gate = self.refine(torch.cat([rgb.to(depth.dtype), depth / scale, confidence], 1)).unbind(1)
         return depth + scale * correction[:, None], confidence * torch.sigmoid(gate[:, None])

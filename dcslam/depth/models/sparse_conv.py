@@ -156,6 +156,6 @@ class SparseConvNet(nn.Module):
             x, _ = fill_from_coarser(x, m)
             x = x * below_topmost(mask, self.layers[0].kernel_size)
         if self.correction is not None:
-            features = torch.cat([x / depth_scale(sparse, mask.to(sparse.dtype)), m.to(x.dtype)], 1)
-            x = self.correction(sparse, mask, features)[0]
+            scale = depth_scale(sparse, mask.to(sparse.dtype))
+            x = self.correction(sparse, mask, torch.cat([x / scale, m.to(x.dtype)], 1), scale)[0]
         return x
