@@ -24,9 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import MISSING, asdict, fields
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -77,7 +75,6 @@ def completer(spec: tuple):
 
 def score_task(spec: tuple, drives: list[Path], kind: str) -> tuple[float, float, int]:
     """One cell of one seed (run in a worker process)."""
-    torch.set_num_threads(1)
     return score(completer(spec), drives, kind)
 
 
@@ -85,7 +82,6 @@ def train_task(run: Path, config, reuse: bool) -> str:
     """Train one run (or check and take the one there with ``reuse``); returns its summary line."""
     from dcslam.stages.train import read_result, train
 
-    torch.set_num_threads(1)
     start = time.perf_counter()
     if reuse and (run / "model.pt").exists():
         same = json.loads((run / "config.json").read_text())["settings"]
@@ -146,6 +142,7 @@ def main() -> None:
 
     from dcslam.depth.train import TrainConfig
     from dcslam.io.drive import DriveFile, input_beams, read_splits
+    from dcslam.workers import process_pool
     from dcslam.workspace import Workspace
 
     ws = Workspace.resolve(args.workspace)
@@ -160,11 +157,9 @@ def main() -> None:
         if args.profile_recipes:
             from dcslam.stages.reproduce_beams import PROFILES
 
-            given = PROFILES["quick"].train[arch]
-            return {"lr": given.get("lr", 1e-3), "lr_schedule": given.get("lr_schedule", "constant"),
-                    "l1_weight": given.get("l1_weight", 0.0), "input": given.get("input", "sparse"),
-                    "input_mix": list(given.get("input_mix", [])),
-                    "model_hparams": {name: True for name in ("fill_holes", "correct_fill") if given.get(name)}}
+            given = PROFILES["quick"].train_config(arch, seed=0)  # `dcslam train`'s options, its defaults filled in
+            return {"lr": given.lr, "lr_schedule": given.lr_schedule, "l1_weight": given.l1_weight,
+                    "input": given.input, "input_mix": list(given.input_mix), "model_hparams": given.model_hparams()}
         return {"lr": args.lr, "lr_schedule": args.lr_schedule, "l1_weight": args.l1_weight,
                 "input": args.train_input, "input_mix": list(args.input_mix),
                 "model_hparams": {**({"fill_holes": True} if args.fill_holes and arch == "sparse-conv" else {}),
@@ -184,7 +179,7 @@ def main() -> None:
                                 max_frames=args.max_frames, epochs=args.epochs, train_drives=paths["train"],
                                 val_drives=paths["val"], **recipe(key[0])) for key in runs}
     start = time.perf_counter()
-    with ProcessPoolExecutor(args.jobs, mp_context=get_context("spawn")) as pool:
+    with process_pool(args.jobs, args.jobs) as pool:  # spawned, one thread each
         for line in pool.map(train_task, runs.values(), configs.values(), [args.reuse] * len(runs)):
             print(line, flush=True)
         print(f"training: {(time.perf_counter() - start) / 60:.1f} min wall with {args.jobs} processes on "
