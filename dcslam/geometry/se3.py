@@ -154,14 +154,28 @@ def transform_points(T_a_b: torch.Tensor, points_b: torch.Tensor) -> torch.Tenso
     _check(T_a_b, (4, 4), "T_a_b")
     _check(points_b, (3,), "points_b")
     R, t = T_a_b[..., :3, :3], T_a_b[..., :3, 3]
-    return points_b @ R.transpose(-1, -2) + t[..., None, :]
+    return rows_times(points_b, R.transpose(-1, -2)) + t[..., None, :]
 
 
 def rotate(T_a_b: torch.Tensor, vectors_b: torch.Tensor) -> torch.Tensor:
     """Rotate direction vectors (normals) from frame b to frame a. Shape as :func:`transform_points`."""
     _check(T_a_b, (4, 4), "T_a_b")
     _check(vectors_b, (3,), "vectors_b")
-    return vectors_b @ T_a_b[..., :3, :3].transpose(-1, -2)
+    return rows_times(vectors_b, T_a_b[..., :3, :3].transpose(-1, -2))
+
+
+def rows_times(points: torch.Tensor, M: torch.Tensor) -> torch.Tensor:
+    """``points @ M`` for (N, 3) rows and a 3 x 3 matrix (any other shapes: plain ``@``).
+
+    On the CPU, outside autograd, the matrix is made contiguous first: the same products summed in the same order
+    (the same bits, checked in the tests), 1.3-1.6 times faster for the 10^4-10^5 points of a SLAM step than the
+    strided slice of a pose. Where a gradient is needed the plain product is kept, so that backward passes, whose
+    sums over the points depend on the layout, stay as they were. Shape: points (..., N, 3), M (..., 3, 3).
+    """
+    if (points.ndim == 2 and M.ndim == 2 and points.device.type == "cpu"
+            and not (torch.is_grad_enabled() and (points.requires_grad or M.requires_grad))):
+        return torch.mm(points, M.contiguous())
+    return points @ M
 
 
 def pose_error(T_a: torch.Tensor, T_b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -102,12 +102,15 @@ def prepare_frame(depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None
             rgb = rgb[None]
         if rgb.shape != (1, 3, H, W):
             raise DcslamError(f"rgb has shape {tuple(rgb.shape)}, expected (1, 3, {H}, {W})")
-        rgb = rgb[0].permute(1, 2, 0).to(depth.dtype)
+        rgb = rgb[0].permute(1, 2, 0).to(depth.dtype).contiguous()
     valid = ok[0, 0]
     if weight is not None:
         weight = _check_weight(weight, H, W).to(depth.dtype)
         valid = valid & (weight.detach() > 0)
-    return Frame(depth, vertex[0].permute(1, 2, 0), normal[0].permute(1, 2, 0), valid, rgb, K, weight)
+    # (H, W, 3) maps stored point by point: odometry and fusion gather whole points from them, which is an order
+    # of magnitude slower from the channel-first layout backproject gives (a no-op where already so stored)
+    return Frame(depth, vertex[0].permute(1, 2, 0).contiguous(), normal[0].permute(1, 2, 0).contiguous(), valid,
+                 rgb, K, weight)
 
 
 def _check_weight(weight: torch.Tensor, H: int, W: int) -> torch.Tensor:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import torch
 
 from dcslam.errors import DcslamError
-from dcslam.geometry.se3 import rotate, transform_points
+from dcslam.geometry.se3 import rotate, rows_times, transform_points
 from dcslam.slam.association import ProjectiveAssociation
 from dcslam.slam.frame import Frame
 from dcslam.slam.pointmap import ModelView, voxel_representatives
@@ -117,7 +117,7 @@ class PointToPlane:
     def linearize(self, T: torch.Tensor) -> Linearization:
         r, src, q, n = self.residuals(T)
         self.pairs = (src, q, n)
-        m = n @ T[:3, :3]                           # R^T n: the normal in the camera frame
+        m = rows_times(n, T[:3, :3])                # R^T n: the normal in the camera frame
         J = torch.cat([m, torch.cross(self.source.index_select(0, src), m, dim=1)], 1).double()
         rd = r.double()
         pw = self._pair_weights(src)

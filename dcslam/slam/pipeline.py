@@ -11,7 +11,7 @@ import torch
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_depth
 from dcslam.slam.fusion import PointFusion
-from dcslam.slam.frame import FrameSettings, prepare_frame
+from dcslam.slam.frame import Frame, FrameSettings, prepare_frame
 from dcslam.slam.health import HealthRules, assess, summarise
 from dcslam.slam.odometry import GroundTruthOdometry, OdometryResult
 from dcslam.slam.pointmap import PointMap
@@ -150,7 +150,14 @@ class SLAM:
         weight (1, 1, H, W) in [0, 1] or None (per-pixel trust for ICP and fusion, see
         :class:`~dcslam.slam.frame.Frame`)."""
         start = time.perf_counter()
-        frame = prepare_frame(depth, K, rgb, self.frame_settings, weight)
+        return self.step_frame(prepare_frame(depth, K, rgb, self.frame_settings, weight), T_gt, start)
+
+    def step_frame(self, frame: Frame, T_gt: torch.Tensor | None = None, start: float | None = None) -> StepReport:
+        """Process one frame already made by ``prepare_frame(depth, K, rgb, self.frame_settings, weight)``, which
+        depends on the frame alone: a caller may prepare the next frame on another thread while this one is
+        aligned and fused (:func:`dcslam.stages.slam.run_drive` does). ``start``: the ``time.perf_counter()`` the
+        report's seconds count from (default: now)."""
+        start = time.perf_counter() if start is None else start
         T_init = self._prediction(frame.vertex.dtype, frame.vertex.device)
         index = len(self.poses)
         if index == 0 and self.reference_depth_m > 0 and bool(frame.valid.any()):

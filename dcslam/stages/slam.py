@@ -9,6 +9,7 @@ The configuration extends :class:`dcslam.slam.config.SlamSettings`, so a field a
 """
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
 import time
 from dataclasses import dataclass, field, fields
@@ -234,6 +235,7 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
 
     from dcslam.io.drive import DriveFile, load_depth_and_confidence
     from dcslam.progress import Bar
+    from dcslam.slam.frame import prepare_frame
 
     with DriveFile(drive_path) as drive:
         n = len(drive) if not frames else min(frames, len(drive))
@@ -249,16 +251,27 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
         T_gt = drive.poses[:n]
         slam.T_world_cam0 = torch.from_numpy(T_gt[0]).float()
         slam.reset()
+        def prepare(i: int):
+            """Frame i made ready for SLAM (it depends on that frame alone), with its measured and kept pixels."""
+            depth_np, weight_np = confidence.apply(depth_all[i], None if confidence_all is None
+                                                   else confidence_all[i])
+            depth = torch.from_numpy(np.ascontiguousarray(depth_np)).to(device)[None, None]
+            weight = None if weight_np is None else torch.from_numpy(weight_np).to(device)[None, None]
+            rgb = torch.from_numpy(drive.rgb(i)).to(device).permute(2, 0, 1)[None].float() / 255
+            frame = prepare_frame(depth, K, rgb, slam.frame_settings, weight)
+            return frame, int((depth_all[i] > 0).sum()), int((depth_np > 0).sum())
+
         start = time.perf_counter()
-        with Bar(description or drive.name, total=n) as bar:
+        # the next frame is read and prepared (normals, colours) on a second thread while this one is aligned and
+        # fused: the same operations on the same values, so the same poses, in less wall-clock time
+        with Bar(description or drive.name, total=n) as bar, prefetcher() as submit:
+            pending = submit(prepare, 0)
             for i in range(n):
-                depth_np, weight_np = confidence.apply(depth_all[i], None if confidence_all is None
-                                                       else confidence_all[i])
-                measured, kept = measured + int((depth_all[i] > 0).sum()), kept + int((depth_np > 0).sum())
-                depth = torch.from_numpy(np.ascontiguousarray(depth_np)).to(device)[None, None]
-                weight = None if weight_np is None else torch.from_numpy(weight_np).to(device)[None, None]
-                rgb = torch.from_numpy(drive.rgb(i)).to(device).permute(2, 0, 1)[None].float() / 255
-                report = slam.step(depth, K, rgb, torch.from_numpy(T_gt[i]).float().to(device), weight)
+                frame, m, k = pending.result()
+                measured, kept = measured + m, kept + k
+                if i + 1 < n:
+                    pending = submit(prepare, i + 1)
+                report = slam.step_frame(frame, torch.from_numpy(T_gt[i]).float().to(device))
                 bar.advance(status=f"{report.points} points" + ("" if report.accepted else " (step rejected)"))
         seconds = time.perf_counter() - start
         poses = slam.trajectory().detach().cpu().double().numpy()
@@ -267,6 +280,22 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
                 "kept_fraction": round(kept / measured, 4) if measured else 0.0}
         return DriveRun(drive.name, poses, drive.timestamps[:n].copy(), T_gt.copy(), global_map,
                         list(slam.reports), seconds, dict(settings or {}), used)
+
+
+@contextlib.contextmanager
+def prefetcher():
+    """A one-thread pool for work ahead of the frame loop, as ``submit(fn, *args) -> Future``. The thread runs torch
+    with the caller's thread count (a new thread would otherwise get torch's default), so its results are those
+    the caller would compute. On leaving, work not yet started is cancelled and the running one waited for."""
+    import torch
+
+    threads = torch.get_num_threads()
+    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="dcslam-prefetch",
+                                               initializer=torch.set_num_threads, initargs=(threads,)) as pool:
+        try:
+            yield pool.submit
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def output_paths(out_dir: Path, name: str) -> dict[str, Path]:

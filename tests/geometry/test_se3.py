@@ -4,8 +4,8 @@ import pytest
 import torch
 
 from dcslam.errors import DcslamError
-from dcslam.geometry.se3 import (compose, from_rotation_translation, inverse, pose_error, rotate, se3_exp, se3_log,
-                                 skew, so3_exp, so3_log, transform_points)
+from dcslam.geometry.se3 import (compose, from_rotation_translation, inverse, pose_error, rotate, rows_times, se3_exp,
+                                 se3_log, skew, so3_exp, so3_log, transform_points)
 
 TOL = {torch.float32: dict(atol=1e-5, rtol=1e-5), torch.float64: dict(atol=1e-10, rtol=1e-10)}
 
@@ -90,6 +90,28 @@ class TestSE3:
         torch.testing.assert_close(transform_points(T, p), expected)
         torch.testing.assert_close(rotate(T, p), p @ T[:3, :3].T)
         torch.testing.assert_close(transform_points(inverse(T), transform_points(T, p)), p)
+
+    @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+    @pytest.mark.parametrize("n", [0, 1, 7, 4099, 40000])
+    def test_rows_times_gives_the_bits_of_the_plain_product(self, dtype, n):
+        """The fast path (a contiguous matrix, outside autograd) must not change a pose by one bit: SLAM's
+        tables rest on bit-identical runs."""
+        torch.manual_seed(n)
+        T = se3_exp(_random_twists(1, torch.float64))[0].to(dtype)
+        T[:3, 3] *= 100
+        p = (torch.randn(n, 3, dtype=dtype) * 30).contiguous()
+        for M in (T[:3, :3], T[:3, :3].transpose(-1, -2)):         # strided slices of a pose
+            assert torch.equal(rows_times(p, M), p @ M)
+        assert torch.equal(transform_points(T, p), p @ T[:3, :3].transpose(-1, -2) + T[:3, 3])
+        assert torch.equal(rotate(T, p), p @ T[:3, :3].transpose(-1, -2))
+
+    def test_rows_times_keeps_the_graph(self):
+        T = se3_exp(_random_twists(1, torch.float64))[0].requires_grad_()
+        p = torch.randn(6, 3, dtype=torch.float64, requires_grad=True)
+        assert rows_times(p, T[:3, :3]).requires_grad
+        assert torch.autograd.gradcheck(rows_times, (p, T[:3, :3]))
+        with torch.no_grad():
+            assert torch.equal(rows_times(p, T[:3, :3]), p @ T[:3, :3])
 
     def test_pose_error(self):
         T = from_rotation_translation(so3_exp(torch.tensor([0.0, 0.1, 0.0], dtype=torch.float64)),

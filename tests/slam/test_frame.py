@@ -47,3 +47,16 @@ def test_depth_range_and_shapes(street):
     assert float(frame.vertex[..., 2][frame.valid].max()) <= 20.0
     with pytest.raises(DcslamError):
         prepare_frame(torch.zeros(2, 1, H, W), K)
+
+
+def test_frame_maps_are_stored_point_by_point(street):
+    """Odometry and fusion gather whole points from the (H, W, 3) maps: from backproject's channel-first layout
+    that gather is an order of magnitude slower, so the frame keeps them point by point (same values)."""
+    from dcslam.geometry.camera import backproject
+
+    depth, K = street
+    rgb = torch.rand(1, 3, H, W)
+    frame = prepare_frame(depth, K, rgb)
+    assert frame.vertex.is_contiguous() and frame.normal.is_contiguous() and frame.rgb.is_contiguous()
+    assert torch.equal(frame.vertex, backproject(frame.depth, K)[0].permute(1, 2, 0))
+    assert torch.equal(frame.rgb, rgb[0].permute(1, 2, 0))

@@ -42,3 +42,15 @@ def test_metric_settings_follow_the_scene_depth():
     fixed = build_slam(SlamSettings(reference_depth=0))
     fixed.step(torch.full((1, 1, H, W), 2.4), K)
     assert fixed.scale == 1.0
+
+
+def test_a_prepared_frame_gives_the_step_of_its_depth():
+    """step_frame (a frame prepared elsewhere, e.g. on the prefetch thread) is step, bit for bit."""
+    from dcslam.slam.frame import prepare_frame
+
+    depth, K, _ = _sparse_drive(4, step=0.8)
+    a, b = build_slam(SlamSettings()), build_slam(SlamSettings())
+    for i in range(len(depth)):
+        ra = a.step(depth[i:i + 1], K)
+        rb = b.step_frame(prepare_frame(depth[i:i + 1], K, settings=b.frame_settings))
+        assert torch.equal(ra.T_world_cam, rb.T_world_cam) and ra.iterations == rb.iterations

@@ -11,6 +11,59 @@ from dcslam.stages.slam import run_drive, write_outputs
 H, W, N = 48, 160, 4
 
 
+def _write_drive(path, frames=N):
+    scene, K = StreetScene(1), kitti_K(H, W)
+    poses = street_trajectory(frames, step=0.5)
+    rng = np.random.default_rng(0)
+    with DriveWriter(path, K.double().numpy(), H, W, source="synthetic", date="2011_09_26", drive="street",
+                     split="test") as writer:
+        for i in range(frames):
+            dense = scene.render(poses[i], K, H, W).float().numpy()
+            writer.append(DriveFrame(rng.integers(0, 255, (H, W, 3), dtype=np.uint8),
+                                     dense * lidar_mask(H, W).numpy(), dense, poses[i].numpy(), 0.1 * i, i))
+    return K, poses
+
+
+def test_prefetched_frames_give_the_poses_of_a_plain_loop(tmp_path):
+    """run_drive prepares the next frame on a second thread: the poses, the map and the step reports are those of
+    SLAM.step over the same frames, bit for bit."""
+    from dcslam.io.drive import DriveFile, load_depth
+
+    path = tmp_path / "street.h5"
+    K, poses = _write_drive(path, frames=5)
+    for depth in ("sparse", "dense"):
+        run = run_drive(path, depth, build_slam(SlamSettings()))
+        slam = build_slam(SlamSettings())
+        slam.T_world_cam0 = poses[0].float()
+        slam.reset()
+        with DriveFile(path) as drive:
+            frames = load_depth(drive, depth)
+            for i in range(len(drive)):
+                rgb = torch.from_numpy(drive.rgb(i)).permute(2, 0, 1)[None].float() / 255
+                slam.step(torch.from_numpy(np.ascontiguousarray(frames[i]))[None, None], K.float(), rgb,
+                          torch.from_numpy(drive.poses[i]).float())
+        expected = slam.trajectory().double().numpy()
+        assert len(run.reports) == 5
+        assert np.array_equal(run.T_world_cam[:, :3, 3], expected[:, :3, 3]), depth
+        assert [r.iterations for r in run.reports] == [r.iterations for r in slam.reports]
+        assert len(run.map) == len(slam.mapper.global_map())
+
+
+def test_prefetch_errors_reach_the_caller():
+    import pytest
+
+    from dcslam.errors import DcslamError
+    from dcslam.stages.slam import prefetcher
+
+    def fail():
+        raise DcslamError("frame 3 unreadable")
+
+    with prefetcher() as submit:
+        with pytest.raises(DcslamError, match="frame 3"):
+            submit(fail).result()
+        assert submit(torch.get_num_threads).result() == torch.get_num_threads()
+
+
 def test_summary_carries_health_and_the_whole_map(tmp_path):
     scene, K = StreetScene(1), kitti_K(H, W)
     poses = street_trajectory(N, step=0.5)
