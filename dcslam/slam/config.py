@@ -32,6 +32,10 @@ class SlamSettings:
     max_distance: float = field(default=0.5, metadata={"help": "ICP outlier gate, metres.", "min": 0.0})
     max_normal_angle: float = field(default=30.0, metadata={"help": "ICP normal-angle gate, degrees.", "min": 0.0})
     iterations: int = field(default=20, metadata={"help": "ICP iterations per gate stage.", "min": 1})
+    coarse_iterations: int = field(default=0, metadata={
+        "help": "ICP iterations of each wide-gate stage (all but the last of --gate-schedule); 0 = from the depth's "
+                "density: 3 for depth with a value at more than 30 % of the pixels (completed, exact), where wide "
+                "gates only oscillate, --iterations for sparser depth (LiDAR, annotated).", "min": 0})
     voxel_size: float = field(default=0.2, metadata={
         "help": "Map voxel size, metres (for a street; see reference_depth).", "min": 0.0})
     kernel: str = field(default="none", metadata={
@@ -74,6 +78,8 @@ class SlamSettings:
                 raise DcslamError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.iterations < 1:
             raise DcslamError(f"iterations must be >= 1, got {self.iterations}")
+        if self.coarse_iterations < 0:
+            raise DcslamError(f"coarse_iterations must be >= 0, got {self.coarse_iterations}")
         try:
             stages = tuple(float(x) for x in self.gate_schedule.split(","))
         except ValueError:
@@ -111,7 +117,7 @@ def build_slam(settings: SlamSettings = SlamSettings()):
                           max_normal_angle_deg=s.max_normal_angle, iterations=s.iterations,
                           kernel=GemanMcClure() if s.kernel == "gm" else None,
                           adaptive=AdaptiveThreshold() if s.adaptive_threshold else None,
-                          source_voxel=s.source_voxel, hold_below=s.hold_below,
+                          source_voxel=s.source_voxel, hold_below=s.hold_below, coarse_iterations=s.coarse_iterations,
                           coarse_to_fine=tuple(float(x) for x in s.gate_schedule.split(",")))
     mapper = (PointFusion if s.mapper == "pointfusion" else ICPSLAM)(voxel_size=s.voxel_size,
                                                                       window=s.local_map_frames,

@@ -15,7 +15,7 @@ def test_every_field_has_help():
 
 @pytest.mark.parametrize("kwargs", [dict(kernel="huber"), dict(gate_schedule="4,x"), dict(gate_schedule="0"),
                                     dict(source_voxel=-1), dict(local_map_frames=-1), dict(normal_search=-2),
-                                    dict(reference_depth=-1), dict(odometry="orb")])
+                                    dict(reference_depth=-1), dict(odometry="orb"), dict(coarse_iterations=-1)])
 def test_bad_values_are_refused(kwargs):
     with pytest.raises(DcslamError):
         SlamSettings(**kwargs)
@@ -24,12 +24,12 @@ def test_bad_values_are_refused(kwargs):
 def test_build_slam_turns_settings_into_objects():
     slam = build_slam(SlamSettings(odometry="gradicp", mapper="icpslam", association="nn", kernel="gm",
                                    adaptive_threshold=True, gate_schedule="2,1", tolerance=1e-3, source_voxel=0.3,
-                                   local_map_frames=7, keep_global_map=False, normal_search=5))
+                                   local_map_frames=7, keep_global_map=False, normal_search=5, coarse_iterations=4))
     odo = slam.odometry
     assert isinstance(odo.solver, DifferentiableLM) and odo.solver.tolerance == 1e-3
     assert isinstance(odo.association, NearestNeighbourAssociation)
     assert isinstance(odo.kernel, GemanMcClure) and isinstance(odo.adaptive, AdaptiveThreshold)
-    assert odo.coarse_to_fine == (2.0, 1.0) and odo.source_voxel == 0.3
+    assert odo.coarse_to_fine == (2.0, 1.0) and odo.source_voxel == 0.3 and odo.coarse_iterations == 4
     assert isinstance(slam.mapper, ICPSLAM) and slam.mapper.window == 7 and slam.mapper.archive is False
     assert slam.frame_settings.normal_search == 5
 

@@ -9,7 +9,8 @@ import torch
 from dcslam.geometry.se3 import pose_error, se3_exp
 from dcslam.slam.association import NearestNeighbourAssociation, ProjectiveAssociation, view_from_frame
 from dcslam.slam.frame import prepare_frame
-from dcslam.slam.odometry import GroundTruthOdometry, ICPOdometry
+from dcslam.errors import DcslamError
+from dcslam.slam.odometry import DENSE_COARSE_ITERATIONS, GroundTruthOdometry, ICPOdometry, coarse_iterations_for
 from dcslam.slam.scene import StreetScene, kitti_K, street_trajectory
 from dcslam.slam.solvers import DifferentiableLM, GaussNewton, LevenbergMarquardt
 
@@ -34,6 +35,36 @@ def test_recovers_known_motion(pair, solver, association):
     assert result.accepted, result.reason
     dt, dr = pose_error(result.T_world_cam.double(), T[1].double())
     assert float(dt) < 0.02 and math.degrees(float(dr)) < 0.1
+
+
+def test_coarse_iterations_bound_the_wide_gate_stages(pair):
+    """Each wide-gate stage runs at most ``coarse_iterations``; the last stage ``iterations``."""
+    (f0, f1), T, _ = pair
+    odo = ICPOdometry(solver=GaussNewton(tolerance=0.0), iterations=5, coarse_iterations=1)
+    result = odo.estimate(f1, view_from_frame(f0, T[0]), T[0])
+    assert result.iterations == 1 + 1 + 5
+    full = ICPOdometry(solver=GaussNewton(tolerance=0.0), iterations=5, coarse_iterations=5)
+    assert full.estimate(f1, view_from_frame(f0, T[0]), T[0]).iterations == 15
+    with pytest.raises(DcslamError, match="coarse_iterations"):
+        ICPOdometry(coarse_iterations=-1)
+
+
+@pytest.mark.parametrize("source_voxel", [0.0, 0.2])
+def test_dense_frames_get_the_dense_coarse_iterations(pair, source_voxel):
+    """The density is the frame's, not that of the sources left after voxel thinning."""
+    (f0, f1), T, _ = pair
+    assert float(f1.valid.float().mean()) > 0.8
+    odo = ICPOdometry(solver=GaussNewton(tolerance=0.0), iterations=8, source_voxel=source_voxel)
+    result = odo.estimate(f1, view_from_frame(f0, T[0]), T[0])
+    assert result.iterations == 2 * min(DENSE_COARSE_ITERATIONS, 8) + 8
+
+
+def test_coarse_iterations_follow_the_density():
+    """0 means: from the frame's density. Sparse depth (LiDAR, annotated) keeps ``iterations`` in every stage;
+    dense depth gets :data:`DENSE_COARSE_ITERATIONS` (never more than ``iterations``)."""
+    assert coarse_iterations_for(0.05, 20) == 20 and coarse_iterations_for(0.2, 20) == 20
+    assert coarse_iterations_for(0.9, 20) == min(DENSE_COARSE_ITERATIONS, 20)
+    assert coarse_iterations_for(0.9, 1) == 1
 
 
 def test_recovers_perturbation_of_same_frame(pair):
