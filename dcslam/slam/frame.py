@@ -1,7 +1,7 @@
 """One input frame made ready for odometry and mapping: vertex map, normals, validity, colours."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 
@@ -63,7 +63,9 @@ class Frame:
     (depth in range, a normal, and a weight above 0); rgb (H, W, 3) in [0, 1] or None; K (3, 3); weight (H, W) in
     [0, 1] or None (every pixel counts fully): how much each pixel's point is trusted, e.g. a completer's confidence.
     ICP multiplies its residuals' robust weights by it and fusion its surfel confidences; a pixel of weight 0 is
-    invalid (neither aligned, nor counted as evidence, nor fused).
+    invalid (neither aligned, nor counted as evidence, nor fused). ``cache``: what odometry and mapping computed
+    from the frame alone (its sources, its camera-frame surfels), keyed by what else it depends on; they fill it
+    ahead of time on another thread (:meth:`dcslam.slam.pipeline.SLAM.precompute`) or when first needed.
     """
 
     depth: torch.Tensor
@@ -73,6 +75,7 @@ class Frame:
     rgb: torch.Tensor | None
     K: torch.Tensor
     weight: torch.Tensor | None = None
+    cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)   # fresh on replace()
 
     @property
     def shape(self) -> tuple[int, int]:

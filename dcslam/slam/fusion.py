@@ -53,18 +53,36 @@ def surfel_radius(frame: Frame, points_cam: torch.Tensor, normals_cam: torch.Ten
     return math.sqrt(2) * z / f / cos
 
 
+def camera_surfels(frame: Frame):
+    """Valid pixels of a frame as camera-frame surfels: (pixels (F,), points (F, 3), normals (F, 3), colors (F, 3),
+    radius (F,)). They depend on the frame alone: kept in :attr:`Frame.cache`, so they may be computed ahead."""
+    if "surfels" not in frame.cache:
+        pixels = torch.nonzero(frame.valid.reshape(-1)).squeeze(1)
+        v_cam = frame.vertex.reshape(-1, 3).index_select(0, pixels)
+        n_cam = frame.normal.reshape(-1, 3).index_select(0, pixels)
+        if frame.rgb is not None:
+            colors = frame.rgb.reshape(-1, 3).index_select(0, pixels)
+        else:
+            colors = torch.full_like(v_cam, 0.5)
+        frame.cache["surfels"] = (pixels, v_cam, n_cam, colors, surfel_radius(frame, v_cam, n_cam))
+    return frame.cache["surfels"]
+
+
 def frame_surfels(frame: Frame, T_world_cam: torch.Tensor):
     """Valid pixels of a frame as world-frame surfels: (pixels (F,), points (F, 3), normals (F, 3), colors (F, 3),
     radius (F,), points in the camera frame (F, 3))."""
-    pixels = torch.nonzero(frame.valid.reshape(-1)).squeeze(1)
-    v_cam = frame.vertex.reshape(-1, 3).index_select(0, pixels)
-    n_cam = frame.normal.reshape(-1, 3).index_select(0, pixels)
+    pixels, v_cam, n_cam, colors, radius = camera_surfels(frame)
     T = T_world_cam.to(v_cam.dtype)
-    if frame.rgb is not None:
-        colors = frame.rgb.reshape(-1, 3).index_select(0, pixels)
-    else:
-        colors = torch.full_like(v_cam, 0.5)
-    return pixels, transform_points(T, v_cam), rotate(T, n_cam), colors, surfel_radius(frame, v_cam, n_cam), v_cam
+    return pixels, transform_points(T, v_cam), rotate(T, n_cam), colors, radius, v_cam
+
+
+def fusion_weights(frame: Frame, sigma: float) -> torch.Tensor:
+    """Keller's weight times the frame's own weight at the pixels of :func:`camera_surfels` (cached per sigma)."""
+    key = ("fusion-weights", sigma)
+    if key not in frame.cache:
+        pixels = camera_surfels(frame)[0]
+        frame.cache[key] = surfel_weights(frame, pixels, sigma) * pixel_weights(frame, pixels)
+    return frame.cache[key]
 
 
 class PointFusion(Mapper):
@@ -102,7 +120,7 @@ class PointFusion(Mapper):
         dtype, device = frame.vertex.dtype, frame.vertex.device
         pm = self.map if self.map is not None else PointMap.empty(dtype, device)
         pixels, p_w, n_w, colors, radius, v_cam = frame_surfels(frame, T_world_cam)
-        weight = surfel_weights(frame, pixels, self.sigma) * pixel_weights(frame, pixels)
+        weight = fusion_weights(frame, self.sigma)
         target = torch.full_like(pixels, -1)
         free_space = torch.zeros(len(pm), dtype=torch.bool, device=device)
         if len(pm) and len(pixels):
@@ -121,6 +139,10 @@ class PointFusion(Mapper):
         self.map = self._slide(pm)
         self.frames += 1
         return self.map
+
+    def precompute(self, frame: Frame) -> None:
+        """Do the work on ``frame`` that does not depend on the map or the pose (its surfels and weights)."""
+        fusion_weights(frame, self.sigma)
 
     def _associate(self, pm: PointMap, frame: Frame, T_world_cam: torch.Tensor, pixels: torch.Tensor,
                    v_cam: torch.Tensor, n_w: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

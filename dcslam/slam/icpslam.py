@@ -8,7 +8,7 @@ from __future__ import annotations
 import torch
 
 from dcslam.slam.frame import Frame
-from dcslam.slam.fusion import frame_surfels, pixel_weights
+from dcslam.slam.fusion import camera_surfels, frame_surfels, pixel_weights
 from dcslam.slam.pointmap import Mapper, PointMap, assign_voxels, merge, voxel_keys
 
 
@@ -28,6 +28,10 @@ class ICPSLAM(Mapper):
         self.voxel_size, self.keep_graph, self.splat = voxel_size, keep_graph, splat
         self.window, self.archive = window, archive
         self.reset()
+
+    def precompute(self, frame: Frame) -> None:
+        """Do the work on ``frame`` that does not depend on the map or the pose (its surfels)."""
+        camera_surfels(frame)
 
     def integrate(self, frame: Frame, T_world_cam: torch.Tensor) -> PointMap:
         dtype, device = frame.vertex.dtype, frame.vertex.device

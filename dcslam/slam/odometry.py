@@ -249,17 +249,11 @@ class ICPOdometry:
         T_init = T_init.to(frame.vertex.dtype)
         if model is None:
             return OdometryResult(T_init, False, "empty model")
-        pixels = torch.nonzero(frame.valid.reshape(-1)).squeeze(1)
+        valid, source, normals, weights = self.sources(frame)
+        if valid < self.min_inliers:
+            return OdometryResult(T_init, False, f"{valid} valid source points", sources=valid)
         H, W = frame.shape
-        coarse = self.coarse_iterations or coarse_iterations_for(pixels.numel() / max(H * W, 1), self.iterations)
-        source = frame.vertex.reshape(-1, 3).index_select(0, pixels)
-        if source.shape[0] < self.min_inliers:
-            return OdometryResult(T_init, False, f"{source.shape[0]} valid source points", sources=source.shape[0])
-        if self.source_voxel > 0:                   # gather the kept pixels' normals and weights only
-            keep = voxel_representatives(source, self.source_voxel)
-            source, pixels = source.index_select(0, keep), pixels.index_select(0, keep)
-        normals = frame.normal.reshape(-1, 3).index_select(0, pixels)
-        weights = None if frame.weight is None else frame.weight.reshape(-1).index_select(0, pixels)
+        coarse = self.coarse_iterations or coarse_iterations_for(valid / max(H * W, 1), self.iterations)
         associate = self.association.prepare(model)
         gate = self.adaptive.gate() if self.adaptive is not None else self.max_distance
         T, iterations = T_init, 0
@@ -290,6 +284,27 @@ class ICPOdometry:
         if self.adaptive is not None:
             self.adaptive.update(T_init, T, T_last if T_last is not None else T_init)
         return OdometryResult(T, True, "", **base)
+
+    def sources(self, frame: Frame) -> tuple[int, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """(number of valid pixels, source points (F, 3), their normals (F, 3), their weights (F,) or None) of a
+        frame: every valid pixel, or one per ``source_voxel``. They depend on the frame alone, so they are kept in
+        :attr:`Frame.cache` (per voxel size) and may be computed ahead, on another thread (:meth:`precompute`)."""
+        key = ("icp-sources", self.source_voxel)
+        if key not in frame.cache:
+            pixels = torch.nonzero(frame.valid.reshape(-1)).squeeze(1)
+            valid = pixels.numel()
+            source = frame.vertex.reshape(-1, 3).index_select(0, pixels)
+            if self.source_voxel > 0 and valid >= self.min_inliers:   # gather the kept pixels' normals only
+                keep = voxel_representatives(source, self.source_voxel)
+                source, pixels = source.index_select(0, keep), pixels.index_select(0, keep)
+            normals = frame.normal.reshape(-1, 3).index_select(0, pixels)
+            weights = None if frame.weight is None else frame.weight.reshape(-1).index_select(0, pixels)
+            frame.cache[key] = (valid, source, normals, weights)
+        return frame.cache[key]
+
+    def precompute(self, frame: Frame) -> None:
+        """Do the work on ``frame`` that does not depend on the map or the pose (:meth:`sources`)."""
+        self.sources(frame)
 
     @staticmethod
     def _conditioning(lin: Linearization, source: torch.Tensor) -> float:

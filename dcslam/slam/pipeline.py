@@ -152,6 +152,14 @@ class SLAM:
         start = time.perf_counter()
         return self.step_frame(prepare_frame(depth, K, rgb, self.frame_settings, weight), T_gt, start)
 
+    def precompute(self, frame: Frame) -> None:
+        """Do the odometry's and the mapper's work on ``frame`` that depends on the frame alone (kept in
+        :attr:`Frame.cache`): safe on another thread while :meth:`step_frame` processes the previous frame, and the
+        results are the ones step_frame would compute."""
+        for part in (self.odometry, self.mapper):
+            if hasattr(part, "precompute"):
+                part.precompute(frame)
+
     def step_frame(self, frame: Frame, T_gt: torch.Tensor | None = None, start: float | None = None) -> StepReport:
         """Process one frame already made by ``prepare_frame(depth, K, rgb, self.frame_settings, weight)``, which
         depends on the frame alone: a caller may prepare the next frame on another thread while this one is

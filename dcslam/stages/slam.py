@@ -259,11 +259,12 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
             weight = None if weight_np is None else torch.from_numpy(weight_np).to(device)[None, None]
             rgb = torch.from_numpy(drive.rgb(i)).to(device).permute(2, 0, 1)[None].float() / 255
             frame = prepare_frame(depth, K, rgb, slam.frame_settings, weight)
+            slam.precompute(frame)
             return frame, int((depth_all[i] > 0).sum()), int((depth_np > 0).sum())
 
         start = time.perf_counter()
-        # the next frame is read and prepared (normals, colours) on a second thread while this one is aligned and
-        # fused: the same operations on the same values, so the same poses, in less wall-clock time
+        # the next frame is read and prepared (normals, colours, ICP sources, surfels) on a second thread while this
+        # one is aligned and fused: the same operations on the same values, so the same poses, in less wall time
         with Bar(description or drive.name, total=n) as bar, prefetcher() as submit:
             pending = submit(prepare, 0)
             for i in range(n):

@@ -60,3 +60,20 @@ def test_frame_maps_are_stored_point_by_point(street):
     assert frame.vertex.is_contiguous() and frame.normal.is_contiguous() and frame.rgb.is_contiguous()
     assert torch.equal(frame.vertex, backproject(frame.depth, K)[0].permute(1, 2, 0))
     assert torch.equal(frame.rgb, rgb[0].permute(1, 2, 0))
+
+
+def test_a_replaced_frame_starts_with_an_empty_cache(street):
+    """Work cached on a frame (ICP sources, surfels) is not carried to a copy with other valid pixels."""
+    from dataclasses import replace
+
+    from dcslam.slam.odometry import ICPOdometry
+
+    depth, K = street
+    frame = prepare_frame(depth, K)
+    odo = ICPOdometry(source_voxel=0.5)
+    full = odo.sources(frame)
+    assert odo.sources(frame) is full                               # computed once
+    half = replace(frame, valid=frame.valid & (torch.arange(W) < W // 2))
+    assert not half.cache and odo.sources(half)[0] < full[0]
+    odo.source_voxel = 0.25                                         # another voxel size: computed again
+    assert odo.sources(frame)[1].shape[0] > full[1].shape[0]

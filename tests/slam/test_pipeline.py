@@ -48,9 +48,14 @@ def test_a_prepared_frame_gives_the_step_of_its_depth():
     """step_frame (a frame prepared elsewhere, e.g. on the prefetch thread) is step, bit for bit."""
     from dcslam.slam.frame import prepare_frame
 
-    depth, K, _ = _sparse_drive(4, step=0.8)
-    a, b = build_slam(SlamSettings()), build_slam(SlamSettings())
-    for i in range(len(depth)):
-        ra = a.step(depth[i:i + 1], K)
-        rb = b.step_frame(prepare_frame(depth[i:i + 1], K, settings=b.frame_settings))
-        assert torch.equal(ra.T_world_cam, rb.T_world_cam) and ra.iterations == rb.iterations
+    for mapper in ("pointfusion", "icpslam"):
+        depth, K, _ = _sparse_drive(4, step=0.8)
+        a, b = build_slam(SlamSettings(mapper=mapper)), build_slam(SlamSettings(mapper=mapper))
+        for i in range(len(depth)):
+            ra = a.step(depth[i:i + 1], K)
+            frame = prepare_frame(depth[i:i + 1], K, settings=b.frame_settings)
+            b.precompute(frame)                                      # what the prefetch thread does
+            assert frame.cache
+            rb = b.step_frame(frame)
+            assert torch.equal(ra.T_world_cam, rb.T_world_cam) and ra.iterations == rb.iterations
+        assert torch.equal(a.map.points, b.map.points)
