@@ -11,10 +11,17 @@ import sys
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
-def one_thread() -> None:
-    """Worker initializer: one thread per library in this process (torch, loaded later, reads OMP_NUM_THREADS)."""
+#: Set in the workers of a pool of more than one process: they share every core with their siblings.
+SHARED_CORES = "DCSLAM_SHARED_CORES"
+
+
+def one_thread(shared: bool = False) -> None:
+    """Worker initializer: one thread per library in this process (torch, loaded later, reads OMP_NUM_THREADS);
+    ``shared``: sibling workers keep the other cores busy (:func:`cores_shared`)."""
     for name in THREAD_VARIABLES:
         os.environ[name] = "1"
+    if shared:
+        os.environ[SHARED_CORES] = "1"
     torch = sys.modules.get("torch")
     if torch is not None:
         torch.set_num_threads(1)
@@ -25,5 +32,12 @@ def process_pool(jobs: int, tasks: int):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    return ProcessPoolExecutor(max_workers=max(1, min(jobs, tasks)), mp_context=multiprocessing.get_context("spawn"),
-                               initializer=one_thread)
+    workers = max(1, min(jobs, tasks))
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=one_thread, initargs=(workers > 1,))
+
+
+def cores_shared() -> bool:
+    """Whether this process is one of several pool workers, which between them keep every core busy: work that
+    would run on a second thread to save wall time (e.g. ``dcslam slam``'s prefetch) only slows its siblings."""
+    return os.environ.get(SHARED_CORES) == "1"

@@ -265,7 +265,10 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
         start = time.perf_counter()
         # the next frame is read and prepared (normals, colours, ICP sources, surfels) on a second thread while this
         # one is aligned and fused: the same operations on the same values, so the same poses, in less wall time
-        with Bar(description or drive.name, total=n) as bar, prefetcher() as submit:
+        # (not in a pool worker: its siblings already keep every core busy, and a second thread only slows them)
+        from dcslam.workers import cores_shared
+
+        with Bar(description or drive.name, total=n) as bar, prefetcher(not cores_shared()) as submit:
             pending = submit(prepare, 0)
             for i in range(n):
                 frame, m, k = pending.result()
@@ -284,12 +287,25 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
 
 
 @contextlib.contextmanager
-def prefetcher():
+def prefetcher(enabled: bool = True):
     """A one-thread pool for work ahead of the frame loop, as ``submit(fn, *args) -> Future``. The thread runs torch
     with the caller's thread count (a new thread would otherwise get torch's default), so its results are those
-    the caller would compute. On leaving, work not yet started is cancelled and the running one waited for."""
+    the caller would compute. On leaving, work not yet started is cancelled and the running one waited for.
+    Not ``enabled`` (e.g. in a pool worker whose siblings keep the other cores busy): ``submit`` runs the work at
+    once, in the caller's thread."""
     import torch
 
+    if not enabled:
+        def submit(fn, *args):
+            future = concurrent.futures.Future()
+            try:
+                future.set_result(fn(*args))
+            except BaseException as exc:              # delivered by future.result(), as from the pool
+                future.set_exception(exc)
+            return future
+
+        yield submit
+        return
     threads = torch.get_num_threads()
     with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="dcslam-prefetch",
                                                initializer=torch.set_num_threads, initargs=(threads,)) as pool:

@@ -50,6 +50,8 @@ def test_prefetched_frames_give_the_poses_of_a_plain_loop(tmp_path):
 
 
 def test_prefetch_errors_reach_the_caller():
+    import threading
+
     import pytest
 
     from dcslam.errors import DcslamError
@@ -58,10 +60,29 @@ def test_prefetch_errors_reach_the_caller():
     def fail():
         raise DcslamError("frame 3 unreadable")
 
-    with prefetcher() as submit:
-        with pytest.raises(DcslamError, match="frame 3"):
-            submit(fail).result()
-        assert submit(torch.get_num_threads).result() == torch.get_num_threads()
+    for enabled in (True, False):
+        with prefetcher(enabled) as submit:
+            with pytest.raises(DcslamError, match="frame 3"):
+                submit(fail).result()
+            assert submit(torch.get_num_threads).result() == torch.get_num_threads()
+            on_caller = submit(threading.current_thread).result() is threading.current_thread()
+            assert on_caller is not enabled
+
+
+def test_pool_workers_do_not_prefetch(monkeypatch):
+    """Workers of a pool of several processes share the cores: no second thread there (one worker: as usual)."""
+    from dcslam.workers import SHARED_CORES, cores_shared, one_thread
+
+    for name in (SHARED_CORES, "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        monkeypatch.delenv(name, raising=False)
+    threads = torch.get_num_threads()
+    try:
+        one_thread(False)
+        assert not cores_shared()
+        one_thread(True)
+        assert cores_shared()
+    finally:
+        torch.set_num_threads(threads)
 
 
 def test_summary_carries_health_and_the_whole_map(tmp_path):
