@@ -9,6 +9,7 @@ before an atomic rename), so a swallowed interrupt still stops the command and p
 from __future__ import annotations
 
 import signal
+import sys
 
 _received = False
 _told = False
@@ -21,8 +22,22 @@ def _handler(signum, frame) -> None:
 
 
 def install() -> None:
-    """Record SIGINT and raise :class:`KeyboardInterrupt` (the command line calls this once, in the main thread)."""
+    """Record SIGINT and raise :class:`KeyboardInterrupt` (the command line calls this once, in the main thread).
+
+    A :class:`KeyboardInterrupt` that Python cannot raise (it landed in a finalizer or a weak-reference callback) is
+    not printed as ``Exception ignored ... Traceback``: it is recorded, and :func:`check` raises it at the next safe
+    point. Every other unraisable exception still goes to Python's own hook."""
     signal.signal(signal.SIGINT, _handler)
+    default = sys.unraisablehook
+
+    def hook(unraisable) -> None:
+        global _received
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            _received = True
+            return
+        default(unraisable)
+
+    sys.unraisablehook = hook
 
 
 def received() -> bool:
