@@ -80,13 +80,21 @@ def _grid_normals(vertex: torch.Tensor, valid: torch.Tensor,
     z = P[..., 2].detach()
     tx, ok_x = _grid_tangent(P, z, v, 2, max_relative_gap)
     ty, ok_y = _grid_tangent(P, z, v, 1, max_relative_gap)
+    n, ok = _unit_normals(tx, ty, v & ok_x & ok_y, P)
+    return n.permute(0, 3, 1, 2), ok[:, None]
+
+
+def _unit_normals(tx: torch.Tensor, ty: torch.Tensor, ok: torch.Tensor,
+                  points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Unit normals from the tangents along rows and columns (their cross product), turned to face the camera;
+    zero where ``ok`` is false or the tangents are parallel. Shape: tx, ty, points (..., 3), ok (...) ->
+    (normals (..., 3), ok (...))."""
     n = torch.cross(tx, ty, dim=-1)
     norm2 = (n * n).sum(-1, keepdim=True)
-    ok = v & ok_x & ok_y & (norm2[..., 0] > 1e-20)
+    ok = ok & (norm2[..., 0] > 1e-20)
     n = torch.where(ok[..., None], n / torch.sqrt(torch.where(ok[..., None], norm2, torch.ones_like(norm2))),
                     torch.zeros_like(n))
-    n = torch.where(((n * P).sum(-1, keepdim=True) > 0), -n, n)
-    return n.permute(0, 3, 1, 2), ok[:, None]
+    return torch.where(((n * points).sum(-1, keepdim=True) > 0), -n, n), ok
 
 
 def vertex_normals(vertex: torch.Tensor, valid: torch.Tensor | None = None, search: int = 1,
@@ -137,12 +145,7 @@ def vertex_normals(vertex: torch.Tensor, valid: torch.Tensor | None = None, sear
         raster = torch.arange(B * H * W, device=idx.device).view(B, H, W).transpose(1, 2)
         order = rank[raster[valid[:, 0].transpose(1, 2)]]
     ty, ok_y = _tangent(points, order, (b * W + u)[order], v[order], search, max_relative_gap)
-    n = torch.cross(tx, ty, dim=1)
-    norm2 = (n * n).sum(1, keepdim=True)
-    ok = ok_x & ok_y & (norm2[:, 0] > 1e-20)
-    n = torch.where(ok[:, None], n / torch.sqrt(torch.where(ok[:, None], norm2, torch.ones_like(norm2))),
-                    torch.zeros_like(n))
-    n = torch.where(((n * points).sum(1, keepdim=True) > 0), -n, n)
+    n, ok = _unit_normals(tx, ty, ok_x & ok_y, points)
     normals = torch.zeros(B * H * W, 3, dtype=vertex.dtype, device=vertex.device).index_put((idx,), n)
     mask = torch.zeros(B * H * W, dtype=torch.bool, device=vertex.device).index_put((idx,), ok)
     return normals.view(B, H, W, 3).permute(0, 3, 1, 2), mask.view(B, 1, H, W)
