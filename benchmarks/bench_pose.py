@@ -6,11 +6,11 @@ A generated drive (``dcslam synth`` + ``prepare-kitti``, full resolution) gives 
 each configuration (back-propagating through every LM iteration or only the last k, ICP source thinning by voxel or
 by a random subset), a fresh process runs one training step: network forward, pose loss (differentiable
 frame-to-model ICP, 3 gate stages: the last ``--iterations`` LM iterations, the two wide ones as many on sparse
-depth and at most 3 on a network's dense depth), backward, optimiser step. Printed per
-configuration: seconds of the step (and of the loss alone), peak resident memory of the process (``ru_maxrss``) and
-its growth over the step, and the pose error. A configuration that passes ``--limit-gb`` of address space is
-reported as such. Figures depend on the machine and on what else runs on it: read them next to the machine line.
-"""
+depth and at most 3 on a network's dense depth, which a random subset of its sources no longer is), backward,
+optimiser step. Printed per configuration: seconds of the step (and of the loss alone), peak resident memory of the
+process (``ru_maxrss``) and its growth over the step, and the pose error. A configuration that passes ``--limit-gb``
+of address space is reported as such. Figures depend on the machine and on what else runs on it: read them next to
+the machine line."""
 from __future__ import annotations
 
 import argparse
@@ -91,11 +91,11 @@ def main() -> None:
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
         print(json.dumps(one_step(args.step[0], args.frames, args.model, args.iterations, CONFIGS[args.step[1]])))
         return
-    from dcslam.slam.odometry import DENSE_COARSE_ITERATIONS
+    from dcslam.slam.odometry import coarse_iterations_for
 
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, torch 1 thread; "
           f"{args.model}, window of {args.frames} frames, 3 gate stages, the last of {args.iterations} LM iterations "
-          f"(the wide ones: at most {min(DENSE_COARSE_ITERATIONS, args.iterations)} on dense depth)", flush=True)
+          f"(the wide ones: {coarse_iterations_for(1.0, args.iterations)} on dense depth)", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         drive = make_drive(Path(tmp), args.frames)
         print(f"{'configuration':<38}{'step s':>8}{'loss s':>8}{'peak GB':>9}{'+GB':>7}{'pose':>8}{'t (m)':>8}")

@@ -22,8 +22,8 @@ SPARSE_REFERENCE_FRACTION = 0.01
 
 
 #: Valid-pixel fraction above which depth counts as dense (completed or exact depth: the adjacent pixels are the
-#: normal neighbours, :func:`normal_search_for`). LiDAR depth is below 6 % valid and KITTI's annotated depth about
-#: 20 %.
+#: normal neighbours, :func:`normal_search_for`). On generated drives 64-beam LiDAR depth has a value at about 4 %
+#: of the pixels, the annotated (accumulated) depth at about 21 %, IP-Basic's completion at all of them.
 DENSE_FRACTION = 0.3
 
 
@@ -80,6 +80,15 @@ class Frame:
     @property
     def shape(self) -> tuple[int, int]:
         return tuple(self.depth.shape[-2:])
+
+
+def valid_points(frame: Frame) -> tuple[torch.Tensor, torch.Tensor]:
+    """(flat indices of the valid pixels (F,), their camera-frame points (F, 3)), gathered once per frame (kept in
+    :attr:`Frame.cache`) for both the ICP sources and the surfels."""
+    if "valid-points" not in frame.cache:
+        pixels = torch.nonzero(frame.valid.reshape(-1)).squeeze(1)
+        frame.cache["valid-points"] = (pixels, frame.vertex.reshape(-1, 3).index_select(0, pixels))
+    return frame.cache["valid-points"]
 
 
 def prepare_frame(depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None = None,

@@ -20,7 +20,7 @@ import torch
 
 from dcslam.geometry.camera import project
 from dcslam.geometry.se3 import inverse, rotate, transform_points
-from dcslam.slam.frame import Frame
+from dcslam.slam.frame import Frame, valid_points
 from dcslam.slam.pointmap import Mapper, PointMap, assign_voxels, merge, voxel_keys
 
 
@@ -57,8 +57,7 @@ def camera_surfels(frame: Frame):
     """Valid pixels of a frame as camera-frame surfels: (pixels (F,), points (F, 3), normals (F, 3), colors (F, 3),
     radius (F,)). They depend on the frame alone: kept in :attr:`Frame.cache`, so they may be computed ahead."""
     if "surfels" not in frame.cache:
-        pixels = torch.nonzero(frame.valid.reshape(-1)).squeeze(1)
-        v_cam = frame.vertex.reshape(-1, 3).index_select(0, pixels)
+        pixels, v_cam = valid_points(frame)
         n_cam = frame.normal.reshape(-1, 3).index_select(0, pixels)
         if frame.rgb is not None:
             colors = frame.rgb.reshape(-1, 3).index_select(0, pixels)

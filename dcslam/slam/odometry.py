@@ -17,7 +17,7 @@ import torch
 from dcslam.errors import DcslamError
 from dcslam.geometry.se3 import rotate, rows_times, transform_points
 from dcslam.slam.association import ProjectiveAssociation
-from dcslam.slam.frame import DENSE_FRACTION, Frame
+from dcslam.slam.frame import DENSE_FRACTION, Frame, valid_points
 from dcslam.slam.pointmap import ModelView, voxel_representatives
 from dcslam.slam.robust import Quadratic
 from dcslam.slam.solvers import GaussNewton, Linearization
@@ -291,9 +291,8 @@ class ICPOdometry:
         :attr:`Frame.cache` (per voxel size) and may be computed ahead, on another thread (:meth:`precompute`)."""
         key = ("icp-sources", self.source_voxel)
         if key not in frame.cache:
-            pixels = torch.nonzero(frame.valid.reshape(-1)).squeeze(1)
+            pixels, source = valid_points(frame)
             valid = pixels.numel()
-            source = frame.vertex.reshape(-1, 3).index_select(0, pixels)
             if self.source_voxel > 0 and valid >= self.min_inliers:   # gather the kept pixels' normals only
                 keep = voxel_representatives(source, self.source_voxel)
                 source, pixels = source.index_select(0, keep), pixels.index_select(0, keep)

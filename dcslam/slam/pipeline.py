@@ -11,7 +11,7 @@ import torch
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_depth
 from dcslam.slam.fusion import PointFusion
-from dcslam.slam.frame import Frame, FrameSettings, prepare_frame
+from dcslam.slam.frame import Frame, FrameSettings, prepare_frame, valid_points
 from dcslam.slam.health import HealthRules, assess, summarise
 from dcslam.slam.odometry import GroundTruthOdometry, OdometryResult
 from dcslam.slam.pointmap import PointMap
@@ -169,7 +169,7 @@ class SLAM:
         T_init = self._prediction(frame.vertex.dtype, frame.vertex.device)
         index = len(self.poses)
         if index == 0 and self.reference_depth_m > 0 and bool(frame.valid.any()):
-            median = float(frame.vertex[..., 2][frame.valid].median())
+            median = float(valid_points(frame)[1][:, 2].median())
             self._set_scale(min(1.0, median / self.reference_depth_m))
         if index == 0:
             T = T_gt.to(T_init.dtype) if (T_gt is not None and isinstance(self.odometry, GroundTruthOdometry)) \

@@ -9,7 +9,6 @@ The configuration extends :class:`dcslam.slam.config.SlamSettings`, so a field a
 """
 from __future__ import annotations
 
-import concurrent.futures
 import contextlib
 import time
 from dataclasses import dataclass, field, fields
@@ -236,6 +235,7 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
     from dcslam.io.drive import DriveFile, load_depth_and_confidence
     from dcslam.progress import Bar
     from dcslam.slam.frame import prepare_frame
+    from dcslam.workers import cores_shared
 
     with DriveFile(drive_path) as drive:
         n = len(drive) if not frames else min(frames, len(drive))
@@ -266,8 +266,6 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
         # the next frame is read and prepared (normals, colours, ICP sources, surfels) on a second thread while this
         # one is aligned and fused: the same operations on the same values, so the same poses, in less wall time
         # (not in a pool worker: its siblings already keep every core busy, and a second thread only slows them)
-        from dcslam.workers import cores_shared
-
         with Bar(description or drive.name, total=n) as bar, prefetcher(not cores_shared()) as submit:
             pending = submit(prepare, 0)
             for i in range(n):
@@ -293,6 +291,8 @@ def prefetcher(enabled: bool = True):
     the caller would compute. On leaving, work not yet started is cancelled and the running one waited for.
     Not ``enabled`` (e.g. in a pool worker whose siblings keep the other cores busy): ``submit`` runs the work at
     once, in the caller's thread."""
+    import concurrent.futures
+
     import torch
 
     if not enabled:
@@ -306,13 +306,13 @@ def prefetcher(enabled: bool = True):
 
         yield submit
         return
-    threads = torch.get_num_threads()
-    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="dcslam-prefetch",
-                                               initializer=torch.set_num_threads, initargs=(threads,)) as pool:
-        try:
-            yield pool.submit
-        finally:
-            pool.shutdown(wait=True, cancel_futures=True)
+    pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="dcslam-prefetch",
+                                                 initializer=torch.set_num_threads,
+                                                 initargs=(torch.get_num_threads(),))
+    try:
+        yield pool.submit
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def output_paths(out_dir: Path, name: str) -> dict[str, Path]:
