@@ -108,7 +108,7 @@ RESUMABLE = ("epochs", "device")  # what a resumed run may change: more epochs, 
 # config.json records the drives and the model a run starts from relative to the workspace holding the run (the folder
 # above runs/<name>/), so that a workspace can be moved or copied and its runs resumed; records without this marker
 # (written before) hold paths as they were given
-PATHS = ("paths_relative_to", "workspace")
+RELATIVE_PATHS = {"paths_relative_to": "workspace"}
 SETTING_KEYS = {"init_model": "init"}  # a TrainConfig field recorded under another key
 
 
@@ -149,7 +149,7 @@ def recorded_config(run_dir: Path) -> TrainConfig:
             raise TypeError("settings is not a mapping")
     except (OSError, KeyError, TypeError, json.JSONDecodeError) as exc:
         raise DcslamError(f"{path}: cannot resume from it ({exc})") from None
-    root = workspace_of(run_dir) if record.get(PATHS[0]) == PATHS[1] else None
+    root = workspace_of(run_dir) if RELATIVE_PATHS.items() <= record.items() else None
     keys = {SETTING_KEYS.get(f.name, f.name): f.name for f in fields(TrainConfig)}
     values = {keys[k]: v for k, v in settings.items() if k in keys}
 
@@ -240,7 +240,7 @@ def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resu
             settings["input_beams"] = input_beams(config.input)
             if config.input_mix:
                 settings["input_beams"] = [input_beams(kind) for kind in config.input_mix]
-            write_json_atomic(run_dir / "config.json", {**stage_config("train", settings), PATHS[0]: PATHS[1]})
+            write_json_atomic(run_dir / "config.json", {**stage_config("train", settings), **RELATIVE_PATHS})
         result = train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world,
                             on_epoch=lambda: plot_training_curves(run_dir / "curves.png", run_dir / "metrics.jsonl"))
         if resume and rank == 0:  # only once the epochs are trained
