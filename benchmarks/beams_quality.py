@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from dataclasses import MISSING, asdict, fields
 from pathlib import Path
 
 import numpy as np
@@ -80,17 +79,13 @@ def score_task(spec: tuple, drives: list[Path], kind: str) -> tuple[float, float
 
 def train_task(run: Path, config, reuse: bool) -> str:
     """Train one run (or check and take the one there with ``reuse``); returns its summary line."""
-    from dcslam.stages.train import read_result, train
+    from dcslam.stages.train import read_result, recorded_config, settings_record, train
 
     start = time.perf_counter()
     if reuse and (run / "model.pt").exists():
-        same = json.loads((run / "config.json").read_text())["settings"]
-        # an option added to TrainConfig after the run was trained counts as its default there
-        defaults = json.loads(json.dumps({f.name: f.default if f.default is not MISSING else f.default_factory()
-                                          for f in fields(config) if f.default is not MISSING
-                                          or f.default_factory is not MISSING}, default=str))
-        differ = [k for k, v in json.loads(json.dumps(asdict(config), default=str)).items()
-                  if k != "device" and same.get(k, defaults.get(k)) != v]
+        # the run's recorded configuration (an option added since it was trained counts as its default there)
+        same = settings_record(recorded_config(run), run)
+        differ = [k for k, v in settings_record(config, run).items() if k != "device" and same[k] != v]
         if differ:
             raise SystemExit(f"{run} was trained with other options ({', '.join(differ)}); drop --reuse")
         result, how = read_result(run), "reused"

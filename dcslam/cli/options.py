@@ -95,7 +95,7 @@ def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, rep
     fields = options_of(config_cls)
 
     def command(ctx: typer.Context, **kwargs):
-        from dcslam.stages.config import from_mapping, read_config_file, to_toml
+        from dcslam.stages.config import config_key, from_mapping, read_config_file, to_toml
         from dcslam.workspace import Workspace
 
         values = {}
@@ -106,7 +106,7 @@ def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, rep
         for field in fields:
             given = ctx.get_parameter_source(field.name)
             if given is not None and given.name != "DEFAULT":
-                values[field.name] = _plain(kwargs[field.name])
+                values[config_key(field)] = _plain(kwargs[field.name])
         config = from_mapping(config_cls, values, source)
         ws = Workspace.resolve(kwargs.get("workspace"))
         if prepare is not None:

@@ -29,14 +29,15 @@ The experiment, on drive files whose ``depth/dense`` is clean sensor depth (e.g.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 from torch import nn
 
-from dcslam.depth.data import check_view, frame_windows
+from dcslam.depth.config import DenoiseConfig
+from dcslam.depth.data import frame_windows
 from dcslam.depth.maps import MapChamfer
 from dcslam.errors import DcslamError
 from dcslam.progress import Bar
@@ -97,48 +98,6 @@ def pointfusion_builder(voxel_size_m: float):
         return build_map(depth, K, T_world_cam, mapper=PointFusion(voxel_size=voxel_size_m, keep_graph=True))
 
     return build
-
-
-@dataclass
-class DenoiseConfig:
-    """Every option of the denoising experiment (written to ``results.json``); :meth:`check` checks all but the
-    drives."""
-
-    sigma_m: float = 0.05
-    scale: float = 0.25
-    steps: int = 200
-    batch_size: int = 4
-    patch: int = 64
-    lr: float = 1e-3
-    warmup_fraction: float = 0.1
-    weight_decay: float = 0.01
-    features: int = 32
-    layers: int = 8
-    depth_scale_m: float = 4.0
-    map_frames: int = 1
-    map_voxel_m: float = 0.0
-    max_frames: int = 200
-    stride: int = 1
-    heldout_fraction: float = 0.25
-    examples: int = 3
-    seed: int = 0
-    device: str = "auto"
-    train_drives: list = field(default_factory=list)
-    test_drives: list = field(default_factory=list)
-
-    def check(self) -> None:
-        check_view(self.scale, 0)
-        for name in ("steps", "batch_size", "features", "layers", "map_frames", "max_frames", "stride"):
-            if getattr(self, name) < 1:
-                raise DcslamError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
-        if self.sigma_m <= 0:
-            raise DcslamError(f"--sigma must be > 0 m, got {self.sigma_m}")
-        if self.patch < 0 or self.map_voxel_m < 0 or self.depth_scale_m <= 0:
-            raise DcslamError("--patch and the map voxel size must be >= 0, the depth scale > 0")
-        if not 0 <= self.warmup_fraction < 1:
-            raise DcslamError(f"the warm-up fraction must be in [0, 1), got {self.warmup_fraction}")
-        if not 0 < self.heldout_fraction < 1:
-            raise DcslamError(f"the held-out fraction must be in (0, 1), got {self.heldout_fraction}")
 
 
 @dataclass

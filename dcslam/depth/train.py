@@ -24,18 +24,19 @@ from __future__ import annotations
 import json
 import math
 import random
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from dcslam.depth.data import DriveFrames, check_view, frame_windows
-from dcslam.depth.losses import MASKS, MaskedMSE, batch_depth_errors
+from dcslam.depth.config import TrainConfig
+from dcslam.depth.data import DriveFrames, frame_windows
+from dcslam.depth.losses import MaskedMSE, batch_depth_errors
 from dcslam.depth.maps import MapChamfer
-from dcslam.depth.recipes import LOSSES, LR_SCHEDULES, check_pose_options, map_frames_of, selection_key
+from dcslam.depth.recipes import LR_SCHEDULES, map_frames_of, selection_key
 from dcslam.depth.train_pose import pose_loss_of, run_model_with_confidence, validate_pose
-from dcslam.depth.models import architectures, build_model, model_record, save_model
+from dcslam.depth.models import build_model, model_record, save_model
 from dcslam.errors import DcslamError
 from dcslam.progress import Bar
 from dcslam.io.atomic import atomic_output
@@ -50,79 +51,6 @@ def lr_factor(schedule: str, step: int, total: int) -> float:
     if schedule == "cosine":
         return 0.5 * (1.0 + math.cos(math.pi * min(step, total) / max(total, 1)))
     raise DcslamError(f"unknown lr schedule {schedule!r}; expected one of {', '.join(LR_SCHEDULES)}")
-
-
-@dataclass
-class TrainConfig:
-    """Every option of a training run (written to ``config.json`` as its ``settings``)."""
-
-    loss: str = "mse"
-    mask: str = "dense"
-    map_frames: int = 1
-    model: str = "sparse-conv"
-    model_hparams: dict = field(default_factory=dict)
-    epochs: int = 1
-    lr: float = 1e-3
-    weight_decay: float = 0.01
-    max_frames: int = 200
-    stride: int = 1
-    scale: float = 1.0
-    crop: int = 0
-    batch_size: int = 1
-    seed: int = 0
-    device: str = "auto"
-    input: str = "sparse"
-    input_mix: list = field(default_factory=list)
-    target: str = "dense"
-    l1_weight: float = 0.0
-    lr_schedule: str = "constant"
-    train_drives: list = field(default_factory=list)
-    val_drives: list = field(default_factory=list)
-    pose_frames: int = 4
-    pose_weight: float = 1.0
-    mse_weight: float = 0.0
-    chamfer_weight: float = 0.0
-    pose_translation_weight: float = 1.0
-    pose_rotation_weight: float = 1.0
-    pose_iterations: int = 10
-    pose_grad_iterations: int = 0
-    pose_max_sources: int = 0
-    pose_source_voxel: float = 0.2
-    pose_weights: str = "confidence"
-    init: str = ""
-
-    def check(self) -> None:
-        if self.loss not in LOSSES:
-            raise DcslamError(f"unknown loss {self.loss!r}; expected one of {', '.join(LOSSES)}")
-        if self.mask not in MASKS:
-            raise DcslamError(f"unknown mask {self.mask!r}; expected one of {', '.join(MASKS)}")
-        if self.model not in architectures():
-            raise DcslamError(f"unknown model {self.model!r}; expected one of {', '.join(architectures())}")
-        for name in ("map_frames", "epochs", "max_frames", "stride", "batch_size"):
-            if getattr(self, name) < 1:
-                raise DcslamError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
-        check_pose_options(self)
-        check_view(self.scale, self.crop)
-        from dcslam.io.drive import check_input_kind
-
-        check_input_kind(self.input)
-        check_input_kind(self.target)
-        for kind in self.input_mix:
-            check_input_kind(kind)
-        if self.lr_schedule not in LR_SCHEDULES:
-            raise DcslamError(f"unknown lr schedule {self.lr_schedule!r}; expected one of {', '.join(LR_SCHEDULES)}")
-        if not 0 <= self.l1_weight < float("inf"):
-            raise DcslamError(f"--l1-weight must be a non-negative number, got {self.l1_weight}")
-        if not self.train_drives:
-            raise DcslamError("no training drives; run `dcslam prepare-kitti` (or `dcslam synth`) first")
-
-    @property
-    def chunk(self) -> int:
-        """Frames per optimisation step: one pose window, one multi-frame map window, else one batch."""
-        if self.loss == "pose":
-            return self.pose_frames
-        frames = map_frames_of(self.loss, self.map_frames)
-        return frames if frames > 1 else self.batch_size
 
 
 @dataclass
@@ -238,13 +166,13 @@ def validate(model, drives: list[DriveFrames], map_frames: int, device, map_buil
 
 
 def initial_model(config: TrainConfig):
-    """A new network of ``config.model``, or, with ``config.init``, the network of that model file (which must be
-    of the same architecture; its hyperparameters come with it)."""
-    if not config.init:
+    """A new network of ``config.model``, or, with ``config.init_model``, the network of that model file (which must
+    be of the same architecture; its hyperparameters come with it)."""
+    if config.init_model is None:
         return build_model(config.model, **config.model_hparams)
     from dcslam.depth.models import model_from_record, read_torch_file
 
-    path = Path(config.init)
+    path = Path(config.init_model)
     if not path.exists():
         raise DcslamError(f"--init model {path} not found; train that run first (`dcslam train --name ...`)")
     record = read_torch_file(path, "model file", "retrain that run with `dcslam train --force`")

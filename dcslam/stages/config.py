@@ -3,8 +3,9 @@
 A stage's options are the fields of its configuration dataclass. Each field carries, in ``metadata``, what the
 command line needs and nothing else declares again: ``help``, and optionally ``choices`` (an unknown value is a usage
 error), ``min`` / ``max``, ``flags`` (option names when they are not ``--field-name``), ``show_default``,
-``metavar``, ``validate`` (a function that raises DcslamError on a bad value: a usage error on the command line) and
-``internal`` (a field set by code, never an option or a config-file key). :func:`option` builds such a field.
+``metavar``, ``validate`` (a function that raises DcslamError on a bad value: a usage error on the command line),
+``key`` (the configuration-file key when it is not the field's name) and ``internal`` (a field set by code, never an
+option or a config-file key). :func:`dcslam.settings.option` builds such a field.
 
 A configuration file holds the same keys as the options (``map_frames``, not ``--map-frames``), in TOML (read with
 :mod:`tomllib`) or YAML (read with PyYAML when it is installed). :func:`to_toml` writes the configuration a command
@@ -19,22 +20,19 @@ import typing
 from pathlib import Path
 
 from dcslam.errors import DcslamError
+from dcslam.settings import option  # noqa: F401  (the stages declare their own options with it)
 
 _MISSING = dataclasses.MISSING
-
-
-def option(default=_MISSING, *, help: str, default_factory=_MISSING, **meta):
-    """A configuration field with its help text (and ``choices``, ``min``, ``max``, ``flags``, ``show_default``,
-    ``metavar``, ``validate``)."""
-    metadata = {"help": help, **meta}
-    if default_factory is not _MISSING:
-        return dataclasses.field(default_factory=default_factory, metadata=metadata)
-    return dataclasses.field(default=default, metadata=metadata)
 
 
 def options_of(cls) -> list[dataclasses.Field]:
     """The fields of a configuration class that are options (not ``internal``)."""
     return [f for f in dataclasses.fields(cls) if not f.metadata.get("internal")]
+
+
+def config_key(field: dataclasses.Field) -> str:
+    """The configuration-file key of an option: its ``key`` metadata, else the field's name."""
+    return field.metadata.get("key", field.name)
 
 
 def field_type(cls, name: str):
@@ -74,23 +72,24 @@ def _convert(value, base, key: str, source: str):
 
 def from_mapping(cls, values: dict, source: str = "configuration"):
     """An instance of configuration class ``cls`` from plain values (a config file's table); unknown keys fail."""
-    known = {f.name: f for f in options_of(cls)}
+    known = {config_key(f): f.name for f in options_of(cls)}
     unknown = sorted(set(values) - set(known))
     if unknown:
         raise DcslamError(f"{source}: unknown key {unknown[0]!r}; expected one of {', '.join(known)}")
     kwargs = {}
     for key, value in values.items():
-        base, optional, is_list = split_type(field_type(cls, key))
+        name = known[key]
+        base, optional, is_list = split_type(field_type(cls, name))
         if value is None:
             if not optional:
                 raise DcslamError(f"{source}: {key} cannot be empty")
-            kwargs[key] = None
+            kwargs[name] = None
         elif is_list:
             if not isinstance(value, list):
                 raise DcslamError(f"{source}: {key} must be a list, got {value!r}")
-            kwargs[key] = [_convert(v, base, key, source) for v in value]
+            kwargs[name] = [_convert(v, base, key, source) for v in value]
         else:
-            kwargs[key] = _convert(value, base, key, source)
+            kwargs[name] = _convert(value, base, key, source)
     return cls(**kwargs)
 
 
@@ -121,8 +120,8 @@ def read_config_file(path: Path | str) -> dict:
 
 
 def to_dict(config) -> dict:
-    """The options of a configuration as plain JSON / TOML values (paths as strings)."""
-    return {f.name: to_dict_value(getattr(config, f.name)) for f in options_of(type(config))}
+    """The options of a configuration as plain JSON / TOML values (paths as strings), by configuration-file key."""
+    return {config_key(f): to_dict_value(getattr(config, f.name)) for f in options_of(type(config))}
 
 
 def changed(config) -> dict:
@@ -131,8 +130,8 @@ def changed(config) -> dict:
     out = {}
     for f in options_of(type(config)):
         default = f.default_factory() if f.default is _MISSING and f.default_factory is not _MISSING else f.default
-        if values[f.name] != to_dict_value(default):
-            out[f.name] = values[f.name]
+        if values[config_key(f)] != to_dict_value(default):
+            out[config_key(f)] = values[config_key(f)]
     return out
 
 

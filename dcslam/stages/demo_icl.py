@@ -8,9 +8,10 @@ experiment (:func:`run_denoising`; the algorithm in :mod:`dcslam.depth.denoise`)
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
+from dcslam.depth.config import DenoiseConfig, DenoiseSettings
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
 from dcslam.io.atomic import write_json_atomic, write_text_atomic
@@ -20,36 +21,18 @@ OUTPUT_FILES = ("model.pt", "results.json", "results.csv", "results.md", "denois
 
 
 @dataclass(frozen=True)
-class DemoIclConfig:
-    """Options of ``dcslam demo-icl``."""
+class DemoIclConfig(DenoiseSettings):
+    """Options of ``dcslam demo-icl``: the experiment's settings plus the data it runs on."""
 
-    sigma: float = option(0.05, help="Standard deviation of the Gaussian depth noise, metres.")
-    steps: int = option(200, help="Training steps (AdamW).")
-    lr: float = option(1e-3, help="AdamW learning rate (after a linear warm-up over 10 % of the steps).")
-    batch_size: int = option(4, help="Frames per step (single-frame maps).")
-    patch: int = option(64, help="Train on random patch × patch windows (0 = whole images).")
-    map_frames: int = option(1, help="Frames per chamfer map (1: one map per frame).")
-    scale: float = option(0.25, help="Image scale, 1/integer (0.25: 640 × 480 → 160 × 120).")
-    features: int = option(32, help="DnCNN feature channels.")
-    layers: int = option(8, help="DnCNN layers.")
     frames: int = option(30, help="Frames per generated sequence.")
     sequences: int = option(4, help="Generated sequences (rooms); the last one is held out.")
     drives: Path | None = option(None, help="A drive file or a folder of drive files with splits.json, instead of "
                                             "generated rooms.")
-    seed: int = option(0, help="Seed of the generated rooms, the noise and training.")
-    device: str = option("auto", help="auto (a GPU if there is one), cpu or cuda.")
 
-    def __post_init__(self) -> None:
-        self.denoise_config().check()
-
-    def denoise_config(self, train_drives: list | None = None, test_drives: list | None = None):
-        """The :class:`dcslam.depth.denoise.DenoiseConfig` of this run."""
-        from dcslam.depth.denoise import DenoiseConfig
-
-        return DenoiseConfig(sigma_m=self.sigma, steps=self.steps, lr=self.lr, batch_size=self.batch_size,
-                             patch=self.patch, map_frames=self.map_frames, scale=self.scale, features=self.features,
-                             layers=self.layers, seed=self.seed, device=self.device,
-                             train_drives=list(train_drives or []), test_drives=list(test_drives or []))
+    def denoise_config(self, train_drives: list | None = None, test_drives: list | None = None) -> DenoiseConfig:
+        """The :class:`dcslam.depth.config.DenoiseConfig` of this run."""
+        settings = {f.name: getattr(self, f.name) for f in fields(DenoiseSettings)}
+        return DenoiseConfig(**settings, train_drives=list(train_drives or []), test_drives=list(test_drives or []))
 
 
 @dataclass
@@ -75,7 +58,6 @@ def run_denoising(out_dir: Path | str, config, *, force: bool = False,
     from dcslam.report.scores import check_outputs
 
     out_dir = Path(out_dir)
-    config.check()
     if not config.train_drives:
         raise DcslamError("no training drives; run `dcslam prepare-tum` first, or give --drives")
     check_outputs([out_dir / name for name in OUTPUT_FILES], force)

@@ -7,62 +7,25 @@ each of which runs this module's :func:`main` on the same configuration file.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass
+import os
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
-from dcslam.depth.models import ARCHITECTURES
-from dcslam.depth.recipes import LOSSES, LR_SCHEDULES, MASKS, POSE_WEIGHTS, check_pose_options, run_name, selection_key
+from dcslam.depth.config import TrainConfig, TrainSettings
+from dcslam.depth.recipes import run_name, selection_key
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
 from dcslam.io.atomic import write_json_atomic
 from dcslam.workspace import Workspace, stage_config
 
-MODELS = tuple(ARCHITECTURES)
 CORRECTABLE = ("sparse-conv", "nconv", "nconv-guided")  # the networks with a correct_fill option
 
 
-def _check_kind(kind: str) -> str:
-    from dcslam.io.drive import check_input_kind
-
-    return check_input_kind(kind)
-
-
 @dataclass(frozen=True)
-class TrainStageConfig:
-    """Options of ``dcslam train`` (the training's own settings are passed on as a
-    :class:`dcslam.depth.train.TrainConfig`)."""
+class TrainStageConfig(TrainSettings):
+    """Options of ``dcslam train``: the training's settings plus the network's options, the run folder and the
+    processes (the run itself is given a :class:`dcslam.depth.config.TrainConfig`)."""
 
-    loss: str = option("mse", choices=LOSSES, help="mse, chamfer or pose (relative-pose error of differentiable "
-                                                   "ICP over --pose-frames windows).")
-    mask: str = option("dense", choices=MASKS, help="MSE mask: dense (pixels with ground truth) or sparse (pixels "
-                                                    "with sparse input and ground truth).")
-    map_frames: int = option(1, help="Frames per chamfer map: 1, or windows of up to N frames (the thesis: 8; its "
-                                     "code: 7).")
-    model: str = option("sparse-conv", choices=MODELS, help=f"Network: {' or '.join(MODELS)}.")
-    epochs: int = option(1, help="Passes over the training drives.")
-    lr: float = option(1e-3, help="AdamW learning rate.")
-    weight_decay: float = option(0.01, help="AdamW weight decay.")
-    max_frames: int = option(200, help="At most this many frames per drive.")
-    stride: int = option(1, help="Use every N-th frame.")
-    scale: float = option(1.0, help="Image scale, 1/integer (1, 0.5, 0.25).")
-    crop: int = option(0, help="Keep only the bottom N rows (0 = whole image).")
-    batch_size: int = option(1, help="Frames per step (MSE and 1-frame chamfer).")
-    seed: int = option(0, help="Random seed.")
-    device: str = option("auto", help="auto (a GPU if there is one), cpu or cuda.")
-    input: str = option("sparse", validate=_check_kind, metavar="KIND",
-                        help="Depth fed to the network: sparse (the drive's own), sparse@<beams> (written by "
-                             "prepare-kitti --beams), dense or exact.")
-    input_mix: list[str] = option(default_factory=list, validate=_check_kind, metavar="KIND",
-                                  help="Density augmentation (repeatable): each frame's input drawn in turn from "
-                                       "these kinds, e.g. --input-mix sparse --input-mix sparse@32 --input-mix "
-                                       "sparse@16 --input-mix sparse@8 (one model for every beam count); replaces "
-                                       "--input.")
-    target: str = option("dense", validate=_check_kind, metavar="KIND",
-                         help="Depth the loss compares with: dense (annotated) or exact (generated drives only).")
-    l1_weight: float = option(0.0, help="MSE loss plus this weight times the mean absolute error (metres) over the "
-                                        "same pixels (0 = MSE alone, the thesis's).")
-    lr_schedule: str = option("constant", choices=LR_SCHEDULES, help="constant, or cosine: from --lr down to 0 over "
-                                                                     "all the run's steps.")
     fill_holes: bool = option(False, flags=("--fill-holes/--no-fill-holes",),
                               help="sparse-conv only: fill what lies beyond its receptive field from coarser scales, "
                                    "up to the topmost measured pixel of each column (nothing above it: no sky); off: "
@@ -77,55 +40,20 @@ class TrainStageConfig:
     nproc: int = option(1, help="Processes for distributed data-parallel training (launches torchrun).")
     init: str | None = option(None, help="Start from the best model of this run (runs/<INIT>/model.pt): "
                                          "fine-tuning, e.g. --loss pose --init chamfer-8.")
-    pose_frames: int = option(4, help="Pose loss: frames per window (the first at its true pose, the others "
-                                      "tracked by ICP).")
-    pose_weight: float = option(1.0, help="Pose loss: weight of the pose term.")
-    mse_weight: float = option(0.0, help="Pose loss: weight of an added MSE term (with --mask).")
-    chamfer_weight: float = option(0.0, help="Pose loss: weight of an added chamfer term (with --map-frames).")
-    pose_translation_weight: float = option(1.0, help="Pose loss: weight of the translation error (per metre).")
-    pose_rotation_weight: float = option(1.0, help="Pose loss: weight of the rotation error (per radian).")
-    pose_iterations: int = option(10, help="Pose loss: LM iterations per ICP gate stage.")
-    pose_grad_iterations: int = option(0, help="Pose loss: back-propagate through only the last N LM iterations "
-                                               "of each stage (0 = all).")
-    pose_max_sources: int = option(0, help="Pose loss: align at most N random valid pixels per frame (0 = all).")
-    pose_source_voxel: float = option(0.2, help="Pose loss: ICP keeps one source point per voxel of this size, "
-                                                "metres (0 = every point).")
-    pose_weights: str = option("confidence", choices=POSE_WEIGHTS, help="Pose loss: per-pixel ICP weights: "
-                               "confidence (the network's, for nconv models; others have none) or none.")
 
     def __post_init__(self) -> None:
-        for name, choices in (("loss", LOSSES), ("mask", MASKS), ("model", MODELS), ("lr_schedule", LR_SCHEDULES)):
-            if getattr(self, name) not in choices:
-                raise DcslamError(f"unknown {name} {getattr(self, name)!r}; expected one of {', '.join(choices)}")
-        for name in ("map_frames", "epochs", "max_frames", "stride", "batch_size", "nproc"):
-            if getattr(self, name) < 1:
-                raise DcslamError(f"--{name.replace('_', '-')} must be >= 1, got {getattr(self, name)}")
-        if not 0 < self.lr < float("inf"):
-            raise DcslamError(f"--lr must be a positive number, got {self.lr}")
-        if not 0 <= self.l1_weight < float("inf"):
-            raise DcslamError(f"--l1-weight must be a non-negative number, got {self.l1_weight}")
+        super().__post_init__()
+        if self.nproc < 1:
+            raise DcslamError(f"--nproc must be >= 1, got {self.nproc}")
         if self.fill_holes and self.model != "sparse-conv":
             raise DcslamError(f"--fill-holes is an option of sparse-conv, not of {self.model}")
         if self.correct_fill and self.model not in CORRECTABLE:
             raise DcslamError(f"--correct-fill is an option of {', '.join(CORRECTABLE)}, not of {self.model}")
-        if not 0 <= self.weight_decay < float("inf"):
-            raise DcslamError(f"--weight-decay must be a non-negative number, got {self.weight_decay}")
-        if self.name is not None:
-            from dcslam.workspace import plain_name
+        from dcslam.workspace import plain_name
 
-            plain_name(self.name, "--name")
-        from dcslam.depth.data import check_view
-
-        check_view(self.scale, self.crop)
-        _check_kind(self.input)
-        _check_kind(self.target)
-        if self.init is not None:
-            from dcslam.workspace import plain_name
-
-            plain_name(self.init, "--init")
-        check_pose_options(self)
-        for kind in self.input_mix:
-            _check_kind(kind)
+        for name in ("name", "init"):
+            if getattr(self, name) is not None:
+                plain_name(getattr(self, name), f"--{name}")
 
     @property
     def run_name(self) -> str:
@@ -143,25 +71,14 @@ class TrainStageConfig:
         return {**({"fill_holes": True} if self.fill_holes else {}),
                 **({"correct_fill": True} if self.correct_fill else {})}
 
-    def train_config(self, train_drives: list[Path], val_drives: list[Path], init: Path | None = None):
-        """The :class:`dcslam.depth.train.TrainConfig` of this run (``init``: the model file of ``--init``)."""
-        from dcslam.depth.train import TrainConfig
-
-        pose = {name: getattr(self, name) for name in POSE_OPTIONS}
-        return TrainConfig(**pose, init=str(init) if init else "", loss=self.loss, mask=self.mask,
-                           map_frames=self.map_frames, model=self.model, epochs=self.epochs, lr=self.lr,
-                           weight_decay=self.weight_decay,
-                           max_frames=self.max_frames, stride=self.stride, scale=self.scale, crop=self.crop,
-                           batch_size=self.batch_size, seed=self.seed, device=self.device, input=self.input,
-                           target=self.target, input_mix=list(self.input_mix), l1_weight=self.l1_weight,
-                           lr_schedule=self.lr_schedule,
-                           model_hparams=self.model_hparams(),
-                           train_drives=train_drives, val_drives=val_drives)
+    def train_config(self, train_drives: list[Path], val_drives: list[Path],
+                     init_model: Path | None = None) -> TrainConfig:
+        """The :class:`dcslam.depth.config.TrainConfig` of this run (``init_model``: the model file of ``--init``)."""
+        settings = {f.name: getattr(self, f.name) for f in fields(TrainSettings)}
+        return TrainConfig(**settings, model_hparams=self.model_hparams(), train_drives=list(train_drives),
+                           val_drives=list(val_drives), init_model=init_model)
 
 
-POSE_OPTIONS = ("pose_frames", "pose_weight", "mse_weight", "chamfer_weight", "pose_translation_weight",
-                "pose_rotation_weight", "pose_iterations", "pose_grad_iterations", "pose_max_sources",
-                "pose_source_voxel", "pose_weights")
 RUN_FILES = ("model.pt", "last.pt", "metrics.jsonl", "config.json", "curves.png")
 
 
@@ -188,35 +105,81 @@ def _prepare_run_dir(run_dir: Path, force: bool, resume: bool) -> None:
 
 
 RESUMABLE = ("epochs", "device")  # what a resumed run may change: more epochs, another device
+# config.json records the drives and the model a run starts from relative to the workspace holding the run (the folder
+# above runs/<name>/), so that a workspace can be moved or copied and its runs resumed; records without this marker
+# (written before) hold paths as they were given
+RELATIVE_PATHS = {"paths_relative_to": "workspace"}
+SETTING_KEYS = {"init_model": "init"}  # a TrainConfig field recorded under another key
 
 
 def _plain(value):
     return json.loads(json.dumps(value, default=str))
 
 
-def _saved_config(run_dir: Path, config):
-    """On resume: the run's own configuration, with the number of epochs and the device taken from ``config``.
+def workspace_of(run_dir: Path) -> Path:
+    """The workspace folder that holds run folder ``run_dir`` (``<workspace>/runs/<name>/``)."""
+    return Path(run_dir).parent.parent
 
-    Raises :class:`DcslamError` naming every other option in which ``config`` differs from the run's."""
-    from dcslam.depth.train import TrainConfig
 
+def _relative(path: Path | str, root: Path) -> str:
+    """``path`` relative to ``root`` where it lies inside it, else the absolute path (no link is followed)."""
+    path, root = os.path.abspath(path), os.path.abspath(root)
+    return os.path.relpath(path, root) if os.path.commonpath([path, root]) == root else path
+
+
+def settings_record(config: TrainConfig, run_dir: Path) -> dict:
+    """The settings of ``config`` as ``run_dir/config.json`` records them: plain JSON values, ``init_model`` under
+    ``init`` ("" for none), paths relative to the run's workspace where they lie inside it."""
+    root = workspace_of(run_dir)
+    settings = {SETTING_KEYS.get(k, k): v for k, v in _plain(asdict(config)).items()}
+    settings["train_drives"] = [_relative(p, root) for p in config.train_drives]
+    settings["val_drives"] = [_relative(p, root) for p in config.val_drives]
+    settings["init"] = _relative(config.init_model, root) if config.init_model is not None else ""
+    return settings
+
+
+def recorded_config(run_dir: Path) -> TrainConfig:
+    """The :class:`dcslam.depth.config.TrainConfig` that ``run_dir/config.json`` records, its paths resolved (relative
+    ones against the run's workspace where the record says so); settings it does not hold take their defaults."""
     path = run_dir / "config.json"
     try:
-        settings = json.loads(path.read_text())["settings"]
+        record = json.loads(path.read_text())
+        settings = record["settings"]
         if not isinstance(settings, dict):
             raise TypeError("settings is not a mapping")
     except (OSError, KeyError, TypeError, json.JSONDecodeError) as exc:
         raise DcslamError(f"{path}: cannot resume from it ({exc})") from None
-    known = {k: v for k, v in settings.items() if k in TrainConfig.__dataclass_fields__}
-    given = _plain(asdict(config))
-    differ = [f"--{k.replace('_', '-')} {given[k]!r} (the run has {known[k]!r})" for k in sorted(known)
-              if k not in RESUMABLE and _plain(known[k]) != given.get(k)]
+    root = workspace_of(run_dir) if RELATIVE_PATHS.items() <= record.items() else None
+    keys = {SETTING_KEYS.get(f.name, f.name): f.name for f in fields(TrainConfig)}
+    values = {keys[k]: v for k, v in settings.items() if k in keys}
+
+    def resolve(p) -> Path:
+        return Path(p) if root is None or Path(p).is_absolute() else root / p
+
+    for name in ("train_drives", "val_drives"):
+        if name in values:
+            values[name] = [resolve(p) for p in values[name]]
+    if "init_model" in values:
+        values["init_model"] = resolve(values["init_model"]) if values["init_model"] else None
+    try:
+        return TrainConfig(**values)
+    except TypeError as exc:
+        raise DcslamError(f"{path}: cannot resume from it ({exc})") from None
+
+
+def _saved_config(run_dir: Path, config: TrainConfig) -> TrainConfig:
+    """On resume: the run's own configuration, with the number of epochs and the device taken from ``config``.
+
+    Raises :class:`DcslamError` naming every other option in which ``config`` differs from the run's."""
+    saved = recorded_config(run_dir)
+    held = json.loads((run_dir / "config.json").read_text())["settings"]
+    mine, given = settings_record(saved, run_dir), settings_record(config, run_dir)
+    differ = [f"--{k.replace('_', '-')} {given[k]!r} (the run has {mine[k]!r})" for k in sorted(mine)
+              if k in held and k not in RESUMABLE and mine[k] != given[k]]
     if differ:
         raise DcslamError(f"cannot resume {run_dir} with other options: {'; '.join(differ)}; resume with the run's "
                           "own options (only --epochs and --device may change), or start again with --force")
-    known["epochs"] = config.epochs
-    known["device"] = config.device
-    return TrainConfig(**known)
+    return replace(saved, epochs=config.epochs, device=config.device)
 
 
 def _record_resume(run_dir: Path, config) -> None:
@@ -229,14 +192,15 @@ def _record_resume(run_dir: Path, config) -> None:
     write_json_atomic(path, record)
 
 
-def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = False, map_builder=None):
-    """Train one run (a :class:`dcslam.depth.train.TrainConfig`) into ``run_dir`` and return its
+def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resume: bool = False, map_builder=None):
+    """Train one run (a :class:`dcslam.depth.config.TrainConfig`) into ``run_dir`` and return its
     :class:`dcslam.depth.train.TrainResult`.
 
-    The folder gets ``config.json`` (the settings, resolved device and world size), ``curves.png`` (after every
-    epoch) and what :func:`dcslam.depth.train.train_loop` writes. An existing run fails without ``force`` (which
-    removes its files first); ``resume`` continues it from ``last.pt`` with its own settings (only the number of
-    epochs and the device are taken from ``config``).
+    The folder gets ``config.json`` (the settings, resolved device and world size; paths relative to the workspace
+    holding ``run_dir``, see :func:`settings_record`), ``curves.png`` (after every epoch) and what
+    :func:`dcslam.depth.train.train_loop` writes. An existing run fails without ``force`` (which removes its files
+    first); ``resume`` continues it from ``last.pt`` with its own settings (only the number of epochs and the device
+    are taken from ``config``).
     """
     import torch
 
@@ -253,7 +217,8 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
     barrier()
     if resume:
         config = _saved_config(run_dir, config)
-    config.check()
+    if not config.train_drives:
+        raise DcslamError("no training drives; run `dcslam prepare-kitti` (or `dcslam synth`) first")
     device = resolve_device(config.device)
     if world > 1 and device.type == "cuda":
         device = torch.device("cuda", rank % torch.cuda.device_count())
@@ -269,15 +234,13 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
                                   config.target, rgb=guided, mix=config.input_mix) for p in config.val_drives]
         open_drives += val_frames
         if rank == 0 and not resume:
-            settings = asdict(config)
-            settings["train_drives"] = [str(p) for p in config.train_drives]
-            settings["val_drives"] = [str(p) for p in config.val_drives]
+            settings = settings_record(config, run_dir)
             settings["resolved_device"] = str(device)
             settings["world_size"] = world
             settings["input_beams"] = input_beams(config.input)
             if config.input_mix:
                 settings["input_beams"] = [input_beams(kind) for kind in config.input_mix]
-            write_json_atomic(run_dir / "config.json", stage_config("train", settings))
+            write_json_atomic(run_dir / "config.json", {**stage_config("train", settings), **RELATIVE_PATHS})
         result = train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world,
                             on_epoch=lambda: plot_training_curves(run_dir / "curves.png", run_dir / "metrics.jsonl"))
         if resume and rank == 0:  # only once the epochs are trained
@@ -338,7 +301,7 @@ def run(ws: Workspace, config: TrainStageConfig, *, force: bool = False):
 
     splits = read_splits(ws.splits)
     init = None
-    if config.init:
+    if config.init is not None:
         from dcslam.workspace import require
 
         init = require(ws.runs / config.init / "model.pt", f"dcslam train --name {config.init}")

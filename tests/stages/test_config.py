@@ -72,7 +72,7 @@ def test_every_slam_setting_is_a_slam_stage_option():
 
 
 def test_validation_happens_when_the_config_is_made():
-    with pytest.raises(DcslamError, match="unknown loss"):
+    with pytest.raises(DcslamError, match="unknown --loss"):
         train.TrainStageConfig(loss="l1")
     with pytest.raises(DcslamError, match="scale"):
         train.TrainStageConfig(scale=0.3)
@@ -95,8 +95,8 @@ def test_unset_fields_are_comments_and_paths_are_strings():
 
 
 def test_train_choices_come_from_the_registries():
-    from dcslam.depth import losses, recipes
+    from dcslam.depth import config, losses, recipes
     from dcslam.depth.models import ARCHITECTURES
 
-    assert train.MODELS == tuple(ARCHITECTURES)
-    assert train.MASKS is recipes.MASKS is losses.MASKS and train.LOSSES is recipes.LOSSES
+    assert config.MODELS == tuple(ARCHITECTURES)
+    assert config.MASKS is recipes.MASKS is losses.MASKS and config.LOSSES is recipes.LOSSES

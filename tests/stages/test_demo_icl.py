@@ -3,6 +3,7 @@ denoiser wrapper, the frame split, and a short chamfer-only training that must b
 another room."""
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -156,7 +157,7 @@ def test_chamfer_only_training_beats_the_noisy_input_on_another_room(rooms, tmp_
 def test_config_errors(rooms, tmp_path):
     for bad in (dict(scale=0.3), dict(steps=0), dict(sigma_m=0.0), dict(heldout_fraction=1.0)):
         with pytest.raises(DcslamError):
-            DenoiseConfig(train_drives=[rooms / "room_a.h5"], **bad).check()
+            DenoiseConfig(train_drives=[rooms / "room_a.h5"], **bad)
     with pytest.raises(DcslamError, match="no training drives"):
         run_denoising(tmp_path / "out", DenoiseConfig())
     assert not (tmp_path / "out").exists()
@@ -173,13 +174,26 @@ def test_demo_drives_refuses_other_settings_without_force(tmp_path):
 def test_stage_config_maps_to_the_experiment_and_runs_on_given_drives(rooms, tmp_path):
     from dcslam.workspace import Workspace
 
-    config = DemoIclConfig(sigma=0.02, steps=2, batch_size=2, patch=16, features=4, layers=3, scale=1.0,
+    config = DemoIclConfig(sigma_m=0.02, steps=2, batch_size=2, patch=16, features=4, layers=3, scale=1.0,
                            drives=rooms, device="cpu")
     experiment = config.denoise_config()
     assert (experiment.sigma_m, experiment.steps, experiment.features, experiment.layers) == (0.02, 2, 4, 3)
     with pytest.raises(DcslamError, match="sigma"):
-        DemoIclConfig(sigma=0)
+        DemoIclConfig(sigma_m=0)
     result = run(Workspace(tmp_path / "ws"), config)
     assert result.out_dir == tmp_path / "ws" / "results" / "demo-icl"
     settings = json.loads((result.out_dir / "results.json").read_text())["settings"]
     assert settings["sigma_m"] == 0.02 and settings["test_drives"] == [str(rooms / "room_c.h5")]
+
+
+def test_the_stage_declares_only_the_data_it_runs_on():
+    import dataclasses
+
+    from dcslam.depth.config import DenoiseSettings
+
+    names = lambda cls: {f.name for f in dataclasses.fields(cls)}  # noqa: E731
+    own = names(DemoIclConfig) - names(DenoiseSettings)
+    assert own == {"frames", "sequences", "drives"} and not own & names(DenoiseConfig)
+    experiment = DemoIclConfig(sigma_m=0.03, seed=4).denoise_config([Path("a.h5")])
+    assert type(experiment) is DenoiseConfig and (experiment.sigma_m, experiment.seed) == (0.03, 4)
+    assert experiment.train_drives == [Path("a.h5")] and experiment.warmup_fraction == DenoiseConfig().warmup_fraction

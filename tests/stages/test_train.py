@@ -127,7 +127,7 @@ def test_new_options_are_checked():
         TrainStageConfig(model="dncnn", correct_fill=True)
     with pytest.raises(DcslamError, match="--l1-weight"):
         TrainStageConfig(l1_weight=-1.0)
-    with pytest.raises(DcslamError, match="unknown lr_schedule"):
+    with pytest.raises(DcslamError, match="unknown --lr-schedule"):
         TrainStageConfig(lr_schedule="step")
     with pytest.raises(DcslamError, match="unknown depth kind"):
         TrainStageConfig(input_mix=["sparse", "sparse16"])
@@ -136,3 +136,69 @@ def test_new_options_are_checked():
 def test_an_input_mix_the_drives_lack_fails_with_one_line(ws):
     with pytest.raises(DcslamError, match="holds no sparse@16 depth"):
         run(ws, TrainStageConfig(max_frames=2, scale=0.5, device="cpu", input_mix=["sparse", "sparse@16"]))
+
+
+def test_the_stage_declares_only_what_the_training_does_not():
+    from dcslam.depth.config import TrainConfig, TrainSettings
+    from dcslam.stages.config import options_of
+
+    own = {f.name for f in dataclasses.fields(TrainStageConfig)} - {f.name for f in dataclasses.fields(TrainSettings)}
+    assert own == {"fill_holes", "correct_fill", "name", "resume", "nproc", "init"}
+    assert not own & {f.name for f in dataclasses.fields(TrainConfig)}
+    assert {f.name for f in dataclasses.fields(TrainSettings)} <= {f.name for f in options_of(TrainStageConfig)}
+    config = TrainStageConfig(loss="pose", lr=0.02, pose_frames=3, input_mix=["sparse"], correct_fill=True,
+                              model="nconv", init="nconv", name="tuned")
+    made = config.train_config(["a.h5"], ["b.h5"], init_model="runs/nconv/model.pt")
+    assert type(made) is TrainConfig
+    assert {f.name: getattr(made, f.name) for f in dataclasses.fields(TrainSettings)} == \
+        {f.name: getattr(config, f.name) for f in dataclasses.fields(TrainSettings)}
+    assert (made.model_hparams, made.train_drives, made.val_drives, made.init_model) == \
+        ({"correct_fill": True}, ["a.h5"], ["b.h5"], "runs/nconv/model.pt")
+
+
+def test_a_moved_workspace_resumes_its_run(ws, tmp_path):
+    import shutil
+
+    from dcslam.workspace import Workspace
+
+    config = TrainStageConfig(max_frames=2, scale=0.5, device="cpu", batch_size=2)
+    run(ws, config)
+    record = json.loads((ws.runs / "mse-dense" / "config.json").read_text())
+    assert record["paths_relative_to"] == "workspace"
+    assert record["settings"]["train_drives"] == ["drives/drive_a.h5", "drives/drive_b.h5"]
+    assert record["settings"]["val_drives"] == ["drives/drive_c.h5"] and record["settings"]["init"] == ""
+
+    moved = Workspace(tmp_path / "elsewhere" / "ws")
+    shutil.move(str(ws.root), str(moved.root))
+    result = run(moved, dataclasses.replace(config, epochs=2, resume=True))
+    assert result.epochs == 2 and result.steps == 4
+    rows = [json.loads(line) for line in (moved.runs / "mse-dense" / "metrics.jsonl").read_text().splitlines()]
+    assert [r["epoch"] for r in rows if r["kind"] == "val"] == [0, 1]
+    assert json.loads((moved.runs / "mse-dense" / "config.json").read_text())["settings"]["epochs"] == 2
+    with pytest.raises(DcslamError, match="--max-frames 3 \\(the run has 2\\)"):
+        run(moved, dataclasses.replace(config, epochs=3, resume=True, max_frames=3))
+
+
+def test_a_run_recorded_with_absolute_paths_still_resumes(ws):
+    config = TrainStageConfig(max_frames=2, scale=0.5, device="cpu", batch_size=2)
+    run(ws, config)
+    path = ws.runs / "mse-dense" / "config.json"
+    record = json.loads(path.read_text())  # as runs were recorded before: absolute paths, no marker
+    del record["paths_relative_to"]
+    for key in ("train_drives", "val_drives"):
+        record["settings"][key] = [str((ws.root / p).absolute()) for p in record["settings"][key]]
+    path.write_text(json.dumps(record))
+    result = run(ws, dataclasses.replace(config, epochs=2, resume=True))
+    assert result.epochs == 2 and result.steps == 4
+    assert json.loads(path.read_text())["settings"]["train_drives"] == record["settings"]["train_drives"]
+
+
+def test_a_fine_tuned_run_records_its_start_relative_to_the_workspace(ws):
+    from dcslam.stages.train import recorded_config
+
+    run(ws, TrainStageConfig(max_frames=2, scale=0.5, device="cpu", name="first"))
+    tuned = run(ws, TrainStageConfig(max_frames=2, scale=0.5, device="cpu", loss="pose", pose_frames=2,
+                                     pose_iterations=2, init="first"))
+    assert tuned.run_dir == ws.runs / "pose-from-first"
+    assert json.loads((tuned.run_dir / "config.json").read_text())["settings"]["init"] == "runs/first/model.pt"
+    assert recorded_config(tuned.run_dir).init_model == ws.runs / "first" / "model.pt"
