@@ -39,7 +39,7 @@ reproduce-table-5-2: setup
 reproduce-table-5-1: setup
 	$(DCSLAM) reproduce --table 5.1 $(REPRO_ARGS)
 
-# The beams experiment (issue 13): every input (sparse, IP-Basic, SparseConvNet, nconv unmasked and masked by its
+# The beams experiment: every input (sparse, IP-Basic, SparseConvNet, nconv unmasked and masked by its
 # confidence, nconv-guided, nconv fine-tuned through the pose loss, annotated dense, exact) at 64/32/16/8 LiDAR
 # beams; table, per-drive CSV and a PNG of localisation against beam count under $(WORKSPACE)/results/
 # (table_beams.*, beams_localisation.png).
