@@ -48,7 +48,7 @@ def read_provenance(folder: Path) -> dict:
 
 
 def provenance_line(record: dict) -> str:
-    """``Provenance: commit C, D, profile P, `command`, machine: M.`` with what the record holds."""
+    """``Provenance: commit C, D, profile P, `command`, machine: M. NOTE.`` with what the record holds."""
     commit = str(record["commit"]) + (" (with uncommitted changes)" if record.get("modified") else "")
     parts = [f"commit {commit}", str(record["date"])]
     if record.get("profile"):
@@ -57,7 +57,8 @@ def provenance_line(record: dict) -> str:
         parts.append(f"`{record['command']}`")
     if record.get("machine"):
         parts.append(f"machine: {record['machine']}")
-    return f"{PROVENANCE_PREFIX} " + ", ".join(parts) + "."
+    line = f"{PROVENANCE_PREFIX} " + ", ".join(parts) + "."
+    return f"{line} {record['note'].rstrip('.')}." if record.get("note") else line
 
 
 def _git(repo: Path, *args: str) -> str | None:

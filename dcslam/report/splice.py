@@ -6,9 +6,10 @@ A page marks each region with an opening and a closing comment; everything betwe
     ...
     <!-- /table -->
 
-The path is relative to the page's folder. ``columns`` and ``rows`` (optional, comma-separated) keep only the
-named columns (by header) and rows (by their first cell), in the order given; ``index`` (optional, from 1) picks
-the file's n-th table (default the first). The region then holds that table followed by the provenance line of the
+The path is relative to the page's folder. ``columns`` and ``rows`` (optional, comma-separated; ``\\,`` is a comma
+inside a name) keep only the named columns (by header) and rows (by their first cell, or by the cells of the
+``key`` columns joined by `` / ``), in the order given; ``index`` (optional, from 1) picks the file's n-th table
+(default the first). The region then holds that table followed by the provenance line of the
 ``provenance.json`` beside the file (written by :func:`dcslam.report.provenance.collect_results`). The results
 files are CSV or Markdown as ``dcslam score`` writes them; a CSV file's first row is its header.
 """
@@ -48,6 +49,7 @@ class Region:
     source: str                  # the path as written in the marker
     columns: tuple[str, ...]     # empty: every column
     rows: tuple[str, ...]        # empty: every row
+    key: tuple[str, ...]         # columns whose cells, joined by " / ", name a row; empty: the first column
     index: int                   # which table of the file, from 1
     line: int                    # line number of the opening marker
     body_start: int              # offsets of the text between the markers
@@ -117,14 +119,17 @@ def _attributes(body: str, where: str) -> tuple[str, dict[str, str]]:
     attrs = {}
     for word in words[1:]:
         key, sep, value = word.partition("=")
-        if not sep or key not in ("columns", "rows", "index"):
-            raise DcslamError(f"{where}: unknown marker attribute {word!r}; expected columns=, rows= or index=")
+        if not sep or key not in ("columns", "rows", "key", "index"):
+            raise DcslamError(f"{where}: unknown marker attribute {word!r}; expected columns=, rows=, key= or index=")
         attrs[key] = value
     return words[0], attrs
 
 
 def _names(value: str | None) -> tuple[str, ...]:
-    return tuple(v.strip() for v in value.split(",") if v.strip()) if value else ()
+    """Comma-separated names; ``\\,`` is a comma inside a name (``rows="pose\\, fine-tuned from chamfer-8"``)."""
+    if not value:
+        return ()
+    return tuple(v.replace("\\,", ",").strip() for v in re.split(r"(?<!\\),", value) if v.strip())
 
 
 def find_regions(text: str, page: str) -> list[Region]:
@@ -155,27 +160,31 @@ def find_regions(text: str, page: str) -> list[Region]:
             index = 0
         if index < 1:
             raise DcslamError(f"{where}: index= must be a whole number from 1, got {attrs['index']!r}")
-        regions.append(Region(source, _names(attrs.get("columns")), _names(attrs.get("rows")), index, line,
-                              opening.end(), closing.start()))
+        regions.append(Region(source, _names(attrs.get("columns")), _names(attrs.get("rows")),
+                              _names(attrs.get("key")), index, line, opening.end(), closing.start()))
         pos = closing.end()
 
 
-def select(table: MarkdownTable, columns: tuple[str, ...], rows: tuple[str, ...], where: str) -> MarkdownTable:
-    """Only ``columns`` (by header) and ``rows`` (by first cell), in the order given; an empty selection keeps
-    everything. An unknown name fails listing the ones there are."""
-    keep = list(range(len(table.header)))
-    if columns:
-        missing = [c for c in columns if c not in table.header]
+def select(table: MarkdownTable, columns: tuple[str, ...], rows: tuple[str, ...], where: str,
+           key: tuple[str, ...] = ()) -> MarkdownTable:
+    """Only ``columns`` (by header) and ``rows`` (by name), in the order given; an empty selection keeps everything.
+    A row's name is its first cell, or with ``key`` the cells of those columns joined by `` / `` (``64 / sparse``).
+    An unknown name fails listing the ones there are."""
+    def index_of(names: tuple[str, ...]) -> list[int]:
+        missing = [c for c in names if c not in table.header]
         if missing:
             raise DcslamError(f"{where}: no column {missing[0]!r}; the columns are: {', '.join(table.header)}")
-        keep = [table.header.index(c) for c in columns]
+        return [table.header.index(c) for c in names]
+
+    keep = index_of(columns) if columns else list(range(len(table.header)))
     chosen = list(table.rows)
     if rows:
-        firsts = [r[0] if r else "" for r in table.rows]
-        missing = [r for r in rows if r not in firsts]
+        by = index_of(key) if key else [0]
+        names = [" / ".join(r[i] for i in by) for r in table.rows]
+        missing = [r for r in rows if r not in names]
         if missing:
-            raise DcslamError(f"{where}: no row {missing[0]!r}; the rows are: {', '.join(firsts)}")
-        chosen = [table.rows[firsts.index(r)] for r in rows]
+            raise DcslamError(f"{where}: no row {missing[0]!r}; the rows are: {', '.join(names)}")
+        chosen = [table.rows[names.index(r)] for r in rows]
     return MarkdownTable(tuple(table.header[i] for i in keep), tuple(tuple(r[i] for i in keep) for r in chosen))
 
 
@@ -189,7 +198,7 @@ def region_text(region: Region, page_dir: Path, where: str) -> str:
     tables = [csv_table(text)] if path.suffix == ".csv" else markdown_tables(text)
     if len(tables) < region.index or not tables[region.index - 1].header:
         raise DcslamError(f"{where}: {path} holds {len(tables)} table(s), not a table number {region.index}")
-    table = select(tables[region.index - 1], region.columns, region.rows, f"{where}: {path.name}")
+    table = select(tables[region.index - 1], region.columns, region.rows, f"{where}: {path.name}", region.key)
     return f"\n{table.render()}\n\n{provenance_line(read_provenance(path.parent))}\n"
 
 

@@ -45,7 +45,7 @@ class BeamsProfile:
     beams: tuple[int, ...] = (64, 32, 16, 8)
     # nconv's "masked" rows keep each frame's most confident quarter of pixels: a fixed threshold (0.5) emptied the
     # layers of a briefly trained nconv, whose confidence scale varies by model and beam count; keeping the top
-    # quarter localised best of 25/50/75 % on 4 seed-2027 drives at 16 beams (README, "Confidence in SLAM")
+    # quarter localised best of 25/50/75 % (RESULTS.md, "Confidence in SLAM")
     confidence_keep: float = 0.25
     split: tuple[int, int, int] | None = None
     slam: dict = field(default_factory=dict)  # SLAM settings other than the defaults (fields of SlamSettings)

@@ -79,6 +79,11 @@ def test_collect_needs_results(tmp_path):
         collect_results(tmp_path / "empty", tmp_path / "out", commit="0123abc")
 
 
+def test_provenance_line_with_a_note_and_without_optional_fields():
+    record = {"commit": "0123abc", "date": "2026-12-01", "note": "transcribed by hand."}
+    assert provenance_line(record) == "Provenance: commit 0123abc, 2026-12-01. transcribed by hand."
+
+
 @pytest.mark.parametrize("content, message", [
     ("{not json", "not a provenance record"),
     ('{"date": "2026-12-01"}', "needs at least commit and date"),

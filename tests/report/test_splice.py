@@ -60,6 +60,18 @@ def test_known_page(results):
     assert again.text == result.text and again.changed == ()
 
 
+def test_names_with_commas_and_rows_keyed_by_several_columns(results):
+    folder = results / "results" / "table_5_2"
+    (folder / "beams.md").write_text("| beams | input | localisation |\n| --- | --- | --- |\n| 64 | sparse | 0.05 |\n"
+                                     "| 8 | sparse | 0.30 |\n| 8 | pose, fine-tuned | 0.42 |\n")
+    text = ('<!-- table: results/table_5_2/beams.md key="beams,input" rows="8 / pose\\, fine-tuned,8 / sparse" '
+            'columns="input,localisation" -->\n<!-- /table -->\n')
+    body = splice(text, results / "RESULTS.md").text
+    assert "| input | localisation |\n| --- | --- |\n| pose, fine-tuned | 0.42 |\n| sparse | 0.30 |\n" in body
+    with pytest.raises(DcslamError, match=r"no row '64'; the rows are: 64 / sparse, 8 / sparse"):
+        splice(text.replace("8 / sparse", "64"), results / "RESULTS.md")
+
+
 def test_csv_file(results):
     text = '<!-- table: results/table_5_2/table_5_2.csv rows="dense depth" -->\n<!-- /table -->\n'
     body = splice(text, results / "RESULTS.md").text
@@ -85,7 +97,7 @@ def test_page_in_a_subfolder_resolves_paths_from_its_folder(results):
     ("<!-- table: results/table_5_2/table_5_2.md index=3 -->\n<!-- /table -->", r"holds 2 table\(s\), not a table"),
     ("<!-- table: results/table_5_2/table_5_2.md index=0 -->\n<!-- /table -->", r"index= must be a whole number"),
     ("<!-- table: results/table_5_2/table_5_2.md colums=method -->\n<!-- /table -->",
-     r"unknown marker attribute 'colums=method'"),
+     r"unknown marker attribute 'colums=method'; expected columns=, rows=, key= or index="),
     ("<!-- table: columns=method -->\n<!-- /table -->", r"the marker names no results file"),
 ])
 def test_mistakes_fail_with_one_line(results, marker, message):
