@@ -11,7 +11,7 @@ KITTI_ROOT ?=
 JOBS       ?= $(shell nproc 2>/dev/null || echo 1)
 REPRO_ARGS  = --profile $(PROFILE) --workspace $(WORKSPACE) --jobs $(JOBS) $(if $(KITTI_ROOT),--kitti $(KITTI_ROOT))
 
-.PHONY: setup test bench clean reproduce-table-5-2 reproduce-table-5-1 reproduce-beams demo-icl
+.PHONY: setup test bench clean reproduce-table-5-2 reproduce-table-5-1 reproduce-beams demo-icl results pages
 
 setup: $(STAMP)
 
@@ -39,7 +39,7 @@ reproduce-table-5-2: setup
 reproduce-table-5-1: setup
 	$(DCSLAM) reproduce --table 5.1 $(REPRO_ARGS)
 
-# The beams experiment (issue 13): every input (sparse, IP-Basic, SparseConvNet, nconv unmasked and masked by its
+# The beams experiment: every input (sparse, IP-Basic, SparseConvNet, nconv unmasked and masked by its
 # confidence, nconv-guided, nconv fine-tuned through the pose loss, annotated dense, exact) at 64/32/16/8 LiDAR
 # beams; table, per-drive CSV and a PNG of localisation against beam count under $(WORKSPACE)/results/
 # (table_beams.*, beams_localisation.png).
@@ -52,6 +52,20 @@ reproduce-beams: setup
 DEMO_ARGS ?=
 demo-icl: setup
 	$(DCSLAM) demo-icl --workspace $(WORKSPACE) --force $(DEMO_ARGS)
+
+# Committed results: copy $(WORKSPACE)/results/*.{md,csv} into results/$(NAME)/ with a provenance.json (commit,
+# date, profile, command, machine); FORCE=1 replaces an earlier copy. Then `make pages` refreshes the tables of
+# RESULTS.md and README.md from results/ (`dcslam score page PAGE --check` tells whether a page is current).
+NAME    ?=
+COMMAND ?= make reproduce-table-5-2 PROFILE=$(PROFILE)
+MACHINE ?=
+results: setup
+	$(DCSLAM) score collect --name $(NAME) -w $(WORKSPACE) --profile $(PROFILE) --command "$(COMMAND)" \
+	  $(if $(MACHINE),--machine "$(MACHINE)") $(if $(FORCE),--force)
+
+pages: setup
+	$(DCSLAM) score page RESULTS.md
+	$(DCSLAM) score page README.md
 
 bench: setup
 	$(PY) benchmarks/run_all.py

@@ -17,7 +17,8 @@ prints MAE / RMSE in millimetres over EVERY ground-truth pixel, a hole left at a
 prediction of 0 m, for: a nearest-neighbour fill of the input, IP-Basic (fast), and each model untrained and
 trained. Rows of models show the mean over the seeds and, after ±, half the range (max − min) / 2; a model is marked
 ``beats`` at a beam count when EVERY seed's trained model has a lower MAE and a lower RMSE than both the fill and its
-own untrained network. Not part of the test suite (minutes of CPU); its output is quoted in the README.
+own untrained network. Not part of the test suite (minutes of CPU); its output is the tables of RESULTS.md, "Fill
+correction".
 """
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ and after filling holes as the KITTI devkit does before scoring (``dcslam score 
 for the network only: it has no output beyond its receptive field (about 13 pixels from the nearest LiDAR point,
 e.g. ground truth at 120 m beyond the LiDAR's range), where the fill and IP-Basic extrapolate. ``--test-drives``
 adds held-out drives (e.g. from another ``dcslam synth --seed``). Not part of the test suite (minutes of CPU); its
-output is quoted in the README.
+output is the table of docs/benchmarks.md, "A briefly trained network against a plain fill".
 
 History: an earlier version trained and predicted at scale 0.5, where the down- and up-sampling of sparse depth
 blurs depth edges; there, after tens of steps, the network did not beat the nearest-neighbour fill (2707 vs

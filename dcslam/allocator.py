@@ -3,13 +3,9 @@
 glibc serves large allocations by their own ``mmap`` (given back to the system at ``free``) only above a threshold
 that it raises on its own, up to 32 MB, each time such a block is freed. The SLAM's per-frame tensors (a 1242 × 375
 float image is 1.8 MB; point and normal arrays of the same order) then come from the heap, where blocks of changing
-sizes fragment it: on 1,000 frames of the analytic street (sparse depth at full size, one thread,
-``benchmarks/bench_slam.py --memory-child sparse``) the heap in use stayed at 91 MB and the RSS after
-``malloc_trim`` at 250 MB from frame 200 on, yet the peak RSS grew 397 → 462 MB (+16 %) with malloc's arena at
-218–261 MB. Calling ``malloc_trim`` every 50 frames did not help (peak +33 %). With the threshold fixed
-(``mallopt(M_MMAP_THRESHOLD)``, which also stops glibc's own adjustment of it): 1 MB, 320 → 328 MB (+2.3 %); 4 MB,
-345 → 359 MB (+3.8 %); 16 MB, 398 → 430 MB (+8.0 %). 4 MB is the default here: flat, and about 10 % slower per SLAM
-frame than glibc's default in a side-by-side run (1 MB cost about 25 %). README, "SLAM on street drives".
+sizes fragment it, and the peak RSS of a long run grows although nothing of dcslam's does. With the threshold fixed
+(``mallopt(M_MMAP_THRESHOLD)``, which also stops glibc's own adjustment of it) the peak stays flat; 4 MB is the
+default here, a little slower per frame than glibc's own (the measurements: docs/slam.md, "Memory on long drives").
 """
 from __future__ import annotations
 

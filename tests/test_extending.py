@@ -1,4 +1,4 @@
-"""The README's "Extending dcslam" examples, run as written: a completer, a filter and a dataset, one module each,
+"""The examples of docs/extending.md, run as written: a completer, a filter and a dataset, one module each,
 registered by one line each, then used through the stages."""
 import re
 import sys
@@ -7,21 +7,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-README = Path(__file__).parents[1] / "README.md"
+PAGE = Path(__file__).parents[1] / "docs" / "extending.md"
 
 
 def _blocks() -> dict[str, str]:
-    """The Python blocks of the section, by their first line (``# mypkg/<file>.py`` or ``# register``)."""
-    text = README.read_text()
-    section = text[text.index("## Extending dcslam"):]
-    section = section[:section.index("\n## ", 3)] if "\n## " in section[3:] else section
-    blocks = re.findall(r"```python\n(.*?)```", section, re.S)
+    """The Python blocks of the page, by their first line (``# mypkg/<file>.py`` or ``# register``)."""
+    blocks = re.findall(r"```python\n(.*?)```", PAGE.read_text(), re.S)
     return {block.splitlines()[0].lstrip("# ").strip(): block for block in blocks}
 
 
 @pytest.fixture
 def registered(tmp_path, monkeypatch):
-    """The example modules written under tmp_path/mypkg, importable, and the README's registration run."""
+    """The example modules written under tmp_path/mypkg, importable, and the page's registration run."""
     from dcslam.depth.models import CLASSICAL
     from dcslam.filters import FILTERS
     from dcslam.stages.datasets import DATASETS
@@ -34,7 +31,7 @@ def registered(tmp_path, monkeypatch):
             (tmp_path / name).write_text(code)
     monkeypatch.syspath_prepend(str(tmp_path))
     saved = [(registry, dict(registry)) for registry in (CLASSICAL, FILTERS, DATASETS)]
-    exec(compile(blocks["register"], "README register block", "exec"), {})
+    exec(compile(blocks["register"], "docs/extending.md register block", "exec"), {})
     yield
     for registry, before in saved:  # the registries as they were
         registry.clear()

@@ -1,6 +1,6 @@
 """Fault test: Ctrl-C (SIGINT to the process group, as a terminal sends it) at seeded random moments of
 prepare-kitti, train, predict, slam and reproduce on tiny drives (one moment each, drawn from the seconds the
-uninterrupted run spent in that stage), then the rerun README.md prescribes; the final outputs must equal those of
+uninterrupted run spent in that stage), then the rerun docs/usage.md prescribes; the final outputs must equal those of
 an uninterrupted run, and no temporary file may be left.
 
 Deselect with ``-m "not faults"``. About a minute on a quiet 2-core machine.
@@ -116,7 +116,7 @@ def same_outputs(stage: str, got: Path, want: Path) -> None:
 
 
 def rerun_args(stage: str, ws: Path) -> list[str]:
-    """The rerun README.md gives for an interrupted stage."""
+    """The rerun docs/usage.md gives for an interrupted stage."""
     if stage == "train":
         run = ws / "runs" / "mse-dense"
         return ["--resume"] if (run / "last.pt").exists() else ["--force"] if run.exists() else []

@@ -47,6 +47,9 @@ def _parameter(cls, field) -> inspect.Parameter:
     default = None if field.default is dataclasses.MISSING else field.default
     if "choices" in meta and default is not None:
         default = base(default)
+    if meta.get("argument"):  # a positional argument (``dcslam score page PAGE``)
+        return inspect.Parameter(field.name, inspect.Parameter.KEYWORD_ONLY, default=default,
+                                 annotation=Annotated[annotation, typer.Argument(help=meta.get("help"), **extra)])
     return inspect.Parameter(field.name, inspect.Parameter.KEYWORD_ONLY, default=default,
                              annotation=Annotated[annotation, typer.Option(*flags, help=meta.get("help"), **extra)])
 

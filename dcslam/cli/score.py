@@ -64,3 +64,27 @@ stage_command(score_app, "tables", score.ScoreTablesConfig, score.run_tables, re
                    "with a trajectory plot per test drive and depth examples; when slam-long/ holds SLAM runs over "
                    "whole drives (dcslam reproduce), Table 5.2 over whole drives too.",
               examples=("dcslam score tables", "dcslam score tables --force    # after rerunning a stage"))
+
+
+def report_page(result) -> None:
+    if result.written:
+        summary(f"rewrote {len(result.changed)} of {result.regions} table region(s) in {result.page}")
+    else:
+        summary(f"{result.page}: {result.regions} table region(s), all as their results files")
+
+
+def report_collect(result) -> None:
+    summary(f"copied {len(result.files)} file(s) into {result.dest} (commit {result.provenance['commit']})")
+
+
+stage_command(score_app, "page", score.ScorePageConfig, score.run_page, report_page, force=False,
+              help="Rewrite the result tables of a Markdown page from committed results files: every region between "
+                   "<!-- table: FILE --> and <!-- /table --> gets FILE's table and its provenance line; "
+                   "columns=\"a,b\", rows=\"x,y\" (first cells) and index=N in the marker keep only those columns "
+                   "and rows, in that order, of the file's N-th table.",
+              examples=("dcslam score page RESULTS.md", "dcslam score page README.md --check"))
+stage_command(score_app, "collect", score.ScoreCollectConfig, score.run_collect, report_collect,
+              help="Copy a workspace's results (the .md and .csv files of results/) into results/<name>/ of the "
+                   "repository with a provenance.json (commit, date, profile, command, machine).",
+              examples=("dcslam score collect --name table_5_2 --profile quick --command 'make reproduce-table-5-2'",
+                        "dcslam score collect --name beams -w ws-beams --force"))

@@ -1,7 +1,7 @@
 """The training recipes' names, decoded in this one place (no torch: the command line imports it).
 
 A recipe is a loss (``mse`` with a ``sparse`` or ``dense`` mask, ``chamfer`` over maps of ``map_frames`` frames, or
-``pose``: the relative-pose error of dcslam's differentiable ICP over windows of frames, issue 14), and for ``pose``
+``pose``: the relative-pose error of dcslam's differentiable ICP over windows of frames), and for ``pose``
 the run it was fine-tuned from (``init``), if any.
 """
 from __future__ import annotations

@@ -1,6 +1,6 @@
-"""The pose loss inside training (issue 14): the :class:`dcslam.depth.pose.PoseLoss` of a training configuration,
-a network's prediction with its confidence (the pose loss's per-pixel ICP weights), and the validation pass of the
-pose loss. :mod:`dcslam.depth.train` composes them into its objective and its validation.
+"""The pose loss inside training (docs/training.md, "The pose loss"): the :class:`dcslam.depth.pose.PoseLoss` of a
+training configuration, a network's prediction with its confidence (the pose loss's per-pixel ICP weights), and the
+validation pass of the pose loss. :mod:`dcslam.depth.train` composes them into its objective and its validation.
 """
 from __future__ import annotations
 

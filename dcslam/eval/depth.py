@@ -45,7 +45,7 @@ from dcslam.errors import DcslamError
 METRICS = ("mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km")
 #: The devkit's depth of a pixel it could not interpolate (``DepthImage::setInvalid``), scored as is.
 DEVKIT_INVALID_M = -1.0
-#: The two departures in one paragraph, for ``--help`` and the README.
+#: The two departures in one paragraph, for ``--help`` and docs/metrics.md.
 DEPARTURES_TEXT = (
     "Depth scores follow the KITTI depth-completion devkit (evaluate_depth.cpp: holes filled by its background "
     "interpolation, errors over ground-truth pixels, mean over images) with two departures: (1) ground-truth pixels "

@@ -283,28 +283,21 @@ def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str], devki
             row.setdefault(f"thesis_{k}_text", "x" if k in theirs and theirs[k] is None else
                            (None if theirs.get(k) is None else f"{theirs[k]:g}"))
         table.rows.append(annotate(row, result, settings.get(id(result)), common))
-    table.notes += [
-        "localisation accuracy: the thesis's metric, mean over poses of ‖t_X‖ + acos((tr R_X − 1)/2), "
-        "X = T_gt⁻¹ T_est (m + rad); lower is better. Every figure of ours: mean over the test drives ± the half-"
-        "width of its 95 % t-interval (the CSV holds std, interval and median)",
-        f"failed: drives whose SLAM run was flagged suspect (rejected or degraded steps, drift bound) or whose "
-        f"localisation error exceeds "
-        f"{(results[0].failure_threshold if results else FAILURE_THRESHOLD):g} (they stay in the means); "
-        "vs sparse: whether the localisation differs from sparse depth's beyond the spread (paired t-interval of the "
-        "per-drive differences, 95 %)",
-        ("MAE, RMSE, iMAE, iRMSE: exactly as the KITTI devkit" if devkit_exact else
-         "MAE, RMSE, iMAE, iRMSE: KITTI devkit with two departures (predictions below 0.1 m are holes; pixels the "
-         "devkit cannot interpolate are left out; --devkit-exact removes both)") +
-        ", per image, averaged over each drive's images, then over the drives",
-        "ATE: evo APE translation after SE(3) Umeyama alignment; RPE: evo, consecutive frames (RMSE of each drive); "
-        "t_rel / r_rel: KITTI odometry devkit drift over 100-800 m segments, averaged over the drives long enough "
-        "(their number in the CSV)",
-        ("trained rows: one training run (one seed) per recipe, so their spread is across test drives only, not "
-         "across training seeds" if all(sum(r.label == recipe for r in results) <= 1 for recipe in RECIPES) else
-         "trained rows: each training run of a recipe is its own row (their spread across test drives; compare "
-         "the rows of one recipe for the spread across training runs)"),
-        "thesis columns: the thesis's own figures (dcslam/report/thesis_tables.json); x where the thesis did not "
-        "compute it; — where the thesis has no such row",
+    threshold = results[0].failure_threshold if results else FAILURE_THRESHOLD
+    single_runs = all(sum(r.label == recipe for r in results) <= 1 for recipe in RECIPES)
+    table.notes += [  # short on purpose: how each column is computed is in docs/metrics.md
+        "localisation accuracy: the thesis's metric (m + rad, lower is better); every figure: mean over the test "
+        "drives ± the half-width of its 95 % t-interval (std, interval and median in the CSV)",
+        f"failed: drives flagged suspect by the SLAM or with a localisation error above {threshold:g}; vs sparse: "
+        "paired 95 % t-interval of the per-drive differences",
+        "MAE, RMSE, iMAE, iRMSE: " + ("exactly as the KITTI devkit" if devkit_exact else
+                                     "KITTI devkit with two departures (--devkit-exact removes them)"),
+        "ATE, RPE: as evo computes them; t_rel / r_rel: KITTI odometry devkit over 100-800 m segments",
+        ("trained rows: one training run per recipe, so their spread is across test drives only" if single_runs
+         else "trained rows: each training run of a recipe is its own row"),
+        "thesis columns: the thesis's figures (dcslam/report/thesis_tables.json); x: not computed there; —: no "
+        "such row",
+        "how each column is computed, and where dcslam departs from the thesis and the devkits: docs/metrics.md",
         f"SLAM settings of the rows (those of most rows; a row made otherwise says how in SLAM settings): "
         f"{settings_text(common) or 'none recorded'}"]
     return table

@@ -1,8 +1,8 @@
-"""The beams experiment's table: depth and localisation of every input at every LiDAR beam count (issue 13).
+"""The beams experiment's table: depth and localisation of every input at every LiDAR beam count.
 
 For each beam count B and each input made from the B-beam sparse depth — the sparse depth itself, IP-Basic's
 completion, SparseConvNet, nconv unmasked and masked by its confidence, nconv-guided, nconv fine-tuned through the
-pose loss (issue 14; its confidence as ICP weights) — and for the inputs that do not
+pose loss (its confidence as ICP weights) — and for the inputs that do not
 depend on B (annotated dense depth, the generator's exact depth): MAE / RMSE against the annotated depth and
 localisation (the thesis's metric, ATE, RPE) as the mean over the test drives ± the half-width of the 95 % t-interval
 (:mod:`dcslam.report.spread`), the median, the failures, whether the row differs from the sparse input of its beam

@@ -11,19 +11,19 @@ from dcslam.geometry.camera import backproject, check_depth, check_K
 from dcslam.geometry.normals import vertex_normals
 
 
-#: Normal search (pixels) for sparse depth. Issue 12 measured 8 px failing on 64 beams (16 px fixed it; 16 and 8
-#: beams needed 32 and 64 px); on 8 seed-2026 drives x 40 frames (64 beams) 32 px tracked as 8 px did. Since normals
-#: are found by sorting the valid pixels, the search costs nothing more.
+#: Normal search (pixels) for sparse depth: far enough to reach the next LiDAR scan line at 64 beams (a shorter
+#: search fails there; measurements in docs/slam.md, "Normals"). Normals are found by sorting the valid pixels, so a
+#: longer search costs nothing more.
 SPARSE_NORMAL_SEARCH = 32
-#: Valid-pixel fraction down to which :data:`SPARSE_NORMAL_SEARCH` reaches the next scan line: 16 of the 64 beams
-#: (1.0-1.1 % of a 1242 x 375 frame on seed-2026 drives). Sparser depth searches proportionally further (8 beams,
-#: 0.53-0.57 %: 56-60 px), as scan lines are proportionally further apart.
+#: Valid-pixel fraction down to which :data:`SPARSE_NORMAL_SEARCH` reaches the next scan line (16 of 64 beams, about
+#: 1 % of a KITTI frame). Sparser depth searches proportionally further, as its scan lines are proportionally
+#: further apart.
 SPARSE_REFERENCE_FRACTION = 0.01
 
 
 #: Valid-pixel fraction above which depth counts as dense (completed or exact depth: the adjacent pixels are the
-#: normal neighbours, :func:`normal_search_for`). On generated drives 64-beam LiDAR depth has a value at about 4 %
-#: of the pixels, the annotated (accumulated) depth at about 21 %, IP-Basic's completion at all of them.
+#: normal neighbours, :func:`normal_search_for`). It lies between LiDAR-like depth (a few per cent of the pixels,
+#: annotated depth about a fifth) and completed depth (all of them); densities in docs/slam.md.
 DENSE_FRACTION = 0.3
 
 

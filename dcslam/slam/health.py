@@ -10,18 +10,12 @@ Each odometry step gets one verdict:
 - ``accepted``: none of that.
 
 :func:`summarise` turns a run's reports into counts and a ``suspect`` flag with its reasons: a run is suspect when
-any step was rejected, when more than a small fraction of its steps were degraded, or when several consecutive
-steps were. The defaults of
-:class:`HealthRules` come from every step of 8 generated drives x 40 frames (seed 2026, sparse depth, voxel 0.2 m;
-``benchmarks/slam_sweep.py --steps``): on the 7 drives that tracked, no step had conditioning below 3.3e-3; on the
-drive that failed (a stretch with little structure along the road), the 7 steps that added 0.2-2 m of error each had
-conditioning 2e-4-1.8e-3. The conditioning bound sits between the two. The pair bound comes from all 100 frames of
-the same 8 drives at 64, 32, 16 and 8 beams: with 8 beams a step has 133-197 pairs (median per drive) and every
-drive ended 1-31 m off; with 16 beams no step of a drive that ended within 0.5 m had fewer than 280 pairs; dense
-frames have thousands.
+any step was rejected, when more than a small fraction of its steps were degraded, when two consecutive steps were,
+or when its accumulated first-order uncertainty (:func:`drift_sigma_m`, three sigma) says it may end more than
+``max_drift_m`` from the truth: slow drift that no single step shows.
 
-A run is also suspect when its accumulated first-order uncertainty (:func:`drift_sigma_m`, three sigma) says it may
-end more than ``max_drift_m`` from the truth: slow drift that no single step shows.
+The thresholds of :class:`HealthRules` are calibrated on generated street drives at 64, 32, 16 and 8 beams and on
+dense depth; the measurements behind each are in docs/slam.md ("Health rules and their calibration").
 """
 from __future__ import annotations
 
@@ -33,29 +27,22 @@ VERDICTS = ("accepted", "degraded", "rejected")
 
 @dataclass(frozen=True)
 class HealthRules:
-    """Thresholds of the verdicts.
+    """Thresholds of the verdicts (calibration: docs/slam.md, "Health rules and their calibration").
 
     min_pairs: a step with fewer pairs (inliers) than this is degraded. A count, not a share of the frame's points:
-        how precisely a step is measured depends on how many pairs constrain it, whatever the depth's density
-        (a dense completed frame pairs 4-10 % of its points with PointFusion's map and still thousands of them; the
-        share of 10 % used before was chosen on sparse depth and flagged most completed-depth runs).
+        how precisely a step is measured depends on how many pairs constrain it, whatever the depth's density.
     min_conditioning: normalised conditioning (see :meth:`ICPOdometry._conditioning`) below which a step is
         degraded (the odometry itself rejects below its own, lower, bound).
     max_prediction_gap_m, max_prediction_gap_deg: distance of the estimate from the constant-velocity prediction
         above which a step is degraded (only once a velocity is known, from the third frame on).
     max_degraded_fraction: a run with more degraded steps than this fraction is suspect.
     max_degraded_run: a run with more consecutive degraded steps than this is suspect (isolated weak steps happen;
-        two in a row mean the tracker has lost the scene: 16-beam drive 1007 of seed 2026 ended 3.5 m off after
-        degraded steps 1 and 2 alone, while no drive that ended within 0.5 m had two degraded steps anywhere, in
-        any of the 64/32/16-beam or dense tables of ``benchmarks/results/slam_seed2026.md``).
+        two in a row mean the tracker has lost the scene).
     max_rejected: a run with more rejected steps than this is suspect.
     max_drift_m: a run whose accumulated uncertainty (three times :func:`drift_sigma_m`) exceeds this may end
-        further than this from the truth, and is suspect (0: never). It catches the slow drift that no single step
-        shows: on the 8 drives x 100 frames of seed 2026, the 16-beam drive that ended 0.65 m off with every step
-        accepted had 3 sigma 0.78 m; every drive of 64 beams (icp, gradicp) or dense depth (icp) that ended within
-        0.5 m had at most 0.22 m, and two 16-beam drives that ended 0.33 and 0.38 m off are flagged by it (0.56 and
-        0.70 m: they may have ended further off). The bound is absolute, as the question it answers ("may this
-        trajectory be more than 0.5 m off?"): a drive ten times longer accumulates more and is flagged sooner.
+        further than this from the truth, and is suspect (0: never). The bound is absolute, as the question it
+        answers ("may this trajectory be more than 0.5 m off?"): a longer drive accumulates more and is flagged
+        sooner.
     """
 
     min_pairs: int = 250

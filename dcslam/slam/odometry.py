@@ -42,12 +42,10 @@ class OdometryResult:
 
 
 #: Iterations of each wide-gate ICP stage on dense depth (a value at more than :data:`DENSE_FRACTION` of the
-#: pixels: completed or exact depth). On such depth Gauss-Newton with a 4x or 2x gate does not converge: it
-#: cycles with 1-2 cm steps until the cap (IP-Basic's completion of seed-77 drives: 40 of 44 iterations per frame
-#: in the wide stages), and on one drive those iterations walked it off (44 m with 20 each, 0.28 m with 1-5). With 3
-#: (chosen on seed-77 IP-Basic and seed-2026 exact and IP-Basic depth, see the README) the final error of every
-#: drive that tracked moved by at most 0.03 m (0.01 m but for one) and the frame took about a third less time.
-#: Sparse depth converges within the cap of each stage and keeps ``iterations``.
+#: pixels: completed or exact depth). On such depth Gauss-Newton with a 4x or 2x gate does not converge but cycles
+#: with centimetre steps until the cap, which costs time and can walk a run off; a few iterations leave the final
+#: error of tracking drives as it was (docs/slam.md, "Wide-gate iterations on dense depth"). Sparse depth converges
+#: within the cap of each stage and keeps ``iterations``.
 DENSE_COARSE_ITERATIONS = 3
 
 

@@ -40,7 +40,7 @@ RECIPES = {  # run name → `dcslam train` options (Table 5.1 / 5.2 rows of the 
     "mse-sparse": {"loss": "mse", "mask": "sparse"},
     "mse-dense": {"loss": "mse", "mask": "dense"},
 }
-POSE_RECIPES = {  # the pose loss (issue 14), from scratch and fine-tuned from a chamfer and an MSE run (trained first)
+POSE_RECIPES = {  # the pose loss, from scratch and fine-tuned from a chamfer and an MSE run (trained first)
     "pose": {"loss": "pose"},
     "pose-from-chamfer-8": {"loss": "pose", "init": "chamfer-8"},
     "pose-from-mse-dense": {"loss": "pose", "init": "mse-dense"},
@@ -404,7 +404,7 @@ def compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | Non
                                  inputs=lambda r=run_name: [ws.runs / r / "model.pt", *test] if r in runs else test))
         layers[run_name] = (made, f"predicted/{run_name}")
     pipe.run_all(predictions, jobs)
-    for run_name in RECIPES:  # the thesis's recipes only: filtering the pose runs too would not fit the budget
+    for run_name in RECIPES:  # the thesis's recipes only: filtering the pose runs too would lengthen the quick profile
         for fname, specs in profile.filters.items():
             name = f"{run_name}+{fname}"
             made = [ws.filtered / name / p.name for p in test]

@@ -1,12 +1,12 @@
 """``dcslam reproduce --table beams`` (``make reproduce-beams``): does completed depth help SLAM when the LiDAR has
-fewer beams? (issue 13)
+fewer beams? (RESULTS.md, "Beams")
 
 The experiment composes the other stages as :mod:`dcslam.stages.reproduce` does (same stamps, same skipping of
 finished stages, same ``jobs``)::
 
     synth (unless a KITTI root is given) → prepare-kitti --beams 32,16,8 (plus depth/exact on generated drives)
     → train SparseConvNet, nconv, nconv-guided, then nconv-pose (nconv fine-tuned through the pose loss, its
-      confidence as ICP weights; issue 14) → predict each (and IP-Basic) at every beam count
+      confidence as ICP weights) → predict each (and IP-Basic) at every beam count
     → filter nconv's predictions by confidence ("masked") → slam over every (input, beam count, test drive)
     → score: the beams table, its per-drive CSV and a plot of localisation against beam count
 
@@ -45,7 +45,7 @@ class BeamsProfile:
     beams: tuple[int, ...] = (64, 32, 16, 8)
     # nconv's "masked" rows keep each frame's most confident quarter of pixels: a fixed threshold (0.5) emptied the
     # layers of a briefly trained nconv, whose confidence scale varies by model and beam count; keeping the top
-    # quarter localised best of 25/50/75 % on 4 seed-2027 drives at 16 beams (README, "Confidence in SLAM")
+    # quarter localised best of 25/50/75 % (RESULTS.md, "Confidence in SLAM")
     confidence_keep: float = 0.25
     split: tuple[int, int, int] | None = None
     slam: dict = field(default_factory=dict)  # SLAM settings other than the defaults (fields of SlamSettings)
@@ -83,10 +83,10 @@ _QUICK = {"epochs": 2, "max_frames": 31, "scale": 0.5}  # as the Table 5.2 quick
 # input three frames in six and on 32, 16 and 8 beams one each, MSE plus 30 x L1 (MAE is what the plain networks lost
 # to the fill on), lr 1e-3 with a cosine schedule: the recipe that beat the fill and its untrained self at 64, 32, 16
 # and 8 beams, MAE and RMSE, for all three networks in benchmarks/beams_quality.py (chosen on the seed-7 drives,
-# confirmed on the seed-11 drives with 2 training seeds; README)
+# confirmed on the seed-11 drives with 2 training seeds; RESULTS.md, "Fill correction")
 _CORRECT = {"correct_fill": True, "input_mix": ["sparse", "sparse", "sparse", "sparse@32", "sparse@16", "sparse@8"],
             "l1_weight": 30.0, "lr": 1e-3, "lr_schedule": "cosine"}
-# nconv fine-tuned through the pose loss (issue 14): the network's confidence is each pixel's ICP weight, so this
+# nconv fine-tuned through the pose loss: the network's confidence is each pixel's ICP weight, so this
 # loss is the one that can teach the confidence which pixels ICP should trust
 _POSE = {"model": "nconv", "loss": "pose", "init": "nconv"}
 # its scale in the quick profile, as Table 5.2's quick pose runs: 1 epoch of 16 frames per drive (12 windows of 4),

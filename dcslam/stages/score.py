@@ -181,3 +181,74 @@ def run_tables(ws: Workspace, config: ScoreTablesConfig, *, force: bool = False)
     write_json_atomic(report.written[0].parent / "score-tables.json", stage_config("score-tables", to_dict(config)),
                       force=True)
     return report
+
+
+@dataclass(frozen=True)
+class ScorePageConfig:
+    """Options of ``dcslam score page``."""
+
+    page: Path = option(Path("RESULTS.md"), argument=True,
+                        help="Markdown page whose <!-- table: FILE ... --> ... <!-- /table --> regions are rewritten "
+                             "from their results files (paths relative to the page).")
+    check: bool = option(False, flags=("--check",),
+                         help="Write nothing; exit 1 naming the first region that differs from its file.")
+
+
+@dataclass
+class PageResult:
+    """The page, its regions and those that changed (``written``: whether the page was rewritten)."""
+
+    page: Path
+    regions: int
+    changed: tuple
+    written: bool
+
+
+def run_page(ws: Workspace, config: ScorePageConfig) -> PageResult:
+    """Splice the page's marked regions from their results files (:mod:`dcslam.report.splice`); with ``check``,
+    fail on the first region that differs instead of writing."""
+    from dcslam.io.atomic import write_text_atomic
+    from dcslam.report.splice import splice_page
+
+    result = splice_page(config.page)
+    if config.check:
+        if result.changed:
+            first = result.changed[0]
+            raise DcslamError(f"{config.page}:{first.line}: the table from {first.source} differs from its file "
+                              f"({len(result.changed)} region(s) differ); run `dcslam score page {config.page}`")
+        return PageResult(config.page, len(result.regions), (), False)
+    if result.changed:
+        write_text_atomic(config.page, result.text, force=True)
+    return PageResult(config.page, len(result.regions), result.changed, bool(result.changed))
+
+
+@dataclass(frozen=True)
+class ScoreCollectConfig:
+    """Options of ``dcslam score collect``."""
+
+    name: str | None = option(None, help="Folder name under --dest, e.g. table_5_2. Required.")
+    source: Path | None = option(None, help="Results folder to copy (default: <workspace>/results).")
+    dest: Path = option(Path("results"), help="Folder of committed results (the repository's results/).")
+    profile: str | None = option(None, help="Profile the results were made with (recorded in provenance.json).")
+    command: str | None = option(None, help="Command that made them, e.g. 'make reproduce-table-5-2'.")
+    machine: str | None = option(None, help="Machine they were made on (default: CPU cores, architecture, system).")
+    commit: str | None = option(None, help="Commit of the code that made them (default: the checkout's HEAD).")
+    include: list[str] = option(default_factory=list, metavar="GLOB",
+                                help="File patterns to copy (repeatable; default *.md and *.csv).")
+
+    def __post_init__(self) -> None:
+        from dcslam.workspace import plain_name
+
+        if not self.name:
+            raise DcslamError("give --name NAME: the folder under results/ to copy the results into")
+        plain_name(self.name, "--name")
+
+
+def run_collect(ws: Workspace, config: ScoreCollectConfig, *, force: bool = False):
+    """Copy a workspace's results into ``<dest>/<name>/`` with their provenance
+    (:func:`dcslam.report.provenance.collect_results`)."""
+    from dcslam.report.provenance import DEFAULT_PATTERNS, collect_results
+
+    return collect_results(config.source or ws.results, config.dest / config.name, profile=config.profile,
+                           command=config.command, machine=config.machine, commit=config.commit,
+                           patterns=tuple(config.include) or DEFAULT_PATTERNS, force=force)

@@ -16,8 +16,8 @@ def _sparse_drive(frames: int, step: float, seed: int = 2):
 
 
 def test_gradicp_follows_a_moving_car_on_sparse_depth():
-    """The README's example (differentiable LM + ICP-SLAM map) once left every pose at the identity: LiDAR-like
-    scan lines land on the same pixels at the initial guess, so re-associating at each candidate pose made every
+    """The example of docs/usage.md (differentiable LM + ICP-SLAM map) must track a moving car: LiDAR-like scan
+    lines land on the same pixels at the initial guess, so re-associating at each candidate pose made every
     step look worse and the solver stopped at its first rejected step."""
     depth, K, T = _sparse_drive(5, step=1.2)
     slam = build_slam(SlamSettings(odometry="gradicp", mapper="icpslam"))

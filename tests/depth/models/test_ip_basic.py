@@ -69,7 +69,7 @@ def _kitti_frame(data_dir):
 
 
 # The authors' code (kujason/ip_basic, depth_map_utils.py) on the real KITTI frame (drive 0001, frame 5, image_02),
-# scored over its ground-truth pixels, mm: the figures of issue 15. dcslam's output was also checked identical, pixel
+# scored over its ground-truth pixels, mm. dcslam's output was also checked identical, pixel
 # for pixel, to the authors' functions run locally on this frame, for both variants, both blurs, with and without
 # extrapolation; the extrapolate=False figures below are those runs' (scored with dcslam's devkit interpolation).
 AUTHORS_FIGURES = [
