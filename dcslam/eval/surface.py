@@ -112,7 +112,8 @@ def depth_surface(depth: torch.Tensor, K: torch.Tensor, search: int = 1, max_rel
     return Surface(points, normals, has_point, has_normal)
 
 
-def depth_edges(depth: torch.Tensor, has_point: torch.Tensor, relative_jump: float = EDGE_RELATIVE_JUMP) -> torch.Tensor:
+def depth_edges(depth: torch.Tensor, has_point: torch.Tensor,
+                relative_jump: float = EDGE_RELATIVE_JUMP) -> torch.Tensor:
     """Pixels at a depth edge: a 4-neighbour with a point whose depth differs from the pixel's by more than
     ``relative_jump`` times the smaller of the two (a hole is no edge).
 
