@@ -167,18 +167,21 @@ def edge_mixing_loss(pred: torch.Tensor, reference: torch.Tensor, K: torch.Tenso
     """The flying-pixel share of :mod:`dcslam.eval.surface` made soft: the mean, over the pixels near a reference
     depth edge (within ``radius_px`` of a relative jump above ``edge_jump``; defaults those of the metric) with a
     predicted and a reference point (and ``mask``), of the squared distance (m²) of the predicted point from the
-    nearer reference surface there (the nearest plane of the pixels within ``radius_px``). A point on either side
+    nearer reference surface there (the nearest plane, or point where it has no normal, of the reference pixels
+    within ``radius_px``: :func:`dcslam.eval.surface.nearest_surface_sq`). A point on either side
     costs nothing; a depth mixed between the sides is pulled to the nearer one (the gradient goes to that plane).
     Options as :func:`normal_loss`.
 
     Shape:
         pred, reference: (B, 1, H, W) metres, 0 = none; K: (3, 3) or (B, 3, 3); mask: (B, 1, H, W) bool → scalar
     """
-    from dcslam.eval.surface import EDGE_RADIUS_PX, EDGE_RELATIVE_JUMP, depth_edges, near, nearest_plane_sq
+    from dcslam.eval.surface import EDGE_RADIUS_PX, EDGE_RELATIVE_JUMP, depth_edges, near, nearest_surface_sq
 
     edge_jump = EDGE_RELATIVE_JUMP if edge_jump is None else edge_jump
     radius_px = EDGE_RADIUS_PX if radius_px is None else radius_px
     surface, ref, mask = _surfaces(pred, reference, K, mask, reference_search, max_relative_gap)
-    band = near(depth_edges(reference, ref.has_point, edge_jump), radius_px) & surface.has_point & ref.has_point
-    distance_sq = nearest_plane_sq(surface.points, ref, radius_px)
-    return _mean_over(distance_sq, band & mask & torch.isfinite(distance_sq), pred)
+    band = (near(depth_edges(reference, ref.has_point, edge_jump), radius_px) & surface.has_point & ref.has_point
+            & mask)
+    if not bool(band.any()):
+        return (pred * 0).sum()
+    return nearest_surface_sq(surface.points, ref, band, radius_px).mean()

@@ -21,9 +21,10 @@ reference (exact depth on generated drives, annotated dense depth otherwise), bo
   from its own by more than :data:`EDGE_RELATIVE_JUMP` times the smaller of the two; a pixel is *near an edge*
   when it lies within :data:`EDGE_RADIUS_PX` pixels (a (2r+1)-pixel square) of one. Of the pixels near an edge
   with a scored and a reference point, the flying share is the fraction whose scored point lies more than
-  max(:data:`FLYING_MIN_M`, :data:`FLYING_RELATIVE` x R(p)) from every reference surface nearby: the planes
-  (reference point and normal) of the pixels within :data:`EDGE_RADIUS_PX` that have a reference normal. A point
-  on either side of the edge, even one drawn a pixel off, is not flying; a depth mixed between the two sides is.
+  max(:data:`FLYING_MIN_M`, :data:`FLYING_RELATIVE` x R(p)) from every reference surface nearby: of each pixel
+  within :data:`EDGE_RADIUS_PX` with a reference point, its plane (reference point and normal), or the point
+  itself where it has no normal (a structure too thin for one). A point on either side of the edge, even one
+  drawn a pixel off, is not flying; a depth mixed between the two sides is.
 
 Over many images every image weighs the same (as the devkit's depth errors): each metric is the mean of the
 per-image values over the images where it is defined (NaN where none is); the pixel counts are totals.
@@ -140,28 +141,37 @@ def near(mask: torch.Tensor, radius: int) -> torch.Tensor:
     return F.max_pool2d(mask.to(torch.float32), 2 * radius + 1, stride=1, padding=radius) > 0
 
 
-def _shifted(x: torch.Tensor, dy: int, dx: int, radius: int, fill: float | bool = 0) -> torch.Tensor:
-    """``x`` at pixel (v + dy, u + dx) for every pixel (v, u); ``fill`` outside the image. Shape: (B, C, H, W)."""
-    padded = F.pad(x if x.dtype != torch.bool else x.to(torch.uint8), (radius,) * 4, value=float(fill))
-    H, W = x.shape[-2:]
-    out = padded[..., radius + dy:radius + dy + H, radius + dx:radius + dx + W]
-    return out.bool() if x.dtype == torch.bool else out
+def nearest_surface_sq(points: torch.Tensor, reference: Surface, pixels: torch.Tensor, radius: int) -> torch.Tensor:
+    """For each pixel of ``pixels``, the squared distance of its point to the nearest reference surface among the
+    pixels within ``radius`` pixels (a square): the plane (reference point and normal) of a pixel with a normal,
+    the reference point itself of a pixel with a point but no normal (a thin structure, a lone return); ``inf``
+    where there is neither. Differentiable in ``points`` (towards the nearest surface; the reference is fixed).
 
-
-def nearest_plane_sq(points: torch.Tensor, reference: Surface, radius: int) -> torch.Tensor:
-    """Squared distance of each pixel's point to the nearest of the reference planes (point and normal) of the
-    pixels within ``radius`` pixels that have a reference normal; ``inf`` where there is none. Differentiable in
-    ``points`` (towards the nearest plane; the reference is taken as fixed).
-
-    Shape: points (B, 3, H, W), reference of (B, ., H, W) -> (B, 1, H, W).
+    Shape: points (B, 3, H, W), reference of (B, ., H, W), pixels (B, 1, H, W) bool -> (M,) for the M pixels of
+    ``pixels`` in raster order.
     """
-    ref_p, ref_n = reference.points.detach(), reference.normals.detach()
-    best = torch.full_like(points[:, :1], math.inf)
+    B, _, H, W = points.shape
+    index = torch.nonzero(pixels.reshape(-1)).squeeze(1)
+    p = points.permute(0, 2, 3, 1).reshape(-1, 3)[index]
+    # the reference maps padded by ``radius`` pixels without a point, so that every neighbour lies at a fixed
+    # offset from the pixel in the flattened padded image
+    Hp, Wp = H + 2 * radius, W + 2 * radius
+
+    def padded(x: torch.Tensor) -> torch.Tensor:
+        return F.pad(x.detach().to(points.dtype), (radius,) * 4).permute(0, 2, 3, 1).reshape(B * Hp * Wp, -1)
+
+    ref_p, ref_n = padded(reference.points), padded(reference.normals)
+    has_point, has_normal = (padded(m)[:, 0] > 0 for m in (reference.has_point, reference.has_normal))
+    b, v, u = index // (H * W), (index // W) % H, index % W
+    centre = (b * Hp + v + radius) * Wp + u + radius
+    best = torch.full((index.numel(),), math.inf, dtype=points.dtype, device=points.device)
     for dy in range(-radius, radius + 1):
         for dx in range(-radius, radius + 1):
-            ok = _shifted(reference.has_normal, dy, dx, radius, False)
-            d = (_shifted(ref_n, dy, dx, radius) * (points - _shifted(ref_p, dy, dx, radius))).sum(1, keepdim=True)
-            best = torch.minimum(best, torch.where(ok, d * d, torch.full_like(d, math.inf)))
+            q = centre + (dy * Wp + dx)
+            offset = p - ref_p[q]
+            plane = (ref_n[q] * offset).sum(1)
+            sq = torch.where(has_normal[q], plane * plane, (offset * offset).sum(1))
+            best = torch.minimum(best, torch.where(has_point[q], sq, torch.full_like(sq, math.inf)))
     return best
 
 
@@ -223,11 +233,9 @@ def surface_errors(depth_m, reference_m, K, settings: SurfaceSettings = SurfaceS
 
         band = (near(depth_edges(reference, ref.has_point, s.edge_jump), s.edge_radius_px)
                 & pred.has_point & ref.has_point)
-        dist = nearest_plane_sq(pred.points, ref, s.edge_radius_px).double().sqrt()
-        band &= torch.isfinite(dist)
-        limit = torch.clamp(s.flying_relative * reference.double(), min=s.flying_min_m)
-        flying = int((band & (dist > limit)).sum())
-        edge_pixels = int(band.sum())
+        dist = nearest_surface_sq(pred.points, ref, band, s.edge_radius_px).double().sqrt()
+        limit = torch.clamp(s.flying_relative * reference[band].double(), min=s.flying_min_m)
+        flying, edge_pixels = int((dist > limit).sum()), int(band.sum())    # every band pixel has its own point
 
     nan = math.nan
     return SurfaceErrors(

@@ -113,6 +113,17 @@ def test_mixed_step_with_holes(dtype):
     assert e.edge_pixels == 6 * 6 and e.flying_pixels == 4 * 6 and e.flying_share == pytest.approx(4 / 6)
 
 
+def test_a_structure_too_thin_for_a_normal_is_a_surface_too(dtype):
+    ref, K_step = step()
+    ref[:, 15] = 5.0                            # a pole one pixel wide: no horizontal neighbour on its surface
+    e = surface_errors(image(ref, dtype), image(ref, dtype), K_step)
+    assert e.flying_pixels == 0 and e.edge_pixels == 12 * 8    # columns 7..18: near the step or the pole
+    assert e.p2p_pixels == 20 * 8 - 8           # the pole has no normal: no plane to measure from
+    mixed = ref.copy()
+    mixed[:, 15] = 7.5                          # half way between the pole and the background
+    assert surface_errors(image(mixed, dtype), image(ref, dtype), K_step).flying_pixels == 8
+
+
 def test_small_mixing_within_the_tolerance_is_not_flying(dtype):
     ref, K_step = step()
     near_side = ref.copy()
