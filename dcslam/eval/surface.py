@@ -81,7 +81,8 @@ class SurfaceSettings:
         if self.search < 1 or self.reference_search < 1:
             raise DcslamError(f"normal searches must be >= 1 pixel, got {self.search} and {self.reference_search}")
         if self.edge_radius_px < 0 or not self.edge_jump > 0 or self.flying_min_m < 0 or self.flying_relative < 0:
-            raise DcslamError("edge radius, flying distances must be >= 0 and the edge jump > 0")
+            raise DcslamError(f"edge_radius_px, flying_min_m and flying_relative must be >= 0 and edge_jump > 0; got "
+                              f"{self.edge_radius_px}, {self.flying_min_m}, {self.flying_relative}, {self.edge_jump}")
 
 
 @dataclass(frozen=True)
@@ -215,7 +216,7 @@ def surface_errors(depth_m, reference_m, K, settings: SurfaceSettings = SurfaceS
         raise DcslamError(f"depth {tuple(depth.shape)} and reference depth {tuple(reference.shape)} differ in shape")
     dtype = torch.promote_types(depth.dtype, reference.dtype)
     depth, reference = depth.to(dtype)[None, None], reference.to(dtype)[None, None]
-    K = check_K(torch.as_tensor(K)).to(dtype)
+    K = check_K(torch.as_tensor(K)).to(dtype=dtype, device=depth.device)
     s = settings
     with torch.no_grad():
         ref = depth_surface(reference, K, s.reference_search, s.max_relative_gap, s.min_depth, s.max_depth)
@@ -224,12 +225,12 @@ def surface_errors(depth_m, reference_m, K, settings: SurfaceSettings = SurfaceS
         pred = depth_surface(depth, K, s.search, s.max_relative_gap, s.min_depth, s.max_depth)
 
         both = (pred.has_normal & ref.has_normal)[:, 0]
-        n_d, n_r = (x.permute(0, 2, 3, 1)[both].double() for x in (pred.normals, ref.normals))
+        n_d, n_r = (x.permute(0, 2, 3, 1)[both].double().cpu() for x in (pred.normals, ref.normals))
         angle = torch.rad2deg(torch.atan2(torch.linalg.cross(n_d, n_r).norm(dim=-1), (n_d * n_r).sum(-1))).numpy()
 
         scored = (pred.has_point & ref.has_point & ref.has_normal)[:, 0]
         offset = (pred.points - ref.points).double() * ref.normals.double()
-        p2p = offset.sum(1)[scored].numpy()
+        p2p = offset.sum(1)[scored].cpu().numpy()
 
         band = (near(depth_edges(reference, ref.has_point, s.edge_jump), s.edge_radius_px)
                 & pred.has_point & ref.has_point)
