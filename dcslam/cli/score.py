@@ -45,8 +45,12 @@ def report_tables(report) -> None:
 
 stage_command(score_app, "depth", score.ScoreDepthConfig, score.run_depth, report,
               help="MAE, RMSE (mm), iMAE, iRMSE (1/km) of a depth layer against the dense depth, as the KITTI devkit "
-                   "computes them (per image, then averaged).",
-              examples=("dcslam score depth --layer mse-dense", "dcslam score depth --layer dense --drive DRIVE"))
+                   "computes them (per image, then averaged), and the surface it builds as SLAM sees it: normal "
+                   "angle error (mean, median; degrees), point-to-plane distance of its points from the reference "
+                   "surface (mean, RMSE; m), and the share of pixels near reference depth edges that lie off both "
+                   "sides (flying pixels).",
+              examples=("dcslam score depth --layer mse-dense", "dcslam score depth --layer dense --drive DRIVE",
+                        "dcslam score depth --layer ip-basic-fast --target exact    # generated drives"))
 stage_command(score_app, "trajectory", score.ScoreTrajectoryConfig, score.run_trajectory, report,
               help="Thesis localisation accuracy, ATE and RPE (as evo computes them) of estimated TUM trajectories: "
                    "--est X.txt --gt drive.h5|Y.txt, or --layer NAME for slam/<layer>/<drive>.txt over the test "

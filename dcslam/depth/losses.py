@@ -98,3 +98,90 @@ def batch_depth_errors(pred: torch.Tensor, dense: torch.Tensor) -> dict[str, flo
         err = (pred[valid] - dense[valid]).double()
         mse = float(err.square().mean())
         return {"mse": mse, "mae_mm": float(err.abs().mean()) * 1000.0, "rmse_mm": mse ** 0.5 * 1000.0, "pixels": n}
+
+
+# ------------------------------------------------------------------------------------------- geometry losses
+# What ICP sees of a completion (dcslam.eval.surface): its normals, its points' distance from the true surface, and
+# the points it puts between the two sides of a depth edge. Each loss compares a prediction with a reference depth
+# (taken as fixed: no gradient reaches it) through the points and normals SLAM takes.
+
+
+def _surfaces(pred: torch.Tensor, reference: torch.Tensor, K: torch.Tensor, mask: torch.Tensor | None,
+              reference_search: int, max_relative_gap: float):
+    """(prediction's surface, reference's surface, mask) after the shape checks shared by the geometry losses."""
+    from dcslam.eval.surface import depth_surface
+
+    _check_same(pred, reference)
+    if mask is None:
+        mask = torch.ones_like(pred, dtype=torch.bool)
+    elif mask.shape != pred.shape or mask.dtype != torch.bool:
+        raise DcslamError(f"mask has shape {tuple(mask.shape)} and dtype {mask.dtype}, expected "
+                          f"{tuple(pred.shape)} bool")
+    with torch.no_grad():
+        ref = depth_surface(reference.detach(), K, reference_search, max_relative_gap)
+    return depth_surface(pred, K, 1, max_relative_gap), ref, mask
+
+
+def _mean_over(values: torch.Tensor, where: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+    """Mean of ``values`` where ``where`` holds; 0 with zero gradient (towards ``like``) where it never does."""
+    count = where.sum()
+    if count == 0:
+        return (like * 0).sum()
+    return torch.where(where, values, torch.zeros_like(values)).sum() / count
+
+
+def normal_loss(pred: torch.Tensor, reference: torch.Tensor, K: torch.Tensor, mask: torch.Tensor | None = None,
+                reference_search: int = 1, max_relative_gap: float = 0.1) -> torch.Tensor:
+    """Mean of 1 - cos(angle between the predicted and the reference normal) over the pixels where both have a
+    normal (and ``mask`` holds): 0 for the same surface orientation everywhere, 1 - cos(a) for a surface tilted by
+    a. The prediction's normals are those of dense depth (adjacent pixels); ``reference_search`` as
+    :func:`dcslam.geometry.normals.vertex_normals`'s ``search`` (1 for exact depth, tens of pixels for sparse).
+
+    Shape:
+        pred, reference: (B, 1, H, W) metres, 0 = none; K: (3, 3) or (B, 3, 3); mask: (B, 1, H, W) bool → scalar
+    """
+    surface, ref, mask = _surfaces(pred, reference, K, mask, reference_search, max_relative_gap)
+    cos = (surface.normals * ref.normals).sum(1, keepdim=True)
+    return _mean_over(1 - cos, surface.has_normal & ref.has_normal & mask, pred)
+
+
+def point_to_plane_loss(pred: torch.Tensor, reference: torch.Tensor, K: torch.Tensor,
+                        mask: torch.Tensor | None = None, reference_search: int = 1,
+                        max_relative_gap: float = 0.1) -> torch.Tensor:
+    """Mean squared distance (m²) of each predicted point from the reference surface at its pixel (the plane through
+    the reference point with the reference normal), over the pixels with a predicted point, a reference point and
+    a reference normal (and ``mask``): δ² for a surface moved by δ along its normal. Options as
+    :func:`normal_loss`.
+
+    Shape:
+        pred, reference: (B, 1, H, W) metres, 0 = none; K: (3, 3) or (B, 3, 3); mask: (B, 1, H, W) bool → scalar
+    """
+    surface, ref, mask = _surfaces(pred, reference, K, mask, reference_search, max_relative_gap)
+    distance = (ref.normals * (surface.points - ref.points)).sum(1, keepdim=True)
+    return _mean_over(distance * distance, surface.has_point & ref.has_point & ref.has_normal & mask, pred)
+
+
+def edge_mixing_loss(pred: torch.Tensor, reference: torch.Tensor, K: torch.Tensor, mask: torch.Tensor | None = None,
+                     reference_search: int = 1, max_relative_gap: float = 0.1, edge_jump: float | None = None,
+                     radius_px: int | None = None) -> torch.Tensor:
+    """The flying-pixel share of :mod:`dcslam.eval.surface` made soft: the mean, over the pixels near a reference
+    depth edge (within ``radius_px`` of a relative jump above ``edge_jump``; defaults those of the metric) with a
+    predicted and a reference point (and ``mask``), of the squared distance (m²) of the predicted point from the
+    nearer reference surface there (the nearest plane, or point where it has no normal, of the reference pixels
+    within ``radius_px``: :func:`dcslam.eval.surface.nearest_surface_sq`). A point on either side
+    costs nothing; a depth mixed between the sides is pulled to the nearer one (the gradient goes to that plane).
+    Options as :func:`normal_loss`.
+
+    Shape:
+        pred, reference: (B, 1, H, W) metres, 0 = none; K: (3, 3) or (B, 3, 3); mask: (B, 1, H, W) bool → scalar
+    """
+    from dcslam.eval.surface import EDGE_RADIUS_PX, EDGE_RELATIVE_JUMP, depth_edges, near, nearest_surface_sq
+
+    edge_jump = EDGE_RELATIVE_JUMP if edge_jump is None else edge_jump
+    radius_px = EDGE_RADIUS_PX if radius_px is None else radius_px
+    surface, ref, mask = _surfaces(pred, reference, K, mask, reference_search, max_relative_gap)
+    band = (near(depth_edges(reference, ref.has_point, edge_jump), radius_px) & surface.has_point & ref.has_point
+            & mask)
+    if not bool(band.any()):
+        return (pred * 0).sum()
+    return nearest_surface_sq(surface.points, ref, band, radius_px).mean()

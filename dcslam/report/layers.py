@@ -12,12 +12,14 @@ import numpy as np
 
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import DepthErrors
+from dcslam.eval.surface import SurfaceErrors
 from dcslam.eval.trajectory import (EVO_MAX_TIME_DIFF_S, Association, TrajectoryScores, associate_timestamps,
                                     score_trajectory)
 from dcslam.workspace import LayerRef, Workspace, drive_file, find_layer, resolve_layer, select_drives
 
 __all__ = ["LayerRef", "TrajectoryPair", "drive_file", "find_layer", "load_pair", "resolve_layer",
-           "score_layer_depth", "score_layer_trajectories", "select_drives", "slam_settings", "slam_trajectory"]
+           "score_layer_depth", "score_layer_surface", "score_layer_trajectories", "select_drives", "slam_settings",
+           "slam_surface_settings", "slam_trajectory"]
 
 #: The SLAM settings that make two trajectories comparable (``beams``: the sparse input's beam count, when known;
 #: ``confidence`` and ``min_confidence``: how a layer's confidence was used, ``none`` for a layer without one).
@@ -34,6 +36,40 @@ def score_layer_depth(ws: Workspace, layer: LayerRef, drives: list[str], interpo
 
     return {drive: score_drive(drive_file(ws, drive), layer.source(drive), interpolate, devkit_exact, target=target)
             for drive in track(drives, f"depth {layer.name}")}
+
+
+def slam_surface_settings(depth_m: np.ndarray, reference_m: np.ndarray):
+    """The :class:`dcslam.eval.surface.SurfaceSettings` under which a depth image and its reference get the points
+    and normals a SLAM run of default frame settings gives them (the normal search chosen from each one's fraction
+    of in-range pixels, :func:`dcslam.slam.frame.normal_search_for`). Shape: depth_m, reference_m (H, W)."""
+    from dcslam.eval.surface import SurfaceSettings
+    from dcslam.slam.frame import FrameSettings, normal_search_for
+
+    frame = FrameSettings()
+
+    def search(depth: np.ndarray) -> int:
+        return normal_search_for(float(((depth >= frame.min_depth) & (depth <= frame.max_depth)).mean()))
+
+    return SurfaceSettings(search=search(depth_m), reference_search=search(reference_m),
+                           max_relative_gap=frame.max_relative_gap, min_depth=frame.min_depth,
+                           max_depth=frame.max_depth)
+
+
+def score_layer_surface(ws: Workspace, layer: LayerRef, drives: list[str],
+                        target: str = "dense") -> dict[str, list[SurfaceErrors | None]]:
+    """Per-frame surface errors (:mod:`dcslam.eval.surface`) of a layer against each drive's depth of kind
+    ``target`` (``dense`` or ``exact``), with the normals SLAM would take (:func:`slam_surface_settings`):
+    ``{drive: [errors per frame]}``."""
+    from dcslam.eval.surface import surface_errors
+    from dcslam.io.drive import DriveFile, load_depth
+    from dcslam.progress import track
+
+    scores = {}
+    for drive in track(drives, f"surface {layer.name}"):
+        with DriveFile(drive_file(ws, drive)) as d:
+            pred, reference, K = load_depth(d, layer.source(drive)), load_depth(d, target), d.K
+        scores[drive] = [surface_errors(p, r, K, slam_surface_settings(p, r)) for p, r in zip(pred, reference)]
+    return scores
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,8 @@ from pathlib import Path
 
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import METRICS, mean_errors
-from dcslam.report.layers import (TrajectoryPair, drive_file, resolve_layer, score_layer_depth)
+from dcslam.report.layers import (TrajectoryPair, drive_file, resolve_layer, score_layer_depth,
+                                  score_layer_surface)
 from dcslam.eval.maps import MapScores
 from dcslam.report.table_5_2 import FAILURE_THRESHOLD, LayerResult, table_5_2, table_5_2_results
 from dcslam.report.table_5_2_long import table_5_2_long, table_5_2_long_results
@@ -35,26 +36,41 @@ def check_outputs(paths: list[Path], force: bool) -> None:
 
 def depth_table(ws: Workspace, layer_name: str, drives: list[str], interpolate: bool = True,
                 devkit_exact: bool = False, target: str = "dense") -> Table:
-    """Depth errors of a layer against the drives' ``target`` depth (``dense`` or ``exact``): one row per drive
-    (mean over its frames) and a row ``all`` (mean over all frames)."""
+    """Depth errors and surface errors (:mod:`dcslam.eval.surface`) of a layer against the drives' ``target`` depth
+    (``dense`` or ``exact``): one row per drive (mean over its frames) and a row ``all`` (mean over all frames)."""
+    from dcslam.eval.surface import SURFACE_METRICS, mean_surface_errors
+
     layer = resolve_layer(ws, layer_name)
     per_drive = score_layer_depth(ws, layer, drives, interpolate, devkit_exact, target)
+    surface = score_layer_surface(ws, layer, drives, target)
     columns = [Column("drive", "drive"), Column("frames", "frames"), Column("mae_mm", "MAE (mm)", "{:.1f}"),
                Column("rmse_mm", "RMSE (mm)", "{:.1f}"), Column("imae_per_km", "iMAE (1/km)", "{:.2f}"),
-               Column("irmse_per_km", "iRMSE (1/km)", "{:.2f}"), Column("coverage", "coverage", "{:.3f}")]
+               Column("irmse_per_km", "iRMSE (1/km)", "{:.2f}"), Column("coverage", "coverage", "{:.3f}"),
+               Column("normal_mean_deg", "normal error mean (°)", "{:.1f}"),
+               Column("normal_median_deg", "normal error median (°)", "{:.1f}"),
+               Column("p2p_mean_m", "point-to-plane mean (m)", "{:.3f}"),
+               Column("p2p_rmse_m", "point-to-plane RMSE (m)", "{:.3f}"),
+               Column("flying_share", "flying share", "{:.3f}")]
     table = Table(f"depth errors of {layer.name}" + (f" against {target} depth" if target != "dense" else ""),
                   columns)
+
+    def row(name: str, frames: list, surfaces: list) -> dict:
+        mean, shape = mean_errors(frames), mean_surface_errors(surfaces)
+        return {"drive": name, "frames": len(frames), **{m: getattr(mean, m) for m in METRICS},
+                "coverage": mean.coverage, **{m: getattr(shape, m) for m in SURFACE_METRICS}}
+
     for drive, frames in per_drive.items():
-        mean = mean_errors(frames)
-        table.rows.append({"drive": drive, "frames": len(frames), **{m: getattr(mean, m) for m in METRICS},
-                           "coverage": mean.coverage})
-    overall = mean_errors(e for frames in per_drive.values() for e in frames)
-    table.rows.append({"drive": "all", "frames": sum(len(f) for f in per_drive.values()),
-                       **{m: getattr(overall, m) for m in METRICS}, "coverage": overall.coverage})
+        table.rows.append(row(drive, frames, surface[drive]))
+    table.rows.append(row("all", [e for frames in per_drive.values() for e in frames],
+                          [e for frames in surface.values() for e in frames]))
     table.notes.append("exactly as the KITTI devkit (no departures)" if devkit_exact else
                        "KITTI devkit (holes of the prediction filled by background interpolation) with dcslam's two "
                        "departures (see --devkit-exact)" if interpolate else
                        "no interpolation: only pixels where the prediction has depth")
+    table.notes.append("surface errors of the layer as SLAM takes it (no interpolation; its points and normals): "
+                       "angle between its normals and the reference's, distance of its points from the reference "
+                       "surface, share of pixels near reference depth edges that lie off both sides "
+                       "(dcslam.eval.surface)")
     return table
 
 

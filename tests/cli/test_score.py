@@ -114,6 +114,59 @@ def test_score_depth_devkit_exact(ws):
     assert "--devkit-exact" in invoke("score", "depth", "--help").output
 
 
+SURFACE_COLUMNS = ("normal_mean_deg", "normal_median_deg", "p2p_mean_m", "p2p_rmse_m", "flying_share")
+
+
+@pytest.fixture
+def step_ws(tmp_path):
+    """A generated drive whose exact depth is a step (5 m left of column 10, 10 m right of it) seen head-on; a layer
+    ``mixed`` that blends the two sides linearly over columns 8-11 and a layer ``far`` 5 cm behind the step."""
+    root = tmp_path / "step"
+    (root / "drives").mkdir(parents=True)
+    rows, columns, frames = 8, 20, 3
+    K_step = np.array([[40.0, 0, columns / 2], [0, 40.0, rows / 2], [0, 0, 1]])
+    exact = np.full((rows, columns), 10.0, np.float32)
+    exact[:, :10] = 5.0
+    sparse = np.where(np.arange(rows)[:, None] % 2 == 0, exact, 0).astype(np.float32)
+    with DriveWriter(root / "drives" / "s0.h5", K_step, rows, columns, source="synthetic", date="2011_09_26",
+                     drive="s0", extra=("exact",)) as writer:
+        for i, T in enumerate(gt_poses(frames)):
+            writer.append(DriveFrame(rgb=np.zeros((rows, columns, 3), np.uint8), sparse=sparse, dense=exact,
+                                     T_world_cam=T, timestamp=10 + 0.1 * i, frame_id=i, extra={"exact": exact}))
+    (root / "drives" / "splits.json").write_text(json.dumps({"train": [], "val": [], "test": ["s0"]}))
+    mixed = exact.copy()
+    mixed[:, 8:12] = [6.0, 7.0, 8.0, 9.0]
+    write_layer(root / "predictions" / "mixed" / "s0.h5",
+                Layer(depth=np.stack([mixed] * frames), drive="s0", made_by="test"))
+    write_layer(root / "predictions" / "far" / "s0.h5",
+                Layer(depth=np.stack([exact + 0.05] * frames), drive="s0", made_by="test"))
+    return root
+
+
+def test_score_depth_reports_the_surface_against_exact_depth(step_ws):
+    results = step_ws / "results"
+    for layer in ("exact", "mixed", "far"):
+        result = invoke("score", "depth", "-w", step_ws, "--layer", layer, "--target", "exact")
+        assert result.exit_code == 0, result.output
+        assert all((results / f"depth_{layer}_vs_exact.{ext}").exists() for ext in ("csv", "json"))
+        assert "flying share" in result.output and "normal error mean" in result.output
+    rows = {layer: read_csv(results / f"depth_{layer}_vs_exact.csv") for layer in ("exact", "mixed", "far")}
+    assert all(c in rows["exact"][0] for c in SURFACE_COLUMNS)
+    assert [r["drive"] for r in rows["mixed"]] == ["s0", "all"] and rows["mixed"][-1]["frames"] == "3"
+    exact, mixed, far = (rows[k][-1] for k in ("exact", "mixed", "far"))
+    assert float(exact["p2p_mean_m"]) == 0 and float(exact["flying_share"]) == 0
+    assert float(exact["normal_mean_deg"]) == pytest.approx(0, abs=1e-6)
+    # the blend: 4 of the 6 columns within 2 px of the edge lie 1-2 m off both sides
+    assert float(mixed["flying_share"]) == pytest.approx(4 / 6)
+    # an offset within the tolerance (0.1 m) moves every point off the surface but none off both sides
+    assert float(far["p2p_mean_m"]) == pytest.approx(0.05, abs=1e-5) and float(far["flying_share"]) == 0
+    config = json.loads((results / "depth_mixed_vs_exact.json").read_text())
+    assert config["settings"]["target"] == "exact"
+    dense = invoke("score", "depth", "-w", step_ws, "--layer", "mixed")          # the annotated (here equal) depth
+    assert dense.exit_code == 0, dense.output
+    assert float(read_csv(results / "depth_mixed.csv")[-1]["flying_share"]) == pytest.approx(4 / 6)
+
+
 def test_score_trajectory_layer_and_files(ws):
     result = invoke("score", "trajectory", "-w", ws, "--layer", "sparse")
     assert result.exit_code == 0, result.output
