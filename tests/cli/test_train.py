@@ -1,8 +1,15 @@
+"""`dcslam train`: options → configuration (``--print-config`` read back as TOML), exit codes, one-line errors, and
+the files of one short run with its resume. The trainings themselves (each loss, model and option) are the stage's
+and the library's tests (tests/stages/test_train.py, tests/depth/test_train.py)."""
 import json
+import tomllib
 
 import pytest
 
 from tests.fixtures import depth as fixtures
+
+RUN_FILES = {"model.pt", "last.pt", "config.json", "metrics.jsonl", "curves.png"}
+SHORT = ["--max-frames", "2", "--scale", "0.5", "--batch-size", "2", "--device", "cpu"]
 
 
 @pytest.fixture
@@ -10,52 +17,74 @@ def ws(tmp_path):
     return fixtures.write_workspace(tmp_path / "ws", n=4)
 
 
-def test_train_mse_dense_writes_the_run(cli, ws):
-    result = cli("train", "-w", ws, "--loss", "mse", "--mask", "dense", "--batch-size", "2", "--device", "cpu")
+def _config(cli, *options, ws):
+    """The configuration `dcslam train OPTIONS` would run, as a dict; asserts it ran nothing."""
+    result = cli("train", *options, "--print-config", "-w", ws)
     assert result.exit_code == 0, result.output
+    assert not ws.exists()
+    return tomllib.loads(result.stdout)
+
+
+@pytest.mark.parametrize("options, changed", [
+    (["--loss", "chamfer", "--map-frames", "8", "--crop", "24", "--scale", "0.5"],
+     {"loss": "chamfer", "map_frames": 8, "crop": 24, "scale": 0.5}),
+    (["--mask", "sparse", "--max-frames", "2", "--name", "mine"], {"mask": "sparse", "max_frames": 2, "name": "mine"}),
+    (["--input-mix", "sparse", "--input-mix", "sparse@16", "--l1-weight", "1", "--lr-schedule", "cosine",
+      "--fill-holes"],
+     {"input_mix": ["sparse", "sparse@16"], "l1_weight": 1.0, "lr_schedule": "cosine", "fill_holes": True}),
+    (["--model", "nconv", "--correct-fill", "--device", "cpu"],
+     {"model": "nconv", "correct_fill": True, "device": "cpu"}),
+    (["--input", "sparse@16", "--target", "exact", "--epochs", "3", "--lr", "0.01", "--resume"],
+     {"input": "sparse@16", "target": "exact", "epochs": 3, "lr": 0.01, "resume": True}),
+])
+def test_options_set_their_fields_and_nothing_else(cli, tmp_path, options, changed):
+    defaults = _config(cli, ws=tmp_path / "ws")
+    assert not set(changed) - set(defaults) - {"name"}          # name is unset by default (a comment)
+    assert _config(cli, *options, ws=tmp_path / "ws") == {**defaults, **changed}
+
+
+def test_a_short_run_writes_its_files_then_resumes_only_with_its_own_options(cli, ws):
+    result = cli("train", "-w", ws, "--loss", "mse", "--mask", "dense", *SHORT)
+    assert result.exit_code == 0, result.output
+    assert "best validation" in result.stdout
     run = ws / "runs" / "mse-dense"
-    assert {p.name for p in run.iterdir()} >= {"model.pt", "last.pt", "config.json", "metrics.jsonl", "curves.png"}
+    assert {p.name for p in run.iterdir()} == RUN_FILES
     settings = json.loads((run / "config.json").read_text())["settings"]
     assert (settings["loss"], settings["mask"], settings["model"], settings["map_frames"]) == \
         ("mse", "dense", "sparse-conv", 1)
-    assert "best validation" in result.stdout
 
-    again = cli("train", "-w", ws, "--batch-size", "2")
-    assert again.exit_code == 1 and "--force" in again.output
-    resumed = cli("train", "-w", ws, "--batch-size", "2", "--epochs", "2", "--resume")
-    assert resumed.exit_code == 0, resumed.output
-    rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
-    assert [r["epoch"] for r in rows if r["kind"] == "val"] == [0, 1]
-    record = json.loads((run / "config.json").read_text())
-    assert record["settings"]["epochs"] == 2 and record["resumed"][0]["settings"]["epochs"] == 2
+    again = cli("train", "-w", ws, *SHORT)
+    assert again.exit_code == 1 and "--force" in again.stderr and len(again.stderr.strip().splitlines()) == 1
 
-    other = cli("train", "-w", ws, "--batch-size", "2", "--epochs", "3", "--resume", "--lr", "0.01",
-                "--name", "mse-dense", "--loss", "chamfer")
+    record, metrics = (run / "config.json").read_text(), (run / "metrics.jsonl").read_text()
+    other = cli("train", "-w", ws, *SHORT, "--epochs", "3", "--resume", "--lr", "0.01", "--name", "mse-dense",
+                "--loss", "chamfer")
     assert other.exit_code == 1
     assert other.stderr.strip().splitlines() == [
         f"error: cannot resume {run} with other options: --loss 'chamfer' (the run has 'mse'); --lr 0.01 (the run "
         "has 0.001); resume with the run's own options (only --epochs and --device may change), or start again "
         "with --force"]
+    assert (run / "config.json").read_text() == record and (run / "metrics.jsonl").read_text() == metrics
+
+    resumed = cli("train", "-w", ws, *SHORT, "--epochs", "2", "--resume")
+    assert resumed.exit_code == 0, resumed.output
+    rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert [r["epoch"] for r in rows if r["kind"] == "val"] == [0, 1]
-    assert json.loads((run / "config.json").read_text()) == record
-
-
-def test_train_chamfer_and_sparse_names(cli, ws):
-    result = cli("train", "-w", ws, "--loss", "chamfer", "--map-frames", "8", "--crop", "24",
-                 "--scale", "0.5")
-    assert result.exit_code == 0, result.output
-    assert (ws / "runs" / "chamfer-8" / "model.pt").exists()
-    result = cli("train", "-w", ws, "--mask", "sparse", "--max-frames", "2", "--name", "mine")
-    assert result.exit_code == 0, result.output
-    assert json.loads((ws / "runs" / "mine" / "config.json").read_text())["settings"]["mask"] == "sparse"
+    resumed_record = json.loads((run / "config.json").read_text())
+    assert resumed_record["settings"]["epochs"] == 2 and resumed_record["resumed"][0]["settings"]["epochs"] == 2
 
 
 def test_train_errors(cli, ws, tmp_path):
-    assert cli("train", "-w", tmp_path / "empty").exit_code == 1
+    result = cli("train", "-w", tmp_path / "empty")
+    assert result.exit_code == 1 and len(result.stderr.strip().splitlines()) == 1
     result = cli("train", "-w", ws, "--loss", "l1")
     assert result.exit_code == 2 and "l1" in result.output  # an unknown choice is a usage error
-    assert cli("train", "-w", ws, "--scale", "0.3").exit_code == 1
-    assert not (ws / "runs" / "mse-dense" / "model.pt").exists()
+    assert cli("train", "-w", ws, "--lr-schedule", "step").exit_code == 2
+    result = cli("train", "-w", ws, "--scale", "0.3")
+    assert result.exit_code == 1 and "scale" in result.stderr
+    result = cli("train", "-w", ws, "--model", "dncnn", "--correct-fill")
+    assert result.exit_code == 1 and "--correct-fill is an option of" in result.stderr
+    assert not (ws / "runs").exists()
 
 
 @pytest.mark.parametrize("args, line", [
@@ -67,27 +96,3 @@ def test_bad_numbers_give_one_line(cli, ws, args, line):
     result = cli("train", "-w", ws, *args)
     assert result.exit_code == 1 and result.stderr.strip().splitlines() == [line]
     assert not (ws / "runs").exists()
-
-
-def test_train_with_density_mix_l1_cosine_and_filled_holes(cli, tmp_path):
-    ws = fixtures.write_workspace(tmp_path / "mix", n=2, extra=True)
-    result = cli("train", "-w", ws, "--device", "cpu", "--input-mix", "sparse", "--input-mix", "sparse@16",
-                 "--l1-weight", "1", "--lr-schedule", "cosine", "--fill-holes", "--scale", "0.5")
-    assert result.exit_code == 0, result.output
-    settings = json.loads((ws / "runs" / "mse-dense-mix" / "config.json").read_text())["settings"]
-    assert (settings["input_mix"], settings["l1_weight"], settings["lr_schedule"], settings["model_hparams"]) == \
-        (["sparse", "sparse@16"], 1.0, "cosine", {"fill_holes": True})
-    bad = cli("train", "-w", ws, "--device", "cpu", "--lr-schedule", "step")
-    assert bad.exit_code == 2
-
-
-def test_train_correcting_the_fill(cli, tmp_path):
-    ws = fixtures.write_workspace(tmp_path / "cf", n=2)
-    result = cli("train", "-w", ws, "--device", "cpu", "--model", "nconv", "--correct-fill", "--scale", "0.5",
-                 "--name", "nconv-cf")
-    assert result.exit_code == 0, result.output
-    run_dir = ws / "runs" / "nconv-cf"
-    assert json.loads((run_dir / "config.json").read_text())["settings"]["model_hparams"] == {"correct_fill": True}
-    assert (run_dir / "model.pt").is_file()
-    bad = cli("train", "-w", ws, "--device", "cpu", "--model", "dncnn", "--correct-fill")
-    assert bad.exit_code == 1 and "--correct-fill is an option of" in bad.stderr
