@@ -30,6 +30,7 @@ def tiny_drives(monkeypatch):
     monkeypatch.setattr("dcslam.stages.prepare.run", prepare)
 
 
+@pytest.mark.slow  # every completer at every beam count, end to end
 def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(cli, tmp_path, tiny_drives):
     result = cli(*ARGS, "--workspace", tmp_path)
     assert result.exit_code == 0, result.output
