@@ -27,9 +27,11 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e '.[test]'
 	touch $(STAMP)
 
+# every test, the slow end-to-end ones included (CI runs this); PYTEST_ARGS='-m "not slow"' leaves those out
+PYTEST_ARGS ?=
 test: setup
 	$(PY) -m ruff check dcslam tests benchmarks examples
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q $(PYTEST_ARGS) tests
 
 # The main job: generate KITTI-format drives (or read KITTI_ROOT=...), train the four recipes, predict, filter,
 # run SLAM on every depth source, score, and print Table 5.2. PROFILE=thesis runs the thesis's scale (for a GPU).

@@ -1,5 +1,6 @@
-"""Shared test settings: no progress bars, the path of the committed KITTI sample, and the device and dtype
-fixtures of the torch op tests (cpu always, cuda when this machine has a GPU; float32 and float64)."""
+"""Shared test settings: no progress bars, the path of the committed KITTI sample, the in-process command line
+(``cli``), and the device and dtype fixtures of the torch op tests (cpu always, cuda on a machine with a GPU and
+reported as skipped elsewhere; float32 and float64)."""
 import os
 from pathlib import Path
 
@@ -10,10 +11,11 @@ os.environ.setdefault("DCSLAM_PROGRESS", "0")
 DATA = Path(__file__).parent / "data"
 
 
-def _devices() -> list[str]:
+def _devices() -> list:
     import torch
 
-    return ["cpu", "cuda"] if torch.cuda.is_available() else ["cpu"]
+    no_gpu = pytest.mark.skipif(not torch.cuda.is_available(), reason="cuda: no GPU on this machine")
+    return ["cpu", pytest.param("cuda", marks=no_gpu)]
 
 
 @pytest.fixture
@@ -21,9 +23,28 @@ def data_dir() -> Path:
     return DATA
 
 
+@pytest.fixture(scope="session")
+def cli():
+    """``dcslam`` in this process: ``cli("slam", "-w", ws, "--frames", 2)`` runs ``dcslam slam -w WS --frames 2``
+    and returns click's ``Result`` (``exit_code``, ``stdout``, ``stderr``, ``output``). Arguments are passed
+    through ``str``. An exception that escapes the command (a crash, not a known error with its exit code 1) fails
+    the test with its traceback; ``catch_exceptions=True`` turns it into ``result.exception`` instead. Session-wide,
+    so module-wide fixtures may run commands too."""
+    from typer.testing import CliRunner
+
+    from dcslam.cli import app
+
+    runner = CliRunner()
+
+    def invoke(*args, catch_exceptions: bool = False):
+        return runner.invoke(app, [str(a) for a in args], catch_exceptions=catch_exceptions)
+
+    return invoke
+
+
 @pytest.fixture(params=_devices())
 def device(request):
-    """``torch.device("cpu")``, and ``torch.device("cuda")`` when a GPU is available."""
+    """``torch.device("cpu")``, and ``torch.device("cuda")`` (skipped on a machine without a GPU)."""
     import torch
 
     return torch.device(request.param)

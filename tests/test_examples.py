@@ -40,6 +40,7 @@ def generated(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess]:
     return ws, result
 
 
+@pytest.mark.slow  # synth, prepare, train, predict, SLAM and scores in a child process
 def test_generated_end_to_end(generated):
     ws, result = generated
     assert result.returncode == 0, result.stderr[-3000:]
@@ -80,6 +81,7 @@ def test_default_filters_of_the_filters_example_parse():
     assert module.chain_of("thesis-range+edges").name == "range+edges"
 
 
+@pytest.mark.slow  # each filter, then SLAM on each, in a child process
 def test_filters_through_slam(generated, tmp_path):
     ws = tmp_path / "ws"
     shutil.copytree(generated[0] / "drives", ws / "drives")

@@ -24,7 +24,7 @@ import pytest
 from dcslam.stages.reproduce import PROFILES
 from tests.fixtures.kitti import write_tiny_drive
 
-pytestmark = pytest.mark.faults
+pytestmark = [pytest.mark.faults, pytest.mark.slow]  # a whole reproduction, then one per stage
 
 SMOKE = PROFILES["smoke"]
 SEED = 16  # the moments of interruption follow from it: a failure is reproducible

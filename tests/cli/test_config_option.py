@@ -3,11 +3,6 @@ unknown choices are usage errors (exit 2), known errors exit 1 with one line."""
 import tomllib
 
 import pytest
-from typer.testing import CliRunner
-
-from dcslam.cli import app
-
-runner = CliRunner()
 COMMANDS = {  # command → options it needs to make a valid configuration, and an option to override
     "synth": ([], ("--frames", "17", "frames", 17)),
     "prepare-kitti": ([], ("--max-frames", "3", "max_frames", 3)),
@@ -25,24 +20,20 @@ COMMANDS = {  # command → options it needs to make a valid configuration, and 
 }
 
 
-def _invoke(*args):
-    return runner.invoke(app, [str(a) for a in args])
-
-
 @pytest.mark.parametrize("command", COMMANDS)
-def test_print_config_then_run_it_back_with_an_override(command, tmp_path):
+def test_print_config_then_run_it_back_with_an_override(cli, command, tmp_path):
     needed, (flag, value, key, expected) = COMMANDS[command]
     ws = tmp_path / "ws"
-    printed = _invoke(*command.split(), *needed, "--print-config", "-w", ws)
+    printed = cli(*command.split(), *needed, "--print-config", "-w", ws)
     assert printed.exit_code == 0, printed.output
     values = tomllib.loads(printed.stdout)
-    assert key in values or key in printed.stdout  # unset fields are written as comments
+    assert key in values or f"# {key} = (unset)" in printed.stdout  # unset fields are written as comments
     assert not ws.exists()  # printing the configuration writes nothing
 
     path = tmp_path / "config.toml"
     path.write_text(printed.stdout)
     override = [flag] if value is None else [flag, value]
-    again = _invoke(*command.split(), "--config", path, *override, "--print-config", "-w", ws)
+    again = cli(*command.split(), "--config", path, *override, "--print-config", "-w", ws)
     assert again.exit_code == 0, again.output
     assert tomllib.loads(again.stdout)[key] == expected
     assert {k: v for k, v in tomllib.loads(again.stdout).items() if k != key} == \
@@ -50,23 +41,23 @@ def test_print_config_then_run_it_back_with_an_override(command, tmp_path):
 
 
 @pytest.mark.parametrize("command", COMMANDS)
-def test_bad_config_file_exits_1_with_one_line(command, tmp_path):
+def test_bad_config_file_exits_1_with_one_line(cli, command, tmp_path):
     path = tmp_path / "bad.toml"
     path.write_text("no_such_option = 1\n")
-    result = _invoke(*command.split(), *COMMANDS[command][0], "--config", path, "-w", tmp_path / "ws")
+    result = cli(*command.split(), *COMMANDS[command][0], "--config", path, "-w", tmp_path / "ws")
     assert result.exit_code == 1
     assert result.stderr.strip().count("\n") == 0 and "unknown key 'no_such_option'" in result.stderr
 
 
-def test_config_file_values_are_used(tmp_path):
+def test_config_file_values_are_used(cli, tmp_path):
     path = tmp_path / "slam.toml"
     path.write_text('odometry = "gt"\nframes = 2\n')
-    result = _invoke("slam", "--config", path, "-w", tmp_path / "ws")  # no drives there: a known error
+    result = cli("slam", "--config", path, "-w", tmp_path / "ws")  # no drives there: a known error
     assert result.exit_code == 1 and "splits.json" in result.stderr
 
 
 @pytest.mark.parametrize("args", [["train", "--loss", "l1"], ["predict", "--split", "nope", "--model", "ip-basic"],
                                   ["reproduce", "--profile", "huge"], ["slam", "--odometry", "ekf"],
                                   ["filter", "--filter", "median", "--depth", "dense"], ["train", "--bogus"]])
-def test_usage_errors_exit_2(args, tmp_path):
-    assert _invoke(*args, "-w", tmp_path).exit_code == 2
+def test_usage_errors_exit_2(cli, args, tmp_path):
+    assert cli(*args, "-w", tmp_path).exit_code == 2

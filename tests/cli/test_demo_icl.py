@@ -3,17 +3,11 @@ import json
 import shutil
 
 import pytest
-from typer.testing import CliRunner
 
-from dcslam.cli import app
 from tests.fixtures import depth as fixtures
 
 RESULTS = {"model.pt", "results.json", "results.csv", "results.md", "denoising.png"}
 TINY = ["--steps", "2", "--batch-size", "2", "--features", "4", "--layers", "3", "--device", "cpu"]
-
-
-def _run(*args):
-    return CliRunner().invoke(app, ["demo-icl", *map(str, args)])
 
 
 def _one_error_line(result, *words):
@@ -30,9 +24,9 @@ def drives(tmp_path):
     return fixtures.write_workspace(tmp_path / "data", n=4) / "drives"
 
 
-def test_demo_on_given_drives_writes_results(drives, tmp_path):
+def test_demo_on_given_drives_writes_results(cli, drives, tmp_path):
     ws = tmp_path / "ws"
-    result = _run("-w", ws, "--drives", drives, "--scale", "0.5", "--patch", "0", "--sigma", "0.1", *TINY)
+    result = cli("demo-icl", "-w", ws, "--drives", drives, "--scale", "0.5", "--patch", "0", "--sigma", "0.1", *TINY)
     assert result.exit_code == 0, result.output
     out = ws / "results" / "demo-icl"
     assert {p.name for p in out.iterdir()} == RESULTS
@@ -43,14 +37,13 @@ def test_demo_on_given_drives_writes_results(drives, tmp_path):
     assert set(record["frames"]["train"]) == {"drive_a", "drive_b", "drive_c"}
     assert (out / "results.csv").read_text().splitlines()[0] == "depth,mae_mm,rmse_mm,psnr_db,chamfer_m2"
 
-    again = _run("-w", ws, "--drives", drives, *TINY)
-    _one_error_line(again, "--force")
-    assert _run("-w", ws, "--drives", drives, "--force", *TINY).exit_code == 0
+    again = cli("demo-icl", "-w", ws, "--drives", drives, *TINY)
+    _one_error_line(again, "--force")  # the --force run that then overwrites: test_demo_generates_indoor_rooms_once
 
 
-def test_demo_generates_indoor_rooms_once(tmp_path):
+def test_demo_generates_indoor_rooms_once(cli, tmp_path):
     ws = tmp_path / "ws"
-    result = _run("-w", ws, "--sequences", "2", "--frames", "2", "--scale", "0.125", *TINY)
+    result = cli("demo-icl", "-w", ws, "--sequences", "2", "--frames", "2", "--scale", "0.125", *TINY)
     assert result.exit_code == 0, result.output
     splits = json.loads((ws / "demo-icl" / "drives" / "splits.json").read_text())
     assert len(splits["train"]) == 1 and len(splits["test"]) == 1
@@ -59,21 +52,23 @@ def test_demo_generates_indoor_rooms_once(tmp_path):
     assert record["scores"]["frames"] == 2
 
     made = (ws / "demo-icl" / "data.json").stat().st_mtime_ns
-    kept = _run("-w", ws, "--sequences", "2", "--frames", "2", "--scale", "0.125", "--force", *TINY)
+    written = (ws / "results" / "demo-icl" / "results.json").stat().st_mtime_ns
+    kept = cli("demo-icl", "-w", ws, "--sequences", "2", "--frames", "2", "--scale", "0.125", "--force", *TINY)
     assert kept.exit_code == 0, kept.output
     assert (ws / "demo-icl" / "data.json").stat().st_mtime_ns == made  # same settings: the data is reused
+    assert (ws / "results" / "demo-icl" / "results.json").stat().st_mtime_ns > written  # --force rewrote it
     shutil.rmtree(ws / "results")
-    _one_error_line(_run("-w", ws, "--sequences", "2", "--frames", "3", *TINY), "other settings", "--force")
+    _one_error_line(cli("demo-icl", "-w", ws, "--sequences", "2", "--frames", "3", *TINY), "other settings", "--force")
 
 
-def test_bad_input(drives, tmp_path):
+def test_bad_input(cli, drives, tmp_path):
     ws = tmp_path / "ws"
-    _one_error_line(_run("-w", ws, "--drives", tmp_path / "nowhere", *TINY), "not found")
-    _one_error_line(_run("-w", ws, "--drives", drives, "--sigma", "-0.1", *TINY), "--sigma")
-    _one_error_line(_run("-w", ws, "--scale", "0.3", *TINY), "--scale")
-    _one_error_line(_run("-w", ws, "--sequences", "1", *TINY), "at least 2 sequences")
+    _one_error_line(cli("demo-icl", "-w", ws, "--drives", tmp_path / "nowhere", *TINY), "not found")
+    _one_error_line(cli("demo-icl", "-w", ws, "--drives", drives, "--sigma", "-0.1", *TINY), "--sigma")
+    _one_error_line(cli("demo-icl", "-w", ws, "--scale", "0.3", *TINY), "--scale")
+    _one_error_line(cli("demo-icl", "-w", ws, "--sequences", "1", *TINY), "at least 2 sequences")
     (tmp_path / "bad.h5").write_text("not a drive")
-    _one_error_line(_run("-w", ws, "--drives", tmp_path / "bad.h5", *TINY), "bad.h5")
+    _one_error_line(cli("demo-icl", "-w", ws, "--drives", tmp_path / "bad.h5", *TINY), "bad.h5")
     assert not (ws / "results").exists()
 
 

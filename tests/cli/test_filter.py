@@ -2,13 +2,10 @@ import json
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from dcslam.cli import app
 from dcslam.io.drive import DriveFrame, DriveWriter, Layer, read_layer, write_layer
 
 K = np.array([[20.0, 0, 12], [0, 20.0, 8], [0, 0, 1]])
-runner = CliRunner()
 
 
 def make_workspace(root, drives=("d0", "d1"), n=3, h=16, w=24):
@@ -29,14 +26,10 @@ def make_workspace(root, drives=("d0", "d1"), n=3, h=16, w=24):
     return root
 
 
-def invoke(*args):
-    return runner.invoke(app, [str(a) for a in args])
-
-
-def test_filter_predicted_chain(tmp_path):
+def test_filter_predicted_chain(cli, tmp_path):
     ws = make_workspace(tmp_path / "ws")
-    result = invoke("filter", "-w", ws, "--run", "mse-dense", "--filter", "range:min=5,max=20",
-                    "--filter", "thesis-bilateral")
+    result = cli("filter", "-w", ws, "--run", "mse-dense", "--filter", "range:min=5,max=20",
+                 "--filter", "thesis-bilateral")
     assert result.exit_code == 0, result.output
     out = ws / "filtered" / "mse-dense+range+bilateral"
     for drive in ("d0", "d1"):
@@ -50,42 +43,42 @@ def test_filter_predicted_chain(tmp_path):
     assert config["stage"] == "filter" and config["settings"]["source_layer"] == "mse-dense"
 
 
-def test_filter_sparse_named_one_drive_and_no_overwrite(tmp_path):
+def test_filter_sparse_named_one_drive_and_no_overwrite(cli, tmp_path):
     ws = make_workspace(tmp_path / "ws")
     args = ("filter", "-w", ws, "--depth", "sparse", "--filter", "thesis-range", "--name", "lidar-5-15",
             "--drive", "d1")
-    assert invoke(*args).exit_code == 0
+    assert cli(*args).exit_code == 0
     out = ws / "filtered" / "lidar-5-15"
     assert sorted(p.name for p in out.iterdir()) == ["config.json", "d1.h5"]
     before = (out / "d1.h5").stat().st_mtime_ns
-    again = invoke(*args)
+    again = cli(*args)
     assert again.exit_code == 1 and "--force" in again.output
     assert (out / "d1.h5").stat().st_mtime_ns == before
-    assert invoke(*args, "--force").exit_code == 0
+    assert cli(*args, "--force").exit_code == 0
 
 
 @pytest.mark.parametrize("spec", ["nonsense", "range:min=abc", "range:lo=3", "range:min=20,max=5",
                                   "bilateral:ignore_holes=maybe"])
-def test_bad_filter_spec_is_a_usage_error(tmp_path, spec):
+def test_bad_filter_spec_is_a_usage_error(cli, tmp_path, spec):
     ws = make_workspace(tmp_path / "ws", drives=("d0",))
-    result = invoke("filter", "-w", ws, "--depth", "dense", "--filter", spec)
+    result = cli("filter", "-w", ws, "--depth", "dense", "--filter", spec)
     assert result.exit_code == 2
     assert not (ws / "filtered").exists()
 
 
-def test_layer_with_wrong_frame_count_fails_cleanly(tmp_path):
+def test_layer_with_wrong_frame_count_fails_cleanly(cli, tmp_path):
     ws = make_workspace(tmp_path / "ws", drives=("d0",))
     write_layer(ws / "predictions" / "short" / "d0.h5",
                 Layer(depth=np.ones((2, 16, 24), np.float32), drive="d0", made_by="short"))
-    result = invoke("filter", "-w", ws, "--run", "short", "--filter", "edges")
+    result = cli("filter", "-w", ws, "--run", "short", "--filter", "edges")
     assert result.exit_code == 1
     assert "2 frames but its drive has 3" in result.output
     assert not (ws / "filtered" / "short+edges" / "d0.h5").exists()
 
 
-def test_missing_run(tmp_path):
+def test_missing_run(cli, tmp_path):
     ws = make_workspace(tmp_path / "ws", drives=("d0",))
-    result = invoke("filter", "-w", ws, "--run", "nope", "--filter", "outlier")
+    result = cli("filter", "-w", ws, "--run", "nope", "--filter", "outlier")
     assert result.exit_code == 1 and "dcslam predict" in result.output
-    result = invoke("filter", "-w", ws, "--filter", "outlier")
+    result = cli("filter", "-w", ws, "--filter", "outlier")
     assert result.exit_code == 1 and "--run" in result.output

@@ -3,11 +3,8 @@ import shlex
 
 import pytest
 import typer
-from typer.testing import CliRunner
 
 from dcslam.cli import app
-
-runner = CliRunner()
 
 
 def _commands():
@@ -23,7 +20,7 @@ COMMANDS = dict(_commands())
 
 
 @pytest.mark.parametrize("name", sorted(COMMANDS))
-def test_help_has_examples_that_parse(name, tmp_path):
+def test_help_has_examples_that_parse(cli, name, tmp_path):
     text = COMMANDS[name].help
     assert "Examples:" in text, name
     examples = [line.strip() for line in text.split("Examples:")[1].splitlines() if line.strip().startswith("dcslam")]
@@ -31,5 +28,5 @@ def test_help_has_examples_that_parse(name, tmp_path):
     for example in examples:
         words = shlex.split(example.split("#")[0])
         assert " ".join(words[1:]).startswith(name), example
-        result = runner.invoke(app, [*words[1:], "--print-config", "-w", str(tmp_path / "ws")])
+        result = cli(*words[1:], "--print-config", "-w", tmp_path / "ws")
         assert result.exit_code == 0, (example, result.output)

@@ -4,20 +4,13 @@ import json
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from typer.testing import CliRunner
 
-from dcslam.cli import app
 from dcslam.io.drive import DriveFrame, DriveWriter, Layer, write_layer
 from dcslam.io.kitti_poses import write_kitti_poses
 from dcslam.io.tum import read_tum, write_tum
 
 K = np.array([[20.0, 0, 12], [0, 20.0, 8], [0, 0, 1]])
 H, W, N = 16, 24, 4
-runner = CliRunner()
-
-
-def invoke(*args):
-    return runner.invoke(app, [str(a) for a in args])
 
 
 def gt_poses(n=N):
@@ -84,34 +77,34 @@ def read_csv(path):
         return list(csv.DictReader(f))
 
 
-def test_score_depth(ws):
-    result = invoke("score", "depth", "-w", ws, "--layer", "dense")
+def test_score_depth(cli, ws):
+    result = cli("score", "depth", "-w", ws, "--layer", "dense")
     assert result.exit_code == 0, result.output
     rows = read_csv(ws / "results" / "depth_dense.csv")
     assert [r["drive"] for r in rows] == ["d0", "d1", "all"]
     assert float(rows[-1]["mae_mm"]) == 0.0 and rows[-1]["frames"] == str(2 * N)
-    result = invoke("score", "depth", "-w", ws, "--layer", "mse-dense", "--drive", "d1", "--out", ws / "x.csv")
+    result = cli("score", "depth", "-w", ws, "--layer", "mse-dense", "--drive", "d1", "--out", ws / "x.csv")
     assert result.exit_code == 0 and float(read_csv(ws / "x.csv")[0]["mae_mm"]) > 1000
-    again = invoke("score", "depth", "-w", ws, "--layer", "dense")
+    again = cli("score", "depth", "-w", ws, "--layer", "dense")
     assert again.exit_code == 1 and "--force" in again.output
 
 
-def test_score_depth_devkit_exact(ws):
+def test_score_depth_devkit_exact(cli, ws):
     """--devkit-exact scores predictions below 0.1 m as the devkit does (dcslam's default counts them as holes)."""
     depth = np.full((N, H, W), 10.0, np.float32)
     depth[:, :, ::2] = 0.05
     for name in ("d0", "d1"):
         write_layer(ws / "predictions" / "tiny" / f"{name}.h5", Layer(depth=depth, drive=name, made_by="test"))
-    ours = invoke("score", "depth", "-w", ws, "--layer", "tiny", "--out", ws / "ours.csv")
-    exact = invoke("score", "depth", "-w", ws, "--layer", "tiny", "--out", ws / "exact.csv", "--devkit-exact")
+    ours = cli("score", "depth", "-w", ws, "--layer", "tiny", "--out", ws / "ours.csv")
+    exact = cli("score", "depth", "-w", ws, "--layer", "tiny", "--out", ws / "exact.csv", "--devkit-exact")
     assert ours.exit_code == 0 and exact.exit_code == 0, ours.output + exact.output
     ours, exact = read_csv(ws / "ours.csv")[-1], read_csv(ws / "exact.csv")[-1]
     # 0.05 m against 2-30 m: inverse errors of about 20 /m = 20000 /km on half the pixels
     assert float(exact["imae_per_km"]) > 5000 > float(ours["imae_per_km"])
     assert json.loads((ws / "exact.json").read_text())["settings"]["devkit_exact"] is True
-    both = invoke("score", "depth", "-w", ws, "--layer", "tiny", "--raw", "--devkit-exact", "--out", ws / "no.csv")
+    both = cli("score", "depth", "-w", ws, "--layer", "tiny", "--raw", "--devkit-exact", "--out", ws / "no.csv")
     assert both.exit_code == 1 and "cannot be combined" in both.output and not (ws / "no.csv").exists()
-    assert "--devkit-exact" in invoke("score", "depth", "--help").output
+    assert "--devkit-exact" in cli("score", "depth", "--help").output
 
 
 SURFACE_COLUMNS = ("normal_mean_deg", "normal_median_deg", "p2p_mean_m", "p2p_rmse_m", "flying_share")
@@ -143,10 +136,10 @@ def step_ws(tmp_path):
     return root
 
 
-def test_score_depth_reports_the_surface_against_exact_depth(step_ws):
+def test_score_depth_reports_the_surface_against_exact_depth(cli, step_ws):
     results = step_ws / "results"
     for layer in ("exact", "mixed", "far"):
-        result = invoke("score", "depth", "-w", step_ws, "--layer", layer, "--target", "exact")
+        result = cli("score", "depth", "-w", step_ws, "--layer", layer, "--target", "exact")
         assert result.exit_code == 0, result.output
         assert all((results / f"depth_{layer}_vs_exact.{ext}").exists() for ext in ("csv", "json"))
         assert "flying share" in result.output and "normal error mean" in result.output
@@ -162,13 +155,12 @@ def test_score_depth_reports_the_surface_against_exact_depth(step_ws):
     assert float(far["p2p_mean_m"]) == pytest.approx(0.05, abs=1e-5) and float(far["flying_share"]) == 0
     config = json.loads((results / "depth_mixed_vs_exact.json").read_text())
     assert config["settings"]["target"] == "exact"
-    dense = invoke("score", "depth", "-w", step_ws, "--layer", "mixed")          # the annotated (here equal) depth
+    dense = cli("score", "depth", "-w", step_ws, "--layer", "mixed")          # the annotated (here equal) depth
     assert dense.exit_code == 0, dense.output
     assert float(read_csv(results / "depth_mixed.csv")[-1]["flying_share"]) == pytest.approx(4 / 6)
 
-
-def test_score_trajectory_layer_and_files(ws):
-    result = invoke("score", "trajectory", "-w", ws, "--layer", "sparse")
+def test_score_trajectory_layer_and_files(cli, ws):
+    result = cli("score", "trajectory", "-w", ws, "--layer", "sparse")
     assert result.exit_code == 0, result.output
     rows = read_csv(ws / "results" / "trajectory_sparse.csv")
     assert [r["trajectory"] for r in rows] == ["d0", "d1"] and rows[0]["poses"] == "3"
@@ -177,57 +169,57 @@ def test_score_trajectory_layer_and_files(ws):
     assert float(rows[0]["rpe_trans_m_rmse"]) == pytest.approx(1.0, rel=1e-6)
     assert float(rows[0]["localisation"]) == pytest.approx(1.0, rel=1e-6)
     est, ref = ws / "slam" / "dense" / "d0.txt", ws / "slam" / "sparse" / "d0.txt"
-    result = invoke("score", "trajectory", "-w", ws, "--est", est, "--gt", ref, "--out", ws / "t.csv")
+    result = cli("score", "trajectory", "-w", ws, "--est", est, "--gt", ref, "--out", ws / "t.csv")
     assert result.exit_code == 0 and float(read_csv(ws / "t.csv")[0]["ate_rmse"]) == pytest.approx(np.sqrt(5 / 3))
 
 
-def test_score_trajectory_associates_within_the_time_tolerance(ws, tmp_path):
+def test_score_trajectory_associates_within_the_time_tolerance(cli, ws, tmp_path):
     """Poses are paired as evo pairs them: nearest timestamp within --max-time-diff (default 10 ms); only the
     paired poses are scored and the pairing is reported."""
     ref = ws / "slam" / "dense" / "d0.txt"
     t_ref, _ = read_tum(ref)
     short = tmp_path / "short.txt"
     write_tum(short, t_ref[:2] + 0.004, gt_poses(2))  # two poses, 4 ms late: both paired
-    result = invoke("score", "trajectory", "-w", ws, "--est", short, "--gt", ref, "--out", ws / "a.csv")
+    result = cli("score", "trajectory", "-w", ws, "--est", short, "--gt", ref, "--out", ws / "a.csv")
     assert result.exit_code == 0, result.output
     assert read_csv(ws / "a.csv")[0]["poses"] == "2"
     assert "2 of 2 estimated poses paired with 3 reference poses (max. time difference 10 ms)" in result.output
     late = tmp_path / "late.txt"
     write_tum(late, t_ref + 0.02, gt_poses(3))  # 20 ms late: nothing pairs at 10 ms …
-    result = invoke("score", "trajectory", "-w", ws, "--est", late, "--gt", ref, "--out", ws / "b.csv")
+    result = cli("score", "trajectory", "-w", ws, "--est", late, "--gt", ref, "--out", ws / "b.csv")
     assert result.exit_code == 1 and "within 10 ms" in result.output and not (ws / "b.csv").exists()
-    result = invoke("score", "trajectory", "-w", ws, "--est", late, "--gt", ref, "--out", ws / "b.csv",
-                    "--max-time-diff", "0.03")  # … everything at 30 ms
+    result = cli("score", "trajectory", "-w", ws, "--est", late, "--gt", ref, "--out", ws / "b.csv",
+                 "--max-time-diff", "0.03")  # … everything at 30 ms
     assert result.exit_code == 0, result.output
     assert read_csv(ws / "b.csv")[0]["poses"] == "3"
 
 
-def test_score_trajectory_reads_kitti_pose_files(ws, tmp_path):
+def test_score_trajectory_reads_kitti_pose_files(cli, ws, tmp_path):
     """A KITTI pose file (no timestamps) is paired by index with the reference's first poses."""
     est = tmp_path / "est.kitti.txt"
     _, T_sparse = read_tum(ws / "slam" / "sparse" / "d0.txt")
     write_kitti_poses(est, T_sparse)
-    result = invoke("score", "trajectory", "-w", ws, "--est", est, "--gt", ws / "slam" / "dense" / "d0.txt",
-                    "--out", ws / "k.csv")
+    result = cli("score", "trajectory", "-w", ws, "--est", est, "--gt", ws / "slam" / "dense" / "d0.txt",
+                 "--out", ws / "k.csv")
     assert result.exit_code == 0, result.output
     assert float(read_csv(ws / "k.csv")[0]["ate_rmse"]) == pytest.approx(np.sqrt(5 / 3))
     too_long = tmp_path / "long.kitti.txt"
     write_kitti_poses(too_long, np.concatenate([T_sparse, T_sparse]))
-    result = invoke("score", "trajectory", "-w", ws, "--est", too_long, "--gt", ws / "slam" / "dense" / "d0.txt")
+    result = cli("score", "trajectory", "-w", ws, "--est", too_long, "--gt", ws / "slam" / "dense" / "d0.txt")
     assert result.exit_code == 1 and "paired by index" in result.output
 
 
-def test_score_trajectory_bad_input(ws, tmp_path):
+def test_score_trajectory_bad_input(cli, ws, tmp_path):
     unsorted = tmp_path / "unsorted.txt"
     unsorted.write_text("10.2 0 0 0 0 0 0 1\n10.1 0 0 0 0 0 0 1\n")
-    result = invoke("score", "trajectory", "-w", ws, "--est", unsorted, "--gt", ws / "drives" / "d0.h5")
+    result = cli("score", "trajectory", "-w", ws, "--est", unsorted, "--gt", ws / "drives" / "d0.h5")
     assert result.exit_code == 1 and "not strictly increasing" in result.output
     assert not (ws / "results").exists()
-    assert invoke("score", "trajectory", "-w", ws).exit_code == 1
+    assert cli("score", "trajectory", "-w", ws).exit_code == 1
 
 
-def test_score_map(ws):
-    result = invoke("score", "map", "-w", ws, "--layer", "sparse")
+def test_score_map(cli, ws):
+    result = cli("score", "map", "-w", ws, "--layer", "sparse")
     assert result.exit_code == 0, result.output
     rows = read_csv(ws / "results" / "map_sparse.csv")
     # map point (0, 0, 1) vs ground truth (0, 0, 0): nearest 1 m away both ways → (1/3 + 1/3) m²
@@ -238,22 +230,22 @@ def test_score_map(ws):
     ("trajectory", "--est", "slam/dense/d0.txt", "give either --est X.txt --gt REFERENCE, or --layer NAME"),
     ("map", "--map", "slam/dense/d0.ply", "give either --map X.ply --gt Y.ply, or --layer NAME"),
 ])
-def test_score_file_or_layer_preamble(ws, command, file_option, file_name, usage):
+def test_score_file_or_layer_preamble(cli, ws, command, file_option, file_name, usage):
     """trajectory and map take either FILE --gt REFERENCE or --layer NAME: anything else is one line, exit 1."""
     path, ref = ws / file_name, ws / file_name.replace("dense", "sparse")
     for args in ([], [file_option, path], [file_option, path, "--gt", ref, "--layer", "dense"], ["--gt", ref]):
-        result = invoke("score", command, "-w", ws, *args)
+        result = cli("score", command, "-w", ws, *args)
         assert result.exit_code == 1 and usage in result.output, args
     assert not (ws / "results").exists()
-    result = invoke("score", command, "-w", ws, file_option, path, "--gt", ref)
+    result = cli("score", command, "-w", ws, file_option, path, "--gt", ref)
     assert result.exit_code == 0, result.output
     assert (ws / "results" / f"{command}_d0.csv").exists()             # named after the file's stem
-    again = invoke("score", command, "-w", ws, file_option, path, "--gt", ref)
+    again = cli("score", command, "-w", ws, file_option, path, "--gt", ref)
     assert again.exit_code == 1 and "--force" in again.output
 
 
-def test_score_tables(ws):
-    result = invoke("score", "tables", "-w", ws)
+def test_score_tables(cli, ws):
+    result = cli("score", "tables", "-w", ws)
     assert result.exit_code == 0, result.output
     results = ws / "results"
     for name in ("table_5_1.md", "table_5_1.csv", "table_5_2.md", "table_5_2.csv", "trajectories_d0.png",
@@ -286,9 +278,9 @@ def test_score_tables(ws):
     assert "3 of 3 estimated poses paired" in sparse_d0["pairing"]
     assert "| testing | 540 | 1810 |" in (results / "table_5_3.md").read_text()   # the authors' figures
     assert "Table 5.3" in result.output
-    again = invoke("score", "tables", "-w", ws)
+    again = cli("score", "tables", "-w", ws)
     assert again.exit_code == 1 and "--force" in again.output
-    assert invoke("score", "tables", "-w", ws, "--force").exit_code == 0
+    assert cli("score", "tables", "-w", ws, "--force").exit_code == 0
 
 
 def _write_summary(ws, layer, drive, frames, rejected=()):
@@ -297,33 +289,33 @@ def _write_summary(ws, layer, drive, frames, rejected=()):
     (ws / "slam" / layer / f"{drive}.json").write_text(json.dumps(record))
 
 
-def test_tables_show_rows_made_with_other_settings_and_refuse_mixed_rows(ws):
+def test_tables_show_rows_made_with_other_settings_and_refuse_mixed_rows(cli, ws):
     for layer in ("sparse", "dense", "mse-dense", "mse-dense+range"):
         for drive in ("d0", "d1"):
             _write_summary(ws, layer, drive, 3, rejected=[2] if (layer, drive) == ("dense", "d1") else [])
     _write_summary(ws, "mse-dense", "d0", 5)
     _write_summary(ws, "mse-dense", "d1", 5)
-    result = invoke("score", "tables", "-w", ws)
+    result = cli("score", "tables", "-w", ws)
     assert result.exit_code == 0, result.output
     t52 = {r["method"]: r for r in read_csv(ws / "results" / "table_5_2.csv")}
     assert t52["MSE dense mask"]["slam_settings"] == "differs: frames=5"
     assert t52["sparse depth"]["slam_settings"] == "as the others"
     assert t52["dense depth"]["failures"] == "1"             # a run that rejected a step is a failure
     _write_summary(ws, "mse-dense", "d1", 3)                 # one row, two settings: refused
-    result = invoke("score", "tables", "-w", ws, "--force")
+    result = cli("score", "tables", "-w", ws, "--force")
     assert result.exit_code == 1 and "mixes SLAM runs made with frames=5 (d0) and frames=3 (d1)" in result.output
 
 
-def test_tables_refuse_a_run_without_validation(ws):
+def test_tables_refuse_a_run_without_validation(cli, ws):
     write_run(ws, "broken", "chamfer", "dense", 8, [])
-    result = invoke("score", "tables", "-w", ws)
+    result = cli("score", "tables", "-w", ws)
     assert result.exit_code == 1 and "no validation metrics" in result.output
     assert not (ws / "results").exists()
 
 
-def test_tables_refuse_a_layer_with_wrong_frame_count(ws):
+def test_tables_refuse_a_layer_with_wrong_frame_count(cli, ws):
     write_layer(ws / "predictions" / "mse-dense" / "d1.h5",
                 Layer(depth=np.ones((N - 1, H, W), np.float32), drive="d1", made_by="mse-dense"), force=True)
-    result = invoke("score", "tables", "-w", ws)
+    result = cli("score", "tables", "-w", ws)
     assert result.exit_code == 1 and "frames but its drive has" in result.output
     assert not (ws / "results").exists()

@@ -2,9 +2,7 @@ import json
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
-from dcslam.cli import app
 from dcslam.io.drive import DriveFrame, DriveWriter, Layer, write_layer
 from dcslam.io.ply import read_ply
 from dcslam.io.tum import read_tum
@@ -30,12 +28,8 @@ def workspace(tmp_path_factory):
     return ws
 
 
-def _run(*args):
-    return CliRunner().invoke(app, ["slam", *args], catch_exceptions=False)
-
-
-def test_dense_icp_writes_trajectory_map_and_summary(workspace):
-    result = _run("--depth", "dense", "--odometry", "icp", "-w", str(workspace))
+def test_dense_icp_writes_trajectory_map_and_summary(cli, workspace):
+    result = cli("slam", "--depth", "dense", "--odometry", "icp", "-w", workspace)
     assert result.exit_code == 0, result.output
     out = workspace / "slam" / "dense"
     timestamps, poses = read_tum(out / "street_0001.txt")
@@ -49,15 +43,15 @@ def test_dense_icp_writes_trajectory_map_and_summary(workspace):
     assert record["settings"]["odometry"] == "icp" and record["seconds_per_frame"] > 0
     assert record["rejected_steps"] == []
     # Refuses to overwrite without --force, keeps the files, then overwrites with it.
-    again = _run("--depth", "dense", "-w", str(workspace))
+    again = cli("slam", "--depth", "dense", "-w", workspace)
     assert again.exit_code == 1 and "--force" in again.output
-    assert _run("--depth", "dense", "-w", str(workspace), "--force", "--frames", "2").exit_code == 0
+    assert cli("slam", "--depth", "dense", "-w", workspace, "--force", "--frames", "2").exit_code == 0
     assert read_tum(out / "street_0001.txt")[1].shape == (2, 4, 4)
 
 
-def test_gt_icpslam_sparse_and_layer_path(workspace, tmp_path):
-    result = _run("--depth", "sparse", "--odometry", "gt", "--mapper", "icpslam", "-w", str(workspace),
-                  "--out", str(tmp_path / "o"))
+def test_gt_icpslam_sparse_and_layer_path(cli, workspace, tmp_path):
+    result = cli("slam", "--depth", "sparse", "--odometry", "gt", "--mapper", "icpslam", "-w", workspace,
+                 "--out", tmp_path / "o")
     assert result.exit_code == 0, result.output
     _, poses = read_tum(tmp_path / "o" / "street_0001.txt")
     np.testing.assert_allclose(poses, street_trajectory(N, step=0.5).numpy(), atol=1e-6)
@@ -65,26 +59,26 @@ def test_gt_icpslam_sparse_and_layer_path(workspace, tmp_path):
     from dcslam.io.drive import DriveFile
     with DriveFile(workspace / "drives" / "street_0001.h5") as drive:
         write_layer(layer_path, Layer(np.stack([drive.depth("dense", i) for i in range(N)]), "street_0001", "test"))
-    result = _run("--depth", str(layer_path), "--odometry", "gradicp", "--frames", "3", "-w", str(workspace))
+    result = cli("slam", "--depth", layer_path, "--odometry", "gradicp", "--frames", "3", "-w", workspace)
     assert result.exit_code == 0, result.output
     assert (workspace / "slam" / "mylayer" / "street_0001.ply").exists()
 
 
-def test_predicted_without_predictions_names_predict(workspace):
-    result = _run("--depth", "predicted", "-w", str(workspace))
+def test_predicted_without_predictions_names_predict(cli, workspace):
+    result = cli("slam", "--depth", "predicted", "-w", workspace)
     assert result.exit_code == 1 and "dcslam predict" in result.output
 
 
-def test_missing_drives_name_prepare(tmp_path):
-    result = _run("-w", str(tmp_path))
+def test_missing_drives_name_prepare(cli, tmp_path):
+    result = cli("slam", "-w", tmp_path)
     assert result.exit_code == 1 and "dcslam prepare-kitti" in result.output
 
 
-def test_bad_choice_is_usage_error(workspace):
-    assert _run("--odometry", "magic", "-w", str(workspace)).exit_code == 2
+def test_bad_choice_is_usage_error(cli, workspace):
+    assert cli("slam", "--odometry", "magic", "-w", workspace).exit_code == 2
 
 
-def test_strict_exits_1_on_a_suspect_drive_and_still_writes_it(workspace, tmp_path):
+def test_strict_exits_1_on_a_suspect_drive_and_still_writes_it(cli, workspace, tmp_path):
     """A layer that is empty after the first frame leaves every step without data: rejected, so the drive is
     suspect. Without --strict that is reported and exits 0; with it, exit 1 naming the drive and why."""
     depth = np.zeros((N, H, W), np.float32)
@@ -93,12 +87,12 @@ def test_strict_exits_1_on_a_suspect_drive_and_still_writes_it(workspace, tmp_pa
     layer = tmp_path / "empty.h5"
     write_layer(layer, Layer(depth=depth, drive="street_0001", made_by="test", config={}))
     args = ("--depth", str(layer), "--odometry", "icp", "-w", str(workspace), "--threads", "1")
-    relaxed = _run(*args, "--out", str(tmp_path / "relaxed"))
+    relaxed = cli("slam", *args, "--out", tmp_path / "relaxed")
     assert relaxed.exit_code == 0, relaxed.output
     assert "SUSPECT" in relaxed.output and "rejected" in relaxed.output
     summary = json.loads((tmp_path / "relaxed" / "street_0001.json").read_text())
     assert summary["health"]["suspect"] and summary["health"]["rejected"] == N - 1
-    strict = CliRunner().invoke(app, ["slam", *args, "--out", str(tmp_path / "strict"), "--strict"])
+    strict = cli("slam", *args, "--out", tmp_path / "strict", "--strict")
     assert strict.exit_code == 1
     assert "suspect trajectories (--strict): street_0001" in strict.output
     assert (tmp_path / "strict" / "street_0001.txt").exists()
@@ -120,14 +114,14 @@ def confident_layer(workspace, tmp_path_factory):
 
 
 @pytest.mark.parametrize("use, minimum", [("weights", 0.0), ("mask", 0.5), ("ignore", 0.0), ("weights", 0.5)])
-def test_confidence_use_is_applied_and_recorded(workspace, confident_layer, tmp_path, use, minimum):
+def test_confidence_use_is_applied_and_recorded(cli, workspace, confident_layer, tmp_path, use, minimum):
     from dcslam.report.layers import slam_settings
     from dcslam.workspace import Workspace
 
     path, good_fraction = confident_layer
     out = tmp_path / "slam" / "noisy"
-    result = _run("--depth", str(path), "--confidence", use, "--min-confidence", str(minimum), "-w", str(workspace),
-                  "--out", str(out), "--frames", "3")
+    result = cli("slam", "--depth", path, "--confidence", use, "--min-confidence", minimum, "-w", workspace,
+                 "--out", out, "--frames", "3")
     assert result.exit_code == 0, result.output
     assert {p.name for p in out.iterdir()} == {f"street_0001{s}" for s in (".txt", ".kitti.txt", ".ply", ".json")}
     record = json.loads((out / "street_0001.json").read_text())
@@ -140,16 +134,16 @@ def test_confidence_use_is_applied_and_recorded(workspace, confident_layer, tmp_
     assert settings["confidence"] == use and settings["min_confidence"] == minimum
 
 
-def test_confidence_of_a_layer_without_one(workspace, tmp_path):
-    result = _run("--depth", "dense", "--min-confidence", "0.3", "-w", str(workspace), "--out", str(tmp_path / "o"))
+def test_confidence_of_a_layer_without_one(cli, workspace, tmp_path):
+    result = cli("slam", "--depth", "dense", "--min-confidence", "0.3", "-w", workspace, "--out", tmp_path / "o")
     assert result.exit_code == 1 and "holds no confidence" in result.output
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
-    result = _run("--depth", "dense", "--odometry", "gt", "--frames", "2", "-w", str(workspace),
-                  "--out", str(tmp_path / "p"))
+    result = cli("slam", "--depth", "dense", "--odometry", "gt", "--frames", "2", "-w", workspace,
+                 "--out", tmp_path / "p")
     assert result.exit_code == 0, result.output
     used = json.loads((tmp_path / "p" / "street_0001.json").read_text())["confidence"]
     assert used == {"mode": "none", "min_confidence": 0.0, "layer_has_confidence": False, "kept_fraction": 1.0}
-    result = _run("--depth", "dense", "--confidence", "ignore", "--min-confidence", "0.3", "-w", str(workspace))
+    result = cli("slam", "--depth", "dense", "--confidence", "ignore", "--min-confidence", "0.3", "-w", workspace)
     assert result.exit_code == 1 and "--min-confidence needs --confidence weights or mask" in result.output
-    assert _run("--depth", "dense", "--confidence", "often", "-w", str(workspace)).exit_code == 2
-    assert _run("--depth", "dense", "--min-confidence", "1.5", "-w", str(workspace)).exit_code == 2
+    assert cli("slam", "--depth", "dense", "--confidence", "often", "-w", workspace).exit_code == 2
+    assert cli("slam", "--depth", "dense", "--min-confidence", "1.5", "-w", workspace).exit_code == 2

@@ -1,16 +1,9 @@
 """`dcslam synth`: exit codes and the files it writes."""
 import json
 
-from typer.testing import CliRunner
 
-from dcslam.cli import app
-
-runner = CliRunner()
-
-
-def test_synth_writes_drives_into_the_workspace(tmp_path):
-    result = runner.invoke(app, ["synth", "--workspace", str(tmp_path), "--drives", "1", "--frames", "11",
-                                 "--seed", "9"])
+def test_synth_writes_drives_into_the_workspace(cli, tmp_path):
+    result = cli("synth", "--workspace", tmp_path, "--drives", 1, "--frames", 11, "--seed", 9)
     assert result.exit_code == 0, result.output
     assert "wrote 1 drives" in result.stdout
     kitti = tmp_path / "kitti"
@@ -25,19 +18,19 @@ def test_synth_writes_drives_into_the_workspace(tmp_path):
     config = json.loads((kitti / "synth_config.json").read_text())
     assert config["stage"] == "synth" and config["settings"]["seed"] == 9
 
-    again = runner.invoke(app, ["synth", "--out", str(kitti), "--drives", "1", "--frames", "12"])
+    again = cli("synth", "--out", kitti, "--drives", 1, "--frames", 12)
     assert again.exit_code == 1
     assert "--force" in again.stderr
 
 
-def test_synth_rejects_bad_options(tmp_path):
-    result = runner.invoke(app, ["synth", "--out", str(tmp_path), "--frames", "0"])
+def test_synth_rejects_bad_options(cli, tmp_path):
+    result = cli("synth", "--out", tmp_path, "--frames", 0)
     assert result.exit_code == 2
     assert not (tmp_path / "raw").exists()
 
 
-def test_synth_refuses_drives_too_short_for_depth_before_any_work(tmp_path):
-    result = runner.invoke(app, ["synth", "--out", str(tmp_path / "k"), "--frames", "5"])
+def test_synth_refuses_drives_too_short_for_depth_before_any_work(cli, tmp_path):
+    result = cli("synth", "--out", tmp_path / "k", "--frames", 5)
     assert result.exit_code == 1
     assert result.stderr.strip().splitlines() == [
         "error: --frames 5 gives no frame a depth map (KITTI skips 5 frames at each end); pass --frames 11 or more"]

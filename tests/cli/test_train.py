@@ -1,10 +1,15 @@
+"""`dcslam train`: options → configuration (``--print-config`` read back as TOML), exit codes, one-line errors, and
+the files of one short run with its resume. The trainings themselves (each loss, model and option) are the stage's
+and the library's tests (tests/stages/test_train.py, tests/depth/test_train.py)."""
 import json
+import tomllib
 
 import pytest
-from typer.testing import CliRunner
 
-from dcslam.cli import app
 from tests.fixtures import depth as fixtures
+
+RUN_FILES = {"model.pt", "last.pt", "config.json", "metrics.jsonl", "curves.png"}
+SHORT = ["--max-frames", "2", "--scale", "0.5", "--batch-size", "2", "--device", "cpu"]
 
 
 @pytest.fixture
@@ -12,56 +17,74 @@ def ws(tmp_path):
     return fixtures.write_workspace(tmp_path / "ws", n=4)
 
 
-def _run(*args):
-    return CliRunner().invoke(app, list(args))
-
-
-def test_train_mse_dense_writes_the_run(ws):
-    result = _run("train", "-w", str(ws), "--loss", "mse", "--mask", "dense", "--batch-size", "2", "--device", "cpu")
+def _config(cli, *options, ws):
+    """The configuration `dcslam train OPTIONS` would run, as a dict; asserts it ran nothing."""
+    result = cli("train", *options, "--print-config", "-w", ws)
     assert result.exit_code == 0, result.output
+    assert not ws.exists()
+    return tomllib.loads(result.stdout)
+
+
+@pytest.mark.parametrize("options, changed", [
+    (["--loss", "chamfer", "--map-frames", "8", "--crop", "24", "--scale", "0.5"],
+     {"loss": "chamfer", "map_frames": 8, "crop": 24, "scale": 0.5}),
+    (["--mask", "sparse", "--max-frames", "2", "--name", "mine"], {"mask": "sparse", "max_frames": 2, "name": "mine"}),
+    (["--input-mix", "sparse", "--input-mix", "sparse@16", "--l1-weight", "1", "--lr-schedule", "cosine",
+      "--fill-holes"],
+     {"input_mix": ["sparse", "sparse@16"], "l1_weight": 1.0, "lr_schedule": "cosine", "fill_holes": True}),
+    (["--model", "nconv", "--correct-fill", "--device", "cpu"],
+     {"model": "nconv", "correct_fill": True, "device": "cpu"}),
+    (["--input", "sparse@16", "--target", "exact", "--epochs", "3", "--lr", "0.01", "--resume"],
+     {"input": "sparse@16", "target": "exact", "epochs": 3, "lr": 0.01, "resume": True}),
+])
+def test_options_set_their_fields_and_nothing_else(cli, tmp_path, options, changed):
+    defaults = _config(cli, ws=tmp_path / "ws")
+    assert not set(changed) - set(defaults) - {"name"}          # name is unset by default (a comment)
+    assert _config(cli, *options, ws=tmp_path / "ws") == {**defaults, **changed}
+
+
+def test_a_short_run_writes_its_files_then_resumes_only_with_its_own_options(cli, ws):
+    result = cli("train", "-w", ws, "--loss", "mse", "--mask", "dense", *SHORT)
+    assert result.exit_code == 0, result.output
+    assert "best validation" in result.stdout
     run = ws / "runs" / "mse-dense"
-    assert {p.name for p in run.iterdir()} >= {"model.pt", "last.pt", "config.json", "metrics.jsonl", "curves.png"}
+    assert {p.name for p in run.iterdir()} == RUN_FILES
     settings = json.loads((run / "config.json").read_text())["settings"]
     assert (settings["loss"], settings["mask"], settings["model"], settings["map_frames"]) == \
         ("mse", "dense", "sparse-conv", 1)
-    assert "best validation" in result.stdout
 
-    again = _run("train", "-w", str(ws), "--batch-size", "2")
-    assert again.exit_code == 1 and "--force" in again.output
-    resumed = _run("train", "-w", str(ws), "--batch-size", "2", "--epochs", "2", "--resume")
-    assert resumed.exit_code == 0, resumed.output
-    rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
-    assert [r["epoch"] for r in rows if r["kind"] == "val"] == [0, 1]
-    record = json.loads((run / "config.json").read_text())
-    assert record["settings"]["epochs"] == 2 and record["resumed"][0]["settings"]["epochs"] == 2
+    again = cli("train", "-w", ws, *SHORT)
+    assert again.exit_code == 1 and "--force" in again.stderr and len(again.stderr.strip().splitlines()) == 1
 
-    other = _run("train", "-w", str(ws), "--batch-size", "2", "--epochs", "3", "--resume", "--lr", "0.01",
-                 "--name", "mse-dense", "--loss", "chamfer")
+    record, metrics = (run / "config.json").read_text(), (run / "metrics.jsonl").read_text()
+    other = cli("train", "-w", ws, *SHORT, "--epochs", "3", "--resume", "--lr", "0.01", "--name", "mse-dense",
+                "--loss", "chamfer")
     assert other.exit_code == 1
     assert other.stderr.strip().splitlines() == [
         f"error: cannot resume {run} with other options: --loss 'chamfer' (the run has 'mse'); --lr 0.01 (the run "
         "has 0.001); resume with the run's own options (only --epochs and --device may change), or start again "
         "with --force"]
+    assert (run / "config.json").read_text() == record and (run / "metrics.jsonl").read_text() == metrics
+
+    resumed = cli("train", "-w", ws, *SHORT, "--epochs", "2", "--resume")
+    assert resumed.exit_code == 0, resumed.output
+    rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert [r["epoch"] for r in rows if r["kind"] == "val"] == [0, 1]
-    assert json.loads((run / "config.json").read_text()) == record
+    resumed_record = json.loads((run / "config.json").read_text())
+    assert resumed_record["settings"]["epochs"] == 2 and resumed_record["resumed"][0]["settings"]["epochs"] == 2
 
 
-def test_train_chamfer_and_sparse_names(ws):
-    result = _run("train", "-w", str(ws), "--loss", "chamfer", "--map-frames", "8", "--crop", "24",
-                  "--scale", "0.5")
-    assert result.exit_code == 0, result.output
-    assert (ws / "runs" / "chamfer-8" / "model.pt").exists()
-    result = _run("train", "-w", str(ws), "--mask", "sparse", "--max-frames", "2", "--name", "mine")
-    assert result.exit_code == 0, result.output
-    assert json.loads((ws / "runs" / "mine" / "config.json").read_text())["settings"]["mask"] == "sparse"
-
-
-def test_train_errors(ws, tmp_path):
-    assert _run("train", "-w", str(tmp_path / "empty")).exit_code == 1
-    result = _run("train", "-w", str(ws), "--loss", "l1")
+def test_train_errors(cli, ws, tmp_path):
+    result = cli("train", "-w", tmp_path / "empty")
+    assert result.exit_code == 1 and len(result.stderr.strip().splitlines()) == 1
+    result = cli("train", "-w", ws, "--loss", "l1")
     assert result.exit_code == 2 and "l1" in result.output  # an unknown choice is a usage error
-    assert _run("train", "-w", str(ws), "--scale", "0.3").exit_code == 1
-    assert not (ws / "runs" / "mse-dense" / "model.pt").exists()
+    assert cli("train", "-w", ws, "--lr-schedule", "step").exit_code == 2
+    result = cli("train", "-w", ws, "--scale", "0.3")
+    assert result.exit_code == 1 and "scale" in result.stderr
+    result = cli("train", "-w", ws, "--model", "dncnn", "--correct-fill")
+    assert result.exit_code == 1 and "--correct-fill is an option of" in result.stderr
+    assert not (ws / "runs").exists()
 
 
 @pytest.mark.parametrize("args, line", [
@@ -69,34 +92,10 @@ def test_train_errors(ws, tmp_path):
     (["--nproc", "0"], "error: --nproc must be >= 1, got 0"),
     (["--weight-decay", "nan"], "error: --weight-decay must be a non-negative number, got nan"),
 ])
-def test_bad_numbers_give_one_line(ws, args, line):
-    result = _run("train", "-w", str(ws), *args)
+def test_bad_numbers_give_one_line(cli, ws, args, line):
+    result = cli("train", "-w", ws, *args)
     assert result.exit_code == 1 and result.stderr.strip().splitlines() == [line]
     assert not (ws / "runs").exists()
-
-
-def test_train_with_density_mix_l1_cosine_and_filled_holes(tmp_path):
-    ws = fixtures.write_workspace(tmp_path / "mix", n=2, extra=True)
-    result = _run("train", "-w", str(ws), "--device", "cpu", "--input-mix", "sparse", "--input-mix", "sparse@16",
-                  "--l1-weight", "1", "--lr-schedule", "cosine", "--fill-holes", "--scale", "0.5")
-    assert result.exit_code == 0, result.output
-    settings = json.loads((ws / "runs" / "mse-dense-mix" / "config.json").read_text())["settings"]
-    assert (settings["input_mix"], settings["l1_weight"], settings["lr_schedule"], settings["model_hparams"]) == \
-        (["sparse", "sparse@16"], 1.0, "cosine", {"fill_holes": True})
-    bad = _run("train", "-w", str(ws), "--device", "cpu", "--lr-schedule", "step")
-    assert bad.exit_code == 2
-
-
-def test_train_correcting_the_fill(tmp_path):
-    ws = fixtures.write_workspace(tmp_path / "cf", n=2)
-    result = _run("train", "-w", str(ws), "--device", "cpu", "--model", "nconv", "--correct-fill", "--scale", "0.5",
-                  "--name", "nconv-cf")
-    assert result.exit_code == 0, result.output
-    run_dir = ws / "runs" / "nconv-cf"
-    assert json.loads((run_dir / "config.json").read_text())["settings"]["model_hparams"] == {"correct_fill": True}
-    assert (run_dir / "model.pt").is_file()
-    bad = _run("train", "-w", str(ws), "--device", "cpu", "--model", "dncnn", "--correct-fill")
-    assert bad.exit_code == 1 and "--correct-fill is an option of" in bad.stderr
 
 
 # every option of `dcslam train` with a value other than its default, and the configuration key it sets
@@ -119,22 +118,20 @@ GIVEN = [("--loss", "pose", "loss", "pose"), ("--mask", "sparse", "mask", "spars
          ("--resume", None, "resume", True), ("--nproc", "2", "nproc", 2), ("--init", "first", "init", "first")]
 
 
-def test_print_config_shows_every_option_under_its_key(tmp_path):
-    import tomllib
-
+def test_print_config_shows_every_option_under_its_key(cli, tmp_path):
     from dcslam.stages.config import from_mapping, options_of
     from dcslam.stages.train import TrainStageConfig
 
     assert {key for _, _, key, _ in GIVEN} == {f.name for f in options_of(TrainStageConfig)} - {"fill_holes"}
     args = [a for flag, value, _, _ in GIVEN for a in ([flag] if value is None else [flag, value])]
-    result = _run("train", "-w", str(tmp_path / "ws"), *args, "--print-config")
+    result = cli("train", "-w", tmp_path / "ws", *args, "--print-config")
     assert result.exit_code == 0, result.output
     printed = tomllib.loads(result.stdout)
     assert printed == {**{key: value for _, _, key, value in GIVEN}, "fill_holes": False}
     config = from_mapping(TrainStageConfig, printed).train_config([], [])  # what the training is given
     assert all(getattr(config, key) == value for _, _, key, value in GIVEN if hasattr(config, key))
     assert config.model_hparams == {"correct_fill": True} and not (tmp_path / "ws").exists()
-    sparse_conv = _run("train", "-w", str(tmp_path / "ws"), "--fill-holes", "--print-config")
+    sparse_conv = cli("train", "-w", tmp_path / "ws", "--fill-holes", "--print-config")
     assert tomllib.loads(sparse_conv.stdout)["fill_holes"] is True
 
 
@@ -148,22 +145,22 @@ def test_print_config_shows_every_option_under_its_key(tmp_path):
     (["--pose-source-voxel", "nan"], "pose_source_voxel = nan"),
     (["--name", "a/b"], 'name = "a/b"'), (["--init", ".."], 'init = ".."'),
     (["--fill-holes", "--model", "nconv"], 'fill_holes = true\nmodel = "nconv"')])
-def test_a_wrong_value_fails_with_one_line_naming_the_option(ws, args, line, tmp_path):
-    result = _run("train", "-w", str(ws), *args)
+def test_a_wrong_value_fails_with_one_line_naming_the_option(cli, ws, args, line, tmp_path):
+    result = cli("train", "-w", ws, *args)
     lines = result.stderr.strip().splitlines()
     assert result.exit_code == 1 and len(lines) == 1 and lines[0].startswith(f"error: {args[0]} "), result.stderr
     path = tmp_path / "bad.toml"  # the same value from a configuration file: the same line
     path.write_text(line + "\n")
-    from_file = _run("train", "-w", str(ws), "--config", str(path))
+    from_file = cli("train", "-w", ws, "--config", path)
     assert from_file.exit_code == 1 and from_file.stderr.strip().splitlines() == lines
     assert not (ws / "runs").exists()
 
 
-def test_resume_after_the_workspace_moved(ws, tmp_path):
-    assert _run("train", "-w", str(ws), "--device", "cpu", "--max-frames", "2").exit_code == 0
+def test_resume_after_the_workspace_moved(cli, ws, tmp_path):
+    assert cli("train", "-w", ws, "--device", "cpu", "--max-frames", "2").exit_code == 0
     moved = tmp_path / "moved"
     ws.rename(moved)
-    resumed = _run("train", "-w", str(moved), "--device", "cpu", "--max-frames", "2", "--epochs", "2", "--resume")
+    resumed = cli("train", "-w", moved, "--device", "cpu", "--max-frames", "2", "--epochs", "2", "--resume")
     assert resumed.exit_code == 0, resumed.output
     rows = [json.loads(line) for line in (moved / "runs" / "mse-dense" / "metrics.jsonl").read_text().splitlines()]
     assert [r["epoch"] for r in rows if r["kind"] == "val"] == [0, 1]

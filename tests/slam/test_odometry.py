@@ -188,3 +188,21 @@ def test_step_reports_its_uncertainty(pair):
     (f0, f1), T, _ = pair
     result = ICPOdometry().estimate(f1, view_from_frame(f0, T[0]), T[0])
     assert result.accepted and 0 < result.sigma_m < 0.05 and 0 < result.sigma_deg < 1.0
+
+
+@pytest.mark.parametrize("association", [ProjectiveAssociation(), NearestNeighbourAssociation()],
+                         ids=["projective", "nn"])
+def test_icp_in_each_dtype_and_on_each_device(device, dtype, association):
+    """ICP recovers a known motion in float32 and float64, on the CPU and on a GPU, with each solver; the pose
+    comes back in the frames' dtype, on their device."""
+    scene, K = StreetScene(0), kitti_K(H, W, dtype=torch.float64)
+    T = street_trajectory(2, step=0.6)
+    depth = [scene.render(T[i], K, H, W).to(device=device, dtype=dtype) for i in range(2)]
+    K, T = K.to(device=device, dtype=dtype), T.to(device=device, dtype=dtype)
+    f0, f1 = (prepare_frame(d, K) for d in depth)
+    for solver in (GaussNewton(), LevenbergMarquardt(), DifferentiableLM()):
+        result = ICPOdometry(solver=solver, association=association).estimate(f1, view_from_frame(f0, T[0]), T[0])
+        assert result.accepted, (type(solver).__name__, result.reason)
+        assert result.T_world_cam.dtype == dtype and result.T_world_cam.device.type == device.type
+        dt, dr = pose_error(result.T_world_cam.double().cpu(), T[1].double().cpu())
+        assert float(dt) < 0.02 and math.degrees(float(dr)) < 0.1, type(solver).__name__

@@ -1,3 +1,4 @@
+import pytest
 import torch
 
 from dcslam.geometry.se3 import pose_error
@@ -59,3 +60,18 @@ def test_a_prepared_frame_gives_the_step_of_its_depth():
             rb = b.step_frame(frame)
             assert torch.equal(ra.T_world_cam, rb.T_world_cam) and ra.iterations == rb.iterations
         assert torch.equal(a.map.points, b.map.points)
+
+
+@pytest.mark.parametrize("settings", [SlamSettings(), SlamSettings(odometry="gradicp", mapper="icpslam")],
+                         ids=["icp-pointfusion", "gradicp-icpslam"])
+def test_slam_in_each_dtype_and_on_each_device(device, dtype, settings):
+    """The frame loop (odometry against the map, then fusion) tracks a moving car in float32 and float64, on the CPU
+    and on a GPU; poses and map stay in the depth's dtype, on its device."""
+    depth, K, T = _sparse_drive(4, step=0.8)
+    slam = build_slam(settings)
+    poses = slam.run(depth.to(device=device, dtype=dtype), K.to(device=device, dtype=dtype))
+    assert poses.shape == (4, 4, 4) and poses.dtype == dtype and poses.device.type == device.type
+    assert slam.map.points.dtype == dtype and slam.map.points.device.type == device.type
+    assert slam.rejected == []
+    dt, _ = pose_error(poses.double().cpu(), T)
+    assert float(dt.max()) < 0.25

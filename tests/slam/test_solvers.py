@@ -19,9 +19,10 @@ class _Quadratic:
 
     def linearize(self, T):
         r = self._r(T).double()
-        J = torch.zeros(3, 6, dtype=torch.float64)
+        J = torch.zeros(3, 6, dtype=torch.float64, device=T.device)
         J[:, :3] = T[:3, :3].double()
-        return Linearization(J.T @ J + 1e-6 * torch.eye(6, dtype=torch.float64), J.T @ r, (r * r).sum(), 100)
+        return Linearization(J.T @ J + 1e-6 * torch.eye(6, dtype=torch.float64, device=T.device), J.T @ r,
+                             (r * r).sum(), 100)
 
     def cost(self, T):
         self.calls += 1
@@ -37,6 +38,21 @@ def test_solvers_reach_a_known_translation(solver):
     target = torch.tensor([0.3, -0.2, 1.1], dtype=torch.float64)
     result = solver.solve(_Quadratic(target), torch.eye(4, dtype=torch.float64), 20)
     assert torch.allclose(result.T[:3, 3], target, atol=1e-4)
+
+
+@pytest.mark.parametrize("solver", [GaussNewton(), LevenbergMarquardt(), DifferentiableLM()], ids=["gn", "lm", "dlm"])
+@pytest.mark.parametrize("punish_first", [False, True], ids=["plain", "first-step-rejected"])
+def test_solvers_in_each_dtype_and_on_each_device(solver, punish_first, device, dtype):
+    """The pose keeps the dtype and device it starts in (the 6 x 6 systems are solved in float64 there) and reaches
+    the target in float32 as in float64, also when the first step must be retried."""
+    target = torch.tensor([0.3, -0.2, 1.1], dtype=dtype, device=device)
+    T0 = se3_exp(torch.tensor([0.0, 0.0, 0.0, 0.02, -0.01, 0.03], dtype=dtype, device=device))
+    result = solver.solve(_Quadratic(target, punish_first), T0, 20)
+    assert result.T.dtype == dtype and result.T.device.type == device.type
+    assert result.last.H.dtype == torch.float64 and result.last.H.device.type == device.type
+    tolerance = 1e-4 if dtype == torch.float64 else 1e-3
+    assert torch.allclose(result.T[:3, 3], target, atol=tolerance)
+    assert torch.allclose(result.T[:3, :3], T0[:3, :3], atol=tolerance)  # the problem leaves the rotation alone
 
 
 def test_differentiable_lm_retries_after_a_rejected_step():

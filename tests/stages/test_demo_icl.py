@@ -128,6 +128,7 @@ def test_held_out_frames_are_never_trained_on(rooms):
         drives_of(rooms / "nowhere")
 
 
+@pytest.mark.slow  # 60 training steps
 def test_chamfer_only_training_beats_the_noisy_input_on_another_room(rooms, tmp_path):
     """A short training (chamfer between single-frame maps only) must bring the held-out room's depth closer to
     the clean depth than the noisy input is: MAE, RMSE and chamfer down, PSNR up. An untrained DnCNN starts as

@@ -4,9 +4,7 @@ import json
 import os
 
 import pytest
-from typer.testing import CliRunner
 
-from dcslam.cli import app
 from dcslam.errors import DcslamError
 from dcslam import __version__
 from dcslam.stages.config import code_version
@@ -14,9 +12,6 @@ from dcslam.stages.reproduce import PROFILES, Pipeline, Profile, Stage, reproduc
 from dcslam.stages.reproduce_plan import planned_stages, read_stage_configs
 from dcslam.stages.slam import SlamStageConfig
 from dcslam.workspace import Workspace
-
-runner = CliRunner()
-
 
 def _fake_stage(calls, outputs):
     """Stand-in for a stage's run(): records the call and writes the stage's outputs."""
@@ -111,21 +106,22 @@ def test_failed_stage_stops_the_pipeline_with_one_line(tmp_path, monkeypatch):
     assert json.loads(stamp.read_text())["complete"] is False  # claims nothing: the next run redoes it
 
 
-def test_unknown_profile_and_table_fail_with_exit_code(tmp_path):
-    result = runner.invoke(app, ["reproduce", "--profile", "huge", "--workspace", str(tmp_path)])
+def test_unknown_profile_and_table_fail_with_exit_code(cli, tmp_path):
+    result = cli("reproduce", "--profile", "huge", "--workspace", tmp_path)
     assert result.exit_code == 2 and "huge" in result.stderr  # a usage error, like every unknown choice
-    result = runner.invoke(app, ["reproduce", "--table", "9.9", "--workspace", str(tmp_path)])
+    result = cli("reproduce", "--table", "9.9", "--workspace", tmp_path)
     assert result.exit_code == 2 and "9.9" in result.stderr
-    result = runner.invoke(app, ["reproduce", "--kitti", str(tmp_path / "nowhere"), "--workspace", str(tmp_path)])
+    result = cli("reproduce", "--kitti", tmp_path / "nowhere", "--workspace", tmp_path)
     assert result.exit_code == 1 and "does not exist" in result.stderr
 
 
-def test_smoke_profile_runs_every_stage_and_writes_the_tables(tmp_path):
+@pytest.mark.slow  # every stage of Table 5.1 and 5.2, end to end
+def test_smoke_profile_runs_every_stage_and_writes_the_tables(cli, tmp_path):
     """The whole experiment on a few tiny generated drives: every stage, then a rerun that skips them all (the worker
     processes of --jobs are tested on their own, below)."""
     import csv
 
-    result = runner.invoke(app, ["reproduce", "--profile", "smoke", "--workspace", str(tmp_path)])
+    result = cli("reproduce", "--profile", "smoke", "--workspace", tmp_path)
     assert result.exit_code == 0, result.output
     results = tmp_path / "results"
     for name in ("table_5_1.md", "table_5_1.csv", "table_5_2.md", "table_5_2.csv", "table_5_2_per_drive.csv",
@@ -158,7 +154,7 @@ def test_smoke_profile_runs_every_stage_and_writes_the_tables(tmp_path):
     ran = {p.stem for p in (tmp_path / ".reproduce").glob("*.json")} - {"splits"}
     assert ran == {stage.name for stage in planned_stages(Workspace(tmp_path), PROFILES["smoke"])}  # --print-config
 
-    again = runner.invoke(app, ["reproduce", "--profile", "smoke", "--workspace", str(tmp_path)])
+    again = cli("reproduce", "--profile", "smoke", "--workspace", tmp_path)
     assert again.exit_code == 0, again.output
     assert "[run]" not in again.stderr and again.stderr.count("[skip]") >= 20
 
@@ -200,11 +196,11 @@ def _touch(ws, config, *, force=False):
     config.out.write_text(str(torch.get_num_threads()))
 
 
-def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(tmp_path):
+def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(cli, tmp_path):
     import tomllib
 
     ws = tmp_path / "ws"
-    result = runner.invoke(app, ["reproduce", "--print-config", "--workspace", str(ws)])
+    result = cli("reproduce", "--print-config", "--workspace", ws)
     assert result.exit_code == 0, result.output
     printed = tomllib.loads(result.stdout)  # still a --config file of reproduce: the stages are comments
     assert printed == {"table": "5.2", "profile": "quick", "seed": 0, "force": False, "jobs": 1}
@@ -224,7 +220,7 @@ def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(tmp_path
     assert long_ip["out"] == str(ws / "slam-long" / "ip-basic-fast")
     assert stages["slam-mse-dense+edges-2011_09_26_drive_1007_sync"]["depth"] == "filtered/mse-dense+edges"
 
-    thesis = read_stage_configs(runner.invoke(app, ["reproduce", "--profile", "thesis", "--table", "5.1",
-                                                    "--print-config", "--workspace", str(ws)]).stdout)
+    thesis = read_stage_configs(cli("reproduce", "--profile", "thesis", "--table", "5.1", "--print-config",
+                                    "--workspace", ws).stdout)
     assert list(thesis)[-1] == "score-tables" and not any(n.startswith("slam") for n in thesis)
     assert thesis["train-mse-dense"]["max_frames"] == 200

@@ -6,15 +6,12 @@ import csv
 import json
 
 import pytest
-from typer.testing import CliRunner
 
-from dcslam.cli import app
 from dcslam.errors import DcslamError
 from dcslam.stages import reproduce_beams
 from dcslam.stages.reproduce_beams import PROFILES, BeamsProfile
 from tests.fixtures import depth as depth_fixtures
 
-runner = CliRunner()
 ARGS = ["reproduce", "--table", "beams", "--profile", "smoke"]
 
 
@@ -33,8 +30,9 @@ def tiny_drives(monkeypatch):
     monkeypatch.setattr("dcslam.stages.prepare.run", prepare)
 
 
-def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(tmp_path, tiny_drives):
-    result = runner.invoke(app, [*ARGS, "--workspace", str(tmp_path)])
+@pytest.mark.slow  # every completer at every beam count, end to end
+def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(cli, tmp_path, tiny_drives):
+    result = cli(*ARGS, "--workspace", tmp_path)
     assert result.exit_code == 0, result.output
     results = tmp_path / "results"
     for name in ("table_beams.md", "table_beams.csv", "table_beams_per_drive.csv", "beams_localisation.png"):
@@ -73,7 +71,7 @@ def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(tmp_path,
     build_beams_report(Workspace(tmp_path), [64, 16], ["drive_d"], out_dir=tmp_path / "parallel", jobs=2)
     assert (tmp_path / "parallel" / "table_beams.csv").read_text() == (results / "table_beams.csv").read_text()
 
-    again = runner.invoke(app, [*ARGS, "--workspace", str(tmp_path)])
+    again = cli(*ARGS, "--workspace", tmp_path)
     assert again.exit_code == 0, again.output
     assert "[run]" not in again.stderr and again.stderr.count("[skip]") >= 30
 
@@ -82,7 +80,7 @@ def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(tmp_path,
     record = json.loads(summary.read_text())
     record["settings"]["voxel_size"] = 0.5
     summary.write_text(json.dumps(record))
-    mixed = runner.invoke(app, [*ARGS, "--workspace", str(tmp_path)])
+    mixed = cli(*ARGS, "--workspace", tmp_path)
     assert mixed.exit_code == 1
     assert "different settings" in mixed.stderr and "voxel_size=0.5 for nconv at 16 beams" in mixed.stderr
 
@@ -117,11 +115,11 @@ def test_drives_without_exact_depth_leave_the_exact_row_empty(tmp_path):
     assert reproduce_beams._have_exact(drives[:1]) and not reproduce_beams._have_exact(drives)
 
 
-def test_print_config_of_the_beams_table_lists_its_stages_and_runs_nothing(tmp_path):
+def test_print_config_of_the_beams_table_lists_its_stages_and_runs_nothing(cli, tmp_path):
     from dcslam.stages.reproduce_plan import read_stage_configs
 
     ws = tmp_path / "ws"
-    result = runner.invoke(app, ["reproduce", "--table", "beams", "--print-config", "--workspace", str(ws)])
+    result = cli("reproduce", "--table", "beams", "--print-config", "--workspace", ws)
     assert result.exit_code == 0, result.output
     assert not ws.exists()
     stages = read_stage_configs(result.stdout)
