@@ -72,13 +72,13 @@ def test_bad_input(cli, drives, tmp_path):
     assert not (ws / "results").exists()
 
 
-def test_print_config_maps_each_option_to_its_key(tmp_path):
+def test_print_config_maps_each_option_to_its_key(cli, tmp_path):
     import tomllib
 
     args = ["--sigma", "0.02", "--steps", "5", "--lr", "0.01", "--batch-size", "2", "--patch", "0", "--map-frames",
             "2", "--scale", "0.5", "--features", "4", "--layers", "3", "--seed", "9", "--device", "cpu", "--frames",
             "6", "--sequences", "3", "--drives", str(tmp_path / "d.h5")]
-    result = _run("-w", tmp_path / "ws", *args, "--print-config")
+    result = cli("demo-icl", "-w", tmp_path / "ws", *args, "--print-config")
     assert result.exit_code == 0, result.output
     printed = tomllib.loads(result.stdout)
     assert printed == {"sigma": 0.02, "steps": 5, "lr": 0.01, "batch_size": 2, "patch": 0, "map_frames": 2,
@@ -92,17 +92,17 @@ def test_print_config_maps_each_option_to_its_key(tmp_path):
     experiment = from_mapping(DemoIclConfig, tomllib.loads(path.read_text())).denoise_config()
     assert (experiment.sigma_m, experiment.steps, experiment.lr, experiment.patch, experiment.seed) == \
         (0.02, 5, 0.01, 0, 9)
-    again = _run("-w", tmp_path / "ws", "--config", path, "--sigma", "0.03", "--print-config")
+    again = cli("demo-icl", "-w", tmp_path / "ws", "--config", path, "--sigma", "0.03", "--print-config")
     assert tomllib.loads(again.stdout) == {**printed, "sigma": 0.03}
 
 
 @pytest.mark.parametrize("option, value, line", [
     ("--sigma", "0", "sigma = 0"), ("--steps", "0", "steps = 0"), ("--patch", "-1", "patch = -1"),
     ("--lr", "0", "lr = 0.0"), ("--layers", "0", "layers = 0"), ("--scale", "0.3", "scale = 0.3")])
-def test_a_wrong_value_fails_with_one_line_naming_the_option(option, value, line, tmp_path):
-    result = _run("-w", tmp_path / "ws", option, value, "--print-config")
+def test_a_wrong_value_fails_with_one_line_naming_the_option(cli, option, value, line, tmp_path):
+    result = cli("demo-icl", "-w", tmp_path / "ws", option, value, "--print-config")
     _one_error_line(result, option)
     assert result.stderr.startswith(f"error: {option} ")
     path = tmp_path / "bad.toml"  # the same value from a configuration file: the same line
     path.write_text(line + "\n")
-    assert _run("-w", tmp_path / "ws", "--config", path).stderr == result.stderr
+    assert cli("demo-icl", "-w", tmp_path / "ws", "--config", path).stderr == result.stderr
