@@ -128,8 +128,10 @@ class PoseLoss:
     """``PoseLoss(odometry, mapper)(depth, K, T_world_cam, weight=None)`` -> (loss, details).
 
     Args:
-        odometry: an ICP odometry whose solver is differentiable (:func:`default_odometry`).
-        mapper: a PointFusion-like mapper with ``keep_graph`` (:func:`default_mapper`); reset for every window.
+        odometry: an :class:`dcslam.slam.parts.Odometry` (ICP whose solver is differentiable:
+            :func:`default_odometry`); reset for every window.
+        mapper: a :class:`dcslam.slam.parts.Mapper` with ``keep_graph`` (:func:`default_mapper`); reset for every
+            window.
         settings: :class:`PoseLossSettings`.
         frame_settings: how depth becomes surfels (:class:`dcslam.slam.frame.FrameSettings`).
 
@@ -179,8 +181,7 @@ class PoseLoss:
             raise DcslamError(f"weight has shape {tuple(weight.shape)}, expected {tuple(depth.shape)}")
         T_gt = T_world_cam.to(depth.dtype)
         self.mapper.reset()
-        if hasattr(self.odometry, "reset"):
-            self.odometry.reset()
+        self.odometry.reset()
         poses, rejected = [T_gt[0]], 0
         w = (lambda i: None) if weight is None else (lambda i: weight[i:i + 1])
         self.mapper.integrate(self._frame(depth[0:1], K, w(0)), T_gt[0])

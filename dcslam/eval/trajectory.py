@@ -4,10 +4,12 @@ All poses are ``T_world_cam`` (N, 4, 4) float64; ``gt`` is the reference, ``est`
 paired with pose i of the other (see :func:`pair_by_timestamps`).
 
 * Localisation accuracy (thesis, eq. in chapter 5): for each pose pair ``X = T_gt⁻¹ T_est``,
-  ``L = ‖t_X‖ + acos((trace(R_X) − 1) / 2)`` (metres + radians), averaged over the poses. The argument of acos is
-  clamped to [−1, 1], which only guards against round-off. The thesis's code clamped it to [0, 1]: every rotation
-  error above 90° then counted as exactly π/2, and a round-off above 1 was harmless but a value below 0 was not —
-  a defect, reproducible here with ``thesis_clamp=True``.
+  ``L = ‖t_X‖ + acos((trace(R_X) − 1) / 2)`` (metres + radians), averaged over the poses. Every rotation angle here
+  (this one, RPE's, the drift's) is :func:`dcslam.geometry.motion.relative_motion`'s: the angle that acos names,
+  computed as ``atan2(|sin|, cos)`` (exact near 0 and π, where acos of the trace loses half its digits) with a
+  general inverse of ``T_gt`` (files' rotations are orthonormal to ~1e-7 only), so a trajectory scored against
+  itself scores 0 to rounding. The thesis's code clamped the acos argument to [0, 1]: every rotation error above
+  90° then counted as exactly π/2 — a defect, reproducible here with ``thesis_clamp=True``.
 * ATE (evo's APE, ``translation_part``): per pose ``‖t_est,i − t_gt,i‖`` after aligning the estimate to the
   reference with the SE(3) Umeyama fit of positions (``evo_ape -a``), or without alignment.
 * RPE (evo's RPE, delta 1 frame, consecutive pairs): ``E_i = (Q_i⁻¹ Q_{i+1})⁻¹ (P_i⁻¹ P_{i+1})`` with Q = gt and
@@ -15,7 +17,7 @@ paired with pose i of the other (see :func:`pair_by_timestamps`).
 * KITTI odometry drift (the odometry devkit's ``evaluate_odometry.cpp``): from every 10th frame, for each length
   L in 100, 200, ..., 800 m, the segment ends at the first frame whose path length along the *ground truth*
   exceeds the start's by more than L; its error is ``E = (P_s⁻¹ P_e)⁻¹ (Q_s⁻¹ Q_e)`` (Q = gt, P = est);
-  ``‖t_E‖ / L`` and ``acos(clip((trace R_E − 1) / 2, −1, 1)) / L`` are averaged over all segments of all lengths:
+  ``‖t_E‖ / L`` and ``angle(R_E) / L`` are averaged over all segments of all lengths:
   t_rel in % and r_rel in deg/100 m (the devkit's stats file has m/m and rad/m; its leaderboard prints % and
   deg/m). The devkit's "every 10 frames" is one second at KITTI's 10 Hz. It computes in 32-bit floats; here
   float64 with general matrix inverses, as in KISS-ICP's port of it, against which this is tested
@@ -33,6 +35,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from dcslam.errors import DcslamError
+from dcslam.geometry.motion import relative_motion
 
 STATISTICS = ("rmse", "mean", "median", "std", "min", "max")
 #: Segment lengths (m) and start step (frames) of the KITTI odometry devkit.
@@ -56,37 +59,18 @@ def _check_poses(*poses: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def invert_se3(T: np.ndarray) -> np.ndarray:
-    """(..., 4, 4) rigid transforms → their inverses."""
-    T = np.asarray(T, dtype=np.float64)
-    R_inv = np.swapaxes(T[..., :3, :3], -1, -2)
-    out = np.zeros_like(T)
-    out[..., :3, :3] = R_inv
-    out[..., :3, 3] = -np.einsum("...ij,...j->...i", R_inv, T[..., :3, 3])
-    out[..., 3, 3] = 1.0
-    return out
-
-
-def rotation_angle(R: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) rotations → (N,) angles in radians in [0, π], from the unit quaternion (accurate near 0 and π,
-    where ``acos`` of the trace is not)."""
-    from dcslam.geometry.rotations import rotation_to_quaternion
-
-    q = rotation_to_quaternion(np.asarray(R, dtype=np.float64))
-    return 2.0 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), np.abs(q[..., 3]))
-
-
 def localisation_errors(T_gt: np.ndarray, T_est: np.ndarray, thesis_clamp: bool = False) -> np.ndarray:
     """Per-pose localisation error L of the thesis (metres + radians). Shapes: (N, 4, 4), (N, 4, 4) → (N,).
 
-    ``thesis_clamp=True`` clamps the acos argument to [0, 1] as the thesis's code did (a defect: rotation errors
-    above 90° all count as π/2).
+    The angle is that of :func:`dcslam.geometry.motion.relative_motion` (``acos((trace − 1) / 2)`` evaluated
+    exactly, with a true inverse of ``T_gt``). ``thesis_clamp=True`` clamps the acos argument to [0, 1] as the
+    thesis's code did (a defect: rotation errors above 90° all count as π/2).
     """
     T_gt, T_est = _check_poses(T_gt, T_est)
-    X = invert_se3(T_gt) @ T_est
-    cos_angle = (np.trace(X[:, :3, :3], axis1=1, axis2=2) - 1.0) / 2.0
-    cos_angle = np.clip(cos_angle, 0.0 if thesis_clamp else -1.0, 1.0)
-    return np.linalg.norm(X[:, :3, 3], axis=1) + np.arccos(cos_angle)
+    metres, radians = relative_motion(T_gt, T_est)
+    if thesis_clamp:        # acos(clip(c, 0, 1)) = min(acos(c), π/2)
+        radians = np.minimum(radians, np.pi / 2)
+    return metres + radians
 
 
 def localisation_accuracy(T_gt: np.ndarray, T_est: np.ndarray, thesis_clamp: bool = False) -> float:
@@ -161,10 +145,10 @@ def rpe_errors(T_gt: np.ndarray, T_est: np.ndarray, delta: int = 1) -> tuple[np.
     T_gt, T_est = _check_poses(T_gt, T_est)
     if delta < 1 or len(T_gt) <= delta:
         raise DcslamError(f"RPE needs more than delta={delta} poses, got {len(T_gt)}")
-    Q_rel = invert_se3(T_gt[:-delta]) @ T_gt[delta:]
-    P_rel = invert_se3(T_est[:-delta]) @ T_est[delta:]
-    E = invert_se3(Q_rel) @ P_rel
-    return np.linalg.norm(E[:, :3, 3], axis=1), np.degrees(rotation_angle(E[:, :3, :3]))
+    Q_rel = np.linalg.solve(T_gt[:-delta], T_gt[delta:])
+    P_rel = np.linalg.solve(T_est[:-delta], T_est[delta:])
+    metres, radians = relative_motion(Q_rel, P_rel)
+    return metres, np.degrees(radians)
 
 
 def path_distances(T_world_cam: np.ndarray) -> np.ndarray:
@@ -204,12 +188,11 @@ def drift_segments(T_gt: np.ndarray, T_est: np.ndarray, lengths_m=DRIFT_LENGTHS_
     first, last = firsts[first_idx], lasts[first_idx, length_idx]
     # general matrix inverses, as the devkit's Matrix::inv: the benchmark's files print 6 digits, so their rotations
     # are orthonormal to ~1e-7 only, and a transpose-inverse would move r_rel by ~1e-6 of itself
-    inv = np.linalg.inv
-    E = inv(inv(T_est[first]) @ T_est[last]) @ (inv(T_gt[first]) @ T_gt[last])
-    cos_angle = np.clip(0.5 * (np.trace(E[:, :3, :3], axis1=1, axis2=2) - 1.0), -1.0, 1.0)
+    solve = np.linalg.solve
+    metres, radians = relative_motion(solve(T_est[first], T_est[last]), solve(T_gt[first], T_gt[last]))
     length = lengths[length_idx]
-    t_err = np.linalg.norm(E[:, :3, 3], axis=1) / length
-    r_err = np.arccos(cos_angle) / length
+    t_err = metres / length
+    r_err = radians / length
     return [DriftSegment(int(f), int(la), float(L), float(t), float(r))
             for f, la, L, t, r in zip(first, last, length, t_err, r_err)]
 

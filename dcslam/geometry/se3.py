@@ -179,10 +179,14 @@ def rows_times(points: torch.Tensor, M: torch.Tensor) -> torch.Tensor:
 
 
 def pose_error(T_a: torch.Tensor, T_b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Translation (same unit as the poses) and rotation angle (radians) of ``T_a^-1 T_b``.
+    """Translation (same unit as the poses) and rotation angle (radians) of ``T_a^-1 T_b``, in ``T_a``'s dtype:
+    :func:`dcslam.geometry.motion.relative_motion` (float64 inside, exact near 0 and pi).
 
     Shape: (..., 4, 4), (..., 4, 4) -> ((...), (...)).
     """
-    X = inverse(T_a) @ T_b
-    cos = ((X[..., 0, 0] + X[..., 1, 1] + X[..., 2, 2] - 1) / 2).clamp(-1.0, 1.0)
-    return X[..., :3, 3].norm(dim=-1), torch.acos(cos)
+    from dcslam.geometry.motion import relative_motion
+
+    _check(T_a, (4, 4), "T_a")
+    _check(T_b, (4, 4), "T_b")
+    metres, radians = relative_motion(T_a, T_b)
+    return metres.to(T_a.dtype), radians.to(T_a.dtype)

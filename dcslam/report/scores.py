@@ -82,8 +82,9 @@ def trajectory_table(pairs: dict[str, TrajectoryPair], title: str) -> Table:
     rows = [{"trajectory": name, **pair.score().flat()} for name, pair in pairs.items()]
     keys = [k for k in rows[0] if k != "trajectory"] if rows else list(TRAJECTORY_SHOWN)
     table = Table(title, [Column("trajectory", "trajectory")] + [Column(k, k) for k in keys], rows)
-    table.notes.append("localisation: thesis accuracy (m + rad, acos argument clamped to [-1, 1]); "
-                       "localisation_thesis_clamp: clamped to [0, 1] as the thesis's code did")
+    table.notes.append("localisation: thesis accuracy (m + rad, ‖t_X‖ + acos((tr R_X − 1)/2), the angle computed "
+                       "as atan2(|sin|, cos), exact near 0 and π); localisation_thesis_clamp: acos argument "
+                       "clamped to [0, 1] as the thesis's code did (errors above 90° count as π/2)")
     table.notes += [f"{name}: {pair.summary()}" for name, pair in pairs.items()]
     for name, pair in pairs.items():
         drift = pair.score().drift

@@ -21,7 +21,7 @@ import torch
 from dcslam.geometry.camera import project
 from dcslam.geometry.se3 import inverse, rotate, transform_points
 from dcslam.slam.frame import Frame, valid_points
-from dcslam.slam.pointmap import Mapper, PointMap, assign_voxels, merge, voxel_keys
+from dcslam.slam.pointmap import MapperBase, PointMap, assign_voxels, merge, voxel_keys
 
 
 def surfel_weights(frame: Frame, pixels: torch.Tensor, sigma: float) -> torch.Tensor:
@@ -84,7 +84,7 @@ def fusion_weights(frame: Frame, sigma: float) -> torch.Tensor:
     return frame.cache[key]
 
 
-class PointFusion(Mapper):
+class PointFusion(MapperBase):
     """The PointFusion mapper: call :meth:`integrate` once per frame with its pose, read :attr:`map`.
 
     Args:
@@ -98,7 +98,7 @@ class PointFusion(Mapper):
             detached after every frame and memory stays flat.
         splat: rendering footprint (pixels each side) of map points when the map is rendered for odometry.
         window, archive: local map of the last ``window`` frames (0: the whole map), see
-            :class:`~dcslam.slam.pointmap.Mapper`.
+            :class:`~dcslam.slam.pointmap.MapperBase`.
     """
 
     def __init__(self, voxel_size: float = 0.05, max_distance: float = 0.1, max_relative_distance: float = 0.02,
@@ -113,8 +113,9 @@ class PointFusion(Mapper):
         self.keep_graph, self.splat = keep_graph, splat
         self.reset()
 
-    def integrate(self, frame: Frame, T_world_cam: torch.Tensor) -> PointMap:
-        """Fuse one frame seen from ``T_world_cam`` (4, 4) into the map; returns the new map."""
+    def integrate(self, frame: Frame, T_world_cam: torch.Tensor, scale: float = 1.0) -> PointMap:
+        """Fuse one frame seen from ``T_world_cam`` (4, 4) into the map, at the voxel size ``voxel_size * scale``
+        (``scale``: the scene scale, see :class:`dcslam.slam.parts.Mapper`); returns the new map."""
         t = self.frames
         dtype, device = frame.vertex.dtype, frame.vertex.device
         pm = self.map if self.map is not None else PointMap.empty(dtype, device)
@@ -124,8 +125,9 @@ class PointFusion(Mapper):
         free_space = torch.zeros(len(pm), dtype=torch.bool, device=device)
         if len(pm) and len(pixels):
             target, free_space = self._associate(pm, frame, T_world_cam, pixels, v_cam, n_w)
-        target, new_keys = assign_voxels(pm, voxel_keys(p_w, self.voxel_size) if self.voxel_size > 0
-                                         else torch.zeros_like(pixels), target, self.voxel_size)
+        voxel = self.voxel_size * scale
+        target, new_keys = assign_voxels(pm, voxel_keys(p_w, voxel) if voxel > 0 else torch.zeros_like(pixels),
+                                         target, voxel)
         pm = merge(pm, target, new_keys, p_w, n_w, colors, radius, weight, t)
         stale = (pm.observations < self.min_observations) & (pm.last_seen < t - self.prune_after)
         unstable_in_free_space = torch.cat([free_space, torch.zeros(len(new_keys), dtype=torch.bool, device=device)])

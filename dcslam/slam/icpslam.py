@@ -9,10 +9,10 @@ import torch
 
 from dcslam.slam.frame import Frame
 from dcslam.slam.fusion import camera_surfels, frame_surfels, pixel_weights
-from dcslam.slam.pointmap import Mapper, PointMap, assign_voxels, merge, voxel_keys
+from dcslam.slam.pointmap import MapperBase, PointMap, assign_voxels, merge, voxel_keys
 
 
-class ICPSLAM(Mapper):
+class ICPSLAM(MapperBase):
     """Accumulated, voxel-downsampled point map; same interface as :class:`~dcslam.slam.fusion.PointFusion`.
 
     Args:
@@ -20,7 +20,7 @@ class ICPSLAM(Mapper):
         keep_graph: keep the autograd graph across frames; otherwise detach after every frame.
         splat: rendering footprint (pixels each side) for odometry.
         window, archive: local map of the last ``window`` frames (0: the whole map), see
-            :class:`~dcslam.slam.pointmap.Mapper`.
+            :class:`~dcslam.slam.pointmap.MapperBase`.
     """
 
     def __init__(self, voxel_size: float = 0.05, keep_graph: bool = False, splat: int = 1, window: int = 0,
@@ -33,12 +33,14 @@ class ICPSLAM(Mapper):
         """Do the work on ``frame`` that does not depend on the map or the pose (its surfels)."""
         camera_surfels(frame)
 
-    def integrate(self, frame: Frame, T_world_cam: torch.Tensor) -> PointMap:
+    def integrate(self, frame: Frame, T_world_cam: torch.Tensor, scale: float = 1.0) -> PointMap:
+        """Add one frame seen from ``T_world_cam`` (4, 4) at the voxel size ``voxel_size * scale`` (``scale``: the
+        scene scale, see :class:`dcslam.slam.parts.Mapper`); returns the new map."""
         dtype, device = frame.vertex.dtype, frame.vertex.device
         pm = self.map if self.map is not None else PointMap.empty(dtype, device)
         pixels, p_w, n_w, colors, radius, _ = frame_surfels(frame, T_world_cam)
-        target, new_keys = assign_voxels(pm, voxel_keys(p_w, self.voxel_size), torch.full_like(pixels, -1),
-                                         self.voxel_size)
+        voxel = self.voxel_size * scale
+        target, new_keys = assign_voxels(pm, voxel_keys(p_w, voxel), torch.full_like(pixels, -1), voxel)
         pm = merge(pm, target, new_keys, p_w, n_w, colors, radius, pixel_weights(frame, pixels), self.frames)
         if not self.keep_graph:
             pm = pm.detach()

@@ -1,6 +1,7 @@
 """Odometry: the pose of a new frame, from ground truth or by point-to-plane ICP against a model.
 
-Odometry objects share one method, ``estimate(frame, model, T_init, T_gt=None) -> OdometryResult``. ICP is
+Odometry objects follow :class:`dcslam.slam.parts.Odometry`:
+``estimate(frame, model, T_init, T_gt=None, T_last=None, scale=1.0) -> OdometryResult`` and its hooks. ICP is
 composed from parts: a solver (:class:`~dcslam.slam.solvers.GaussNewton`, ``LevenbergMarquardt``,
 ``DifferentiableLM``) and an association (:class:`~dcslam.slam.association.ProjectiveAssociation`,
 ``NearestNeighbourAssociation``), with distance and normal-angle gates. A degenerate step (no model, too few
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 import torch
 
 from dcslam.errors import DcslamError
+from dcslam.geometry.motion import relative_motion
 from dcslam.geometry.se3 import rotate, rows_times, transform_points
 from dcslam.slam.association import ProjectiveAssociation
 from dcslam.slam.frame import DENSE_FRACTION, Frame, valid_points
@@ -56,13 +58,26 @@ def coarse_iterations_for(fraction: float, iterations: int) -> int:
 
 
 class GroundTruthOdometry:
-    """Poses read from the drive: returns ``T_gt``."""
+    """Poses read from the drive: returns ``T_gt`` (the first frame's too); given poses are not health-checked."""
+
+    first_pose_from_gt = True
+    assess_steps = False
 
     def estimate(self, frame: Frame, model: ModelView | None, T_init: torch.Tensor,
-                 T_gt: torch.Tensor | None = None) -> OdometryResult:
+                 T_gt: torch.Tensor | None = None, T_last: torch.Tensor | None = None,
+                 scale: float = 1.0) -> OdometryResult:
         if T_gt is None:
             raise DcslamError("ground-truth odometry needs the ground-truth pose of every frame")
         return OdometryResult(T_gt.to(frame.vertex.dtype))
+
+    def reset(self) -> None:
+        """Nothing learnt from past steps."""
+
+    def precompute(self, frame: Frame, scale: float = 1.0) -> None:
+        """Nothing depends on the frame alone."""
+
+    def effective_settings(self, scale: float) -> dict:
+        return {}
 
 
 class PointToPlane:
@@ -213,7 +228,13 @@ class ICPOdometry:
         adaptive: an :class:`~dcslam.slam.robust.AdaptiveThreshold` giving the gate from past prediction errors
             (KISS-ICP), or None for the fixed ``max_distance``. It is updated by :meth:`estimate` after each
             accepted step; :meth:`reset` clears it.
+
+    The scene scale given to :meth:`estimate` multiplies ``max_distance`` and ``source_voxel`` (not the adaptive
+    gate, which measures itself, nor ``max_step_m``).
     """
+
+    first_pose_from_gt = False
+    assess_steps = True
 
     def __init__(self, solver=None, association=None, max_distance: float = 0.5, max_normal_angle_deg: float = 30.0,
                  iterations: int = 20, min_inliers: int = 100, min_conditioning: float = 1e-5,
@@ -241,19 +262,21 @@ class ICPOdometry:
             self.adaptive.reset()
 
     def estimate(self, frame: Frame, model: ModelView | None, T_init: torch.Tensor,
-                 T_gt: torch.Tensor | None = None, T_last: torch.Tensor | None = None) -> OdometryResult:
+                 T_gt: torch.Tensor | None = None, T_last: torch.Tensor | None = None,
+                 scale: float = 1.0) -> OdometryResult:
         """Align ``frame`` to ``model`` from ``T_init`` (4, 4), the prediction; ``T_last`` (4, 4), the previous
-        frame's pose, lets the adaptive threshold tell a moving step from a standing one."""
+        frame's pose, lets the adaptive threshold tell a moving step from a standing one; ``scale``: the scene
+        scale (see :class:`dcslam.slam.parts.Odometry`). ``T_gt`` is not used."""
         T_init = T_init.to(frame.vertex.dtype)
         if model is None:
             return OdometryResult(T_init, False, "empty model")
-        valid, source, normals, weights = self.sources(frame)
+        valid, source, normals, weights = self.sources(frame, scale)
         if valid < self.min_inliers:
             return OdometryResult(T_init, False, f"{valid} valid source points", sources=valid)
         H, W = frame.shape
         coarse = self.coarse_iterations or coarse_iterations_for(valid / max(H * W, 1), self.iterations)
         associate = self.association.prepare(model)
-        gate = self.adaptive.gate() if self.adaptive is not None else self.max_distance
+        gate = self.adaptive.gate() if self.adaptive is not None else self.max_distance * scale
         T, iterations = T_init, 0
         for stage, multiplier in enumerate(self.coarse_to_fine):
             problem = PointToPlane(source, normals, associate, gate * multiplier, self.cos_max_angle, self.kernel,
@@ -275,33 +298,41 @@ class ICPOdometry:
         base["sigma_deg"] = math.degrees(math.sqrt(max(float(torch.linalg.eigvalsh(cov[3:, 3:])[-1]), 0.0)))
         if conditioning < self.min_conditioning:
             return OdometryResult(T_init, False, f"degenerate geometry (conditioning {conditioning:.1e})", **base)
-        X = torch.linalg.solve(T_init.detach().double(), T.detach().double())
-        angle = math.acos(max(-1.0, min(1.0, (float(torch.trace(X[:3, :3])) - 1) / 2)))
-        if float(X[:3, 3].norm()) > self.max_step_m or angle > self.max_step_rad:
+        step_m, step_rad = relative_motion(T_init.detach(), T.detach())
+        if float(step_m) > self.max_step_m or float(step_rad) > self.max_step_rad:
             return OdometryResult(T_init, False, "diverged", **base)
         if self.adaptive is not None:
             self.adaptive.update(T_init, T, T_last if T_last is not None else T_init)
         return OdometryResult(T, True, "", **base)
 
-    def sources(self, frame: Frame) -> tuple[int, torch.Tensor, torch.Tensor, torch.Tensor | None]:
+    def sources(self, frame: Frame, scale: float = 1.0) -> tuple[int, torch.Tensor, torch.Tensor, torch.Tensor | None]:
         """(number of valid pixels, source points (F, 3), their normals (F, 3), their weights (F,) or None) of a
-        frame: every valid pixel, or one per ``source_voxel``. They depend on the frame alone, so they are kept in
-        :attr:`Frame.cache` (per voxel size) and may be computed ahead, on another thread (:meth:`precompute`)."""
-        key = ("icp-sources", self.source_voxel)
+        frame: every valid pixel, or one per ``source_voxel * scale``. They depend on the frame alone, so they are
+        kept in :attr:`Frame.cache` (per voxel size) and may be computed ahead, on another thread
+        (:meth:`precompute`)."""
+        voxel = self.source_voxel * scale
+        key = ("icp-sources", voxel)
         if key not in frame.cache:
             pixels, source = valid_points(frame)
             valid = pixels.numel()
-            if self.source_voxel > 0 and valid >= self.min_inliers:   # gather the kept pixels' normals only
-                keep = voxel_representatives(source, self.source_voxel)
+            if voxel > 0 and valid >= self.min_inliers:   # gather the kept pixels' normals only
+                keep = voxel_representatives(source, voxel)
                 source, pixels = source.index_select(0, keep), pixels.index_select(0, keep)
             normals = frame.normal.reshape(-1, 3).index_select(0, pixels)
             weights = None if frame.weight is None else frame.weight.reshape(-1).index_select(0, pixels)
             frame.cache[key] = (valid, source, normals, weights)
         return frame.cache[key]
 
-    def precompute(self, frame: Frame) -> None:
+    def precompute(self, frame: Frame, scale: float = 1.0) -> None:
         """Do the work on ``frame`` that does not depend on the map or the pose (:meth:`sources`)."""
-        self.sources(frame)
+        self.sources(frame, scale)
+
+    def effective_settings(self, scale: float) -> dict:
+        """``source_voxel`` and ``max_distance`` (the last gate) at ``scale``, and ``gates``, the gate of each
+        coarse-to-fine stage (metres); the last two are None with the adaptive threshold, whose gate varies."""
+        gate = None if self.adaptive is not None else self.max_distance * scale
+        return {"source_voxel": self.source_voxel * scale, "max_distance": gate,
+                "gates": None if gate is None else [gate * m for m in self.coarse_to_fine]}
 
     @staticmethod
     def _conditioning(lin: Linearization, source: torch.Tensor) -> float:

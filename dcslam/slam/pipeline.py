@@ -10,15 +10,17 @@ import torch
 
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_depth
+from dcslam.geometry.motion import relative_motion
 from dcslam.slam.fusion import PointFusion
 from dcslam.slam.frame import Frame, FrameSettings, prepare_frame, valid_points
 from dcslam.slam.health import HealthRules, assess, summarise
-from dcslam.slam.odometry import GroundTruthOdometry, OdometryResult
+from dcslam.slam.odometry import OdometryResult
+from dcslam.slam.parts import Mapper, Odometry
 from dcslam.slam.pointmap import PointMap
 
 
 def build_map(depth: torch.Tensor, K: torch.Tensor, T_world_cam: torch.Tensor, rgb: torch.Tensor | None = None,
-              mapper=None, frame_settings: FrameSettings = FrameSettings(),
+              mapper: Mapper | None = None, frame_settings: FrameSettings = FrameSettings(),
               weight: torch.Tensor | None = None) -> PointMap:
     """Fuse depth frames seen from given poses (e.g. ground-truth odometry) into one point map.
 
@@ -84,39 +86,54 @@ class SLAM:
     ...     report = slam.step(depth[i:i + 1], K, rgb[i:i + 1])
     >>> slam.poses, slam.map
 
-    The first frame is placed at ``T_world_cam0`` (identity by default). Each later frame starts from a
+    The first frame is placed at ``T_world_cam0`` (identity by default), or at its ground-truth pose when the
+    odometry says so (:attr:`dcslam.slam.parts.Odometry.first_pose_from_gt`). Each later frame starts from a
     constant-velocity prediction; a rejected odometry step keeps that prediction and is listed in
     :attr:`rejected`. With ``keep_graph`` (set on the mapper) poses and map stay connected to the inputs.
+
+    Metric settings (voxel sizes, the ICP gate) are for scenes of median depth ``reference_depth_m`` (a street): the
+    first frame of a sequence fixes the scene scale ``min(1, median depth / reference_depth_m)`` (1 when
+    ``reference_depth_m`` is 0), which every call to the parts then carries, so that a room scales them down in
+    proportion and one set of defaults serves both. :meth:`effective_settings` says what they came to.
     """
 
-    #: metric settings scaled by :attr:`reference_depth_m` (object, attribute)
-    _METRIC = (("mapper", "voxel_size"), ("odometry", "source_voxel"), ("odometry", "max_distance"))
-
-    def __init__(self, odometry, mapper, frame_settings: FrameSettings = FrameSettings(),
+    def __init__(self, odometry: Odometry, mapper: Mapper, frame_settings: FrameSettings = FrameSettings(),
                  T_world_cam0: torch.Tensor | None = None, health: HealthRules = HealthRules(),
                  reference_depth_m: float = 0.0):
         self.odometry, self.mapper, self.frame_settings = odometry, mapper, frame_settings
         self.T_world_cam0, self.health = T_world_cam0, health
         self.reference_depth_m = reference_depth_m
-        self._metric = {(o, a): getattr(getattr(self, o), a) for o, a in self._METRIC
-                        if hasattr(getattr(self, o), a)}
-        self.scale = 1.0
         self.reset()
 
-    def _set_scale(self, scale: float) -> None:
-        """Voxel sizes and the ICP gate are for scenes of median depth ``reference_depth_m`` (a street); a smaller
-        scene (a room) scales them down in proportion, so one set of defaults serves both."""
-        self.scale = scale
-        for (o, a), value in self._metric.items():
-            setattr(getattr(self, o), a, value * scale)
-
     def reset(self) -> None:
-        self._set_scale(1.0)
+        #: the scene scale of this sequence; None until its first frame fixes it
+        self.scale: float | None = None if self.reference_depth_m > 0 else 1.0
+        self.first_frame_median_depth_m: float | None = None
         self.mapper.reset()
-        if hasattr(self.odometry, "reset"):
-            self.odometry.reset()
+        self.odometry.reset()
         self.poses: list[torch.Tensor] = []
         self.reports: list[StepReport] = []
+
+    def _fix_scale(self, frame: Frame) -> float:
+        """The scene scale, fixed by the sequence's first frame (1 for a frame without valid depth)."""
+        if self.scale is None:
+            scale = 1.0
+            if bool(frame.valid.any()):
+                median = float(valid_points(frame)[1][:, 2].median())
+                self.first_frame_median_depth_m = median
+                scale = min(1.0, median / self.reference_depth_m)
+            self.scale = scale
+        return self.scale
+
+    def effective_settings(self) -> dict:
+        """The settings in metres as this sequence uses them: ``scene_scale`` (None before the first frame), the
+        ``reference_depth`` and ``first_frame_median_depth`` it comes from, and the parts' own
+        (:meth:`dcslam.slam.parts.Mapper.effective_settings`, ``Odometry.effective_settings``), e.g. ``voxel_size``,
+        ``source_voxel``, ``max_distance``, ``gates``."""
+        scale = 1.0 if self.scale is None else self.scale
+        return {"scene_scale": self.scale, "reference_depth": self.reference_depth_m,
+                "first_frame_median_depth": self.first_frame_median_depth_m,
+                **self.mapper.effective_settings(scale), **self.odometry.effective_settings(scale)}
 
     @property
     def map(self) -> PointMap | None:
@@ -155,10 +172,12 @@ class SLAM:
     def precompute(self, frame: Frame) -> None:
         """Do the odometry's and the mapper's work on ``frame`` that depends on the frame alone (kept in
         :attr:`Frame.cache`): safe on another thread while :meth:`step_frame` processes the previous frame, and the
-        results are the ones step_frame would compute."""
-        for part in (self.odometry, self.mapper):
-            if hasattr(part, "precompute"):
-                part.precompute(frame)
+        results are the ones step_frame would compute. The odometry's part waits until the first frame has fixed
+        the scene scale (until then step_frame computes it itself)."""
+        self.mapper.precompute(frame)
+        scale = self.scale
+        if scale is not None:
+            self.odometry.precompute(frame, scale)
 
     def step_frame(self, frame: Frame, T_gt: torch.Tensor | None = None, start: float | None = None) -> StepReport:
         """Process one frame already made by ``prepare_frame(depth, K, rgb, self.frame_settings, weight)``, which
@@ -168,24 +187,18 @@ class SLAM:
         start = time.perf_counter() if start is None else start
         T_init = self._prediction(frame.vertex.dtype, frame.vertex.device)
         index = len(self.poses)
-        if index == 0 and self.reference_depth_m > 0 and bool(frame.valid.any()):
-            median = float(valid_points(frame)[1][:, 2].median())
-            self._set_scale(min(1.0, median / self.reference_depth_m))
+        scale = self._fix_scale(frame)
         if index == 0:
-            T = T_gt.to(T_init.dtype) if (T_gt is not None and isinstance(self.odometry, GroundTruthOdometry)) \
-                else T_init
-            result = OdometryResult(T)
+            first_from_gt = T_gt is not None and self.odometry.first_pose_from_gt
+            result = OdometryResult(T_gt.to(T_init.dtype) if first_from_gt else T_init)
         else:
             H, W = frame.shape
             model = self.mapper.model(T_init, frame.K, H, W)
-            if isinstance(self.odometry, GroundTruthOdometry):
-                result = self.odometry.estimate(frame, model, T_init, T_gt)
-            else:
-                result = self.odometry.estimate(frame, model, T_init, T_gt, T_last=self.poses[-1].detach())
-        self.mapper.integrate(frame, result.T_world_cam)
+            result = self.odometry.estimate(frame, model, T_init, T_gt, T_last=self.poses[-1].detach(), scale=scale)
+        self.mapper.integrate(frame, result.T_world_cam, scale)
         self.poses.append(result.T_world_cam)
         gap_m, gap_deg = _distance(T_init, result.T_world_cam)
-        verdict, why = ("accepted", []) if index == 0 or isinstance(self.odometry, GroundTruthOdometry) else assess(
+        verdict, why = ("accepted", []) if index == 0 or not self.odometry.assess_steps else assess(
             result.accepted, result.reason, result.inliers, result.sources, result.conditioning, gap_m, gap_deg,
             has_velocity=index >= 2, rules=self.health)
         report = StepReport(index, result.T_world_cam, result.accepted, result.reason, result.iterations,
@@ -210,6 +223,5 @@ class SLAM:
 
 def _distance(T_a: torch.Tensor, T_b: torch.Tensor) -> tuple[float, float]:
     """Translation (m) and rotation (deg) of T_a^-1 T_b. Shape: (4, 4), (4, 4)."""
-    X = torch.linalg.solve(T_a.detach().double(), T_b.detach().double())
-    angle = math.acos(max(-1.0, min(1.0, (float(torch.trace(X[:3, :3])) - 1) / 2)))
-    return float(X[:3, 3].norm()), math.degrees(angle)
+    metres, radians = relative_motion(T_a.detach(), T_b.detach())
+    return float(metres), math.degrees(float(radians))

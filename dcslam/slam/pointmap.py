@@ -223,10 +223,12 @@ def merge(pm: PointMap, target: torch.Tensor, new_keys: torch.Tensor, points: to
     )
 
 
-class Mapper:
-    """What PointFusion and ICP-SLAM share: the current :attr:`map` (None until the first frame), the frame count,
-    and the map rendered into a camera for frame-to-model odometry. Subclasses set ``splat`` and implement
-    ``integrate(frame, T_world_cam) -> PointMap``, ending with ``self.map = self._slide(pm)``.
+class MapperBase:
+    """What PointFusion and ICP-SLAM share (the parts of :class:`dcslam.slam.parts.Mapper` that do not depend on
+    how frames are fused): the current :attr:`map` (None until the first frame), the frame count, and the map
+    rendered into a camera for frame-to-model odometry. Subclasses set ``splat`` and ``voxel_size`` and implement
+    ``integrate(frame, T_world_cam, scale=1.0) -> PointMap`` (at the voxel size ``voxel_size * scale``), ending with
+    ``self.map = self._slide(pm)``.
 
     A local map (``window`` > 0 frames) keeps only points updated in the last ``window`` frames for odometry and
     fusion, so that memory and time per frame stay flat however far the car drives; older points move, detached,
@@ -235,6 +237,7 @@ class Mapper:
     """
 
     splat: int = 1
+    voxel_size: float = 0.0
     window: int = 0
     archive: bool = True
 
@@ -254,6 +257,13 @@ class Mapper:
         if self.archive:
             self.archived.append(pm.select(old))
         return pm.select(~old)
+
+    def precompute(self, frame) -> None:
+        """Nothing depends on the frame alone (subclasses that have such work override this)."""
+
+    def effective_settings(self, scale: float) -> dict:
+        """``voxel_size`` (metres) at the scene scale ``scale``."""
+        return {"voxel_size": self.voxel_size * scale}
 
     def global_map(self) -> PointMap | None:
         """The archived points and the local map (detached, on the CPU); the map itself without a window."""

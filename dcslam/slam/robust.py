@@ -12,6 +12,7 @@ import math
 import torch
 
 from dcslam.errors import DcslamError
+from dcslam.geometry.motion import relative_motion
 
 
 class GemanMcClure:
@@ -75,15 +76,15 @@ class AdaptiveThreshold:
     def gate(self) -> float:
         return 3.0 * self.sigma()
 
-    def _metres(self, X: torch.Tensor) -> float:
-        X = X.detach().double().cpu()
-        angle = math.acos(max(-1.0, min(1.0, (float(torch.trace(X[:3, :3])) - 1) / 2)))
-        return float(X[:3, 3].norm()) + 2 * self.max_range * math.sin(angle / 2)
+    def _metres(self, T_a: torch.Tensor, T_b: torch.Tensor) -> float:
+        """The motion T_a^-1 T_b in metres: its translation plus the chord its rotation sweeps at ``max_range``."""
+        metres, radians = relative_motion(T_a.detach(), T_b.detach())
+        return float(metres) + 2 * self.max_range * math.sin(float(radians) / 2)
 
     def update(self, T_pred: torch.Tensor, T_est: torch.Tensor, T_last: torch.Tensor) -> None:
         """Record one accepted step: estimate ``T_est``, its prediction ``T_pred``, the previous pose ``T_last``."""
-        if self._metres(torch.linalg.solve(T_last.detach().double(), T_est.detach().double())) < self.min_motion:
+        if self._metres(T_last, T_est) < self.min_motion:
             return
-        error = self._metres(torch.linalg.solve(T_pred.detach().double(), T_est.detach().double()))
+        error = self._metres(T_pred, T_est)
         self.sum_squares += error * error
         self.count += 1

@@ -2,7 +2,9 @@
 by evo), ``<out>/<drive>.kitti.txt`` (the same poses as a KITTI 3x4 pose file, for the odometry devkit),
 ``<out>/<drive>.ply`` (the map with normals and colours) and ``<out>/<drive>.json`` (frames, points, seconds
 per frame, rejected steps, drift against the drive's ground truth, and the configuration that ran), ``<out>`` being
-``slam/<layer>/`` by default.
+``slam/<layer>/`` by default. The summary's ``settings`` are the requested ones; its ``effective_settings`` the
+metric ones as the run used them, after the scene scale (:meth:`dcslam.slam.pipeline.SLAM.effective_settings`: a
+room run at the 0.2 m ``voxel_size`` fuses at ~0.04 m).
 
 The configuration extends :class:`dcslam.slam.config.SlamSettings`, so a field added there is an option of
 ``dcslam slam`` and a configuration-file key with no other edit.
@@ -194,6 +196,7 @@ class DriveRun:
     seconds: float
     settings: dict = field(default_factory=dict)
     confidence: dict = field(default_factory=dict)  # ConfidenceUse.record() plus the fraction of pixels kept
+    effective_settings: dict = field(default_factory=dict)  # SLAM.effective_settings(): after the scene scale
 
     def __post_init__(self) -> None:
         from dcslam.geometry.rotations import nearest_rotation
@@ -221,6 +224,7 @@ class DriveRun:
             "rotation_error_deg": {"final": float(dr[-1]) * 180 / np.pi, "max": float(dr.max()) * 180 / np.pi},
             "confidence": self.confidence,
             "settings": self.settings,
+            "effective_settings": self.effective_settings,
         }
 
 
@@ -281,7 +285,7 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
         used = {**confidence.record(confidence_all is not None),
                 "kept_fraction": round(kept / measured, 4) if measured else 0.0}
         return DriveRun(drive.name, poses, drive.timestamps[:n].copy(), T_gt.copy(), global_map,
-                        list(slam.reports), seconds, dict(settings or {}), used)
+                        list(slam.reports), seconds, dict(settings or {}), used, slam.effective_settings())
 
 
 @contextlib.contextmanager

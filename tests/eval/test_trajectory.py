@@ -6,11 +6,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from dcslam.errors import DcslamError
-from dcslam.eval.trajectory import (Statistics, ate_errors, invert_se3, localisation_errors, pair_by_timestamps,
-                                    rotation_angle, rpe_errors, score_trajectory, umeyama_alignment)
+from dcslam.eval.trajectory import (Statistics, ate_errors, kitti_drift, localisation_accuracy, localisation_errors,
+                                    pair_by_timestamps, rpe_errors, score_trajectory, umeyama_alignment)
+from dcslam.io.kitti_poses import read_kitti_poses
 from dcslam.io.tum import read_tum
 
 DATA = Path(__file__).parent / "data"
+POSES_04 = Path(__file__).parents[1] / "data" / "kitti-sample" / "odometry" / "poses" / "04.txt"
 
 
 def pose(rotvec=(0, 0, 0), t=(0, 0, 0)):
@@ -47,6 +49,28 @@ class TestLocalisation:
     def test_different_lengths_fail(self):
         with pytest.raises(DcslamError, match="different lengths"):
             localisation_errors(straight_line(3), straight_line(4))
+
+    @pytest.mark.parametrize("angle", [0.0, 1e-8, 1e-3, np.pi / 2, np.pi - 1e-6, np.pi])
+    def test_rotation_errors_near_0_and_pi(self, angle):
+        """acos of the trace read 1e-8 rad as 0 and lost half its digits near pi."""
+        gt = straight_line(2)
+        est = gt.copy()
+        est[1] = gt[1] @ pose(rotvec=(0, angle, 0))
+        assert abs(localisation_errors(gt, est)[1] - angle) <= 1e-14 + 1e-12 * angle
+        assert localisation_errors(gt, est, thesis_clamp=True)[1] == pytest.approx(min(angle, np.pi / 2),
+                                                                                    rel=1e-12, abs=1e-14)
+
+    def test_kitti_poses_against_themselves_score_zero(self):
+        """KITTI's poses are printed to ~7 digits, so their rotations are orthonormal to ~1.5e-7 only: inverting one
+        by its transpose scored sequence 04 against itself at 1.55e-4."""
+        T = read_kitti_poses(POSES_04)
+        R = T[:, :3, :3]
+        assert np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max() > 1e-8
+        assert localisation_accuracy(T, T) < 1e-9
+        assert localisation_accuracy(T, T, thesis_clamp=True) < 1e-9
+        trans, rot = rpe_errors(T, T)
+        assert trans.max() < 1e-9 and rot.max() < 1e-9
+        assert kitti_drift(T, T).overall.r_rel_deg_per_100m < 1e-9
 
 
 class TestUmeyama:
@@ -116,13 +140,11 @@ class TestAteRpe:
         _, est_T = read_tum(DATA / "traj_est.tum")
         assert score_trajectory(gt, est_T).ate.rmse == pytest.approx(ape.get_statistic(metrics.StatisticsType.rmse))
 
-    def test_rotation_angle_near_pi(self):
-        R = Rotation.from_rotvec([[0, 0, np.pi - 1e-7], [1e-8, 0, 0]]).as_matrix()
-        np.testing.assert_allclose(rotation_angle(R), [np.pi - 1e-7, 1e-8], rtol=1e-6)
-
-    def test_invert(self):
-        T = pose((0.1, 0.2, 0.3), (1, 2, 3))
-        np.testing.assert_allclose(invert_se3(T) @ T, np.eye(4), atol=1e-12)
+    @pytest.mark.parametrize("angle", [1e-8, 1e-3, np.pi - 1e-7])
+    def test_rpe_angle_near_0_and_pi(self, angle):
+        est = np.stack([np.eye(4), pose(rotvec=(0, 0, angle))])
+        _, rot = rpe_errors(np.stack([np.eye(4), np.eye(4)]), est)
+        assert np.radians(rot[0]) == pytest.approx(angle, rel=1e-9)
 
     def test_single_pose_has_no_rpe(self):
         scores = score_trajectory(straight_line(1), straight_line(1))

@@ -30,19 +30,55 @@ def test_gradicp_follows_a_moving_car_on_sparse_depth():
 
 
 def test_metric_settings_follow_the_scene_depth():
-    """Voxel sizes and the gate are for streets (median depth ~12 m); a room scales them down, a street not."""
+    """Voxel sizes and the gate are for streets (median depth ~12 m); a room scales them down, a street not. The
+    parts keep their settings; the scale goes with each call and the effective settings say what it came to."""
     K = kitti_K(H, W)
     slam = build_slam(SlamSettings(voxel_size=0.2, source_voxel=0.2, max_distance=0.5, reference_depth=12.0))
+    assert slam.scale is None and slam.effective_settings()["scene_scale"] is None
     slam.step(torch.full((1, 1, H, W), 2.4), K)
-    assert abs(slam.scale - 0.2) < 1e-6
-    assert abs(slam.mapper.voxel_size - 0.04) < 1e-6 and abs(slam.odometry.max_distance - 0.1) < 1e-6
+    effective = slam.effective_settings()
+    assert abs(slam.scale - 0.2) < 1e-6 and abs(effective["scene_scale"] - 0.2) < 1e-6
+    assert effective["first_frame_median_depth"] == pytest.approx(2.4) and effective["reference_depth"] == 12.0
+    assert abs(effective["voxel_size"] - 0.04) < 1e-6 and abs(effective["source_voxel"] - 0.04) < 1e-6
+    assert abs(effective["max_distance"] - 0.1) < 1e-6
+    assert effective["gates"] == pytest.approx([0.4, 0.2, 0.1])
+    assert slam.mapper.voxel_size == 0.2 and slam.odometry.max_distance == 0.5 and slam.odometry.source_voxel == 0.2
     slam.reset()
-    assert slam.mapper.voxel_size == 0.2 and slam.odometry.source_voxel == 0.2
+    assert slam.scale is None
     slam.step(torch.full((1, 1, H, W), 30.0), K)
-    assert slam.scale == 1.0 and slam.mapper.voxel_size == 0.2
+    assert slam.scale == 1.0 and slam.effective_settings()["voxel_size"] == 0.2
     fixed = build_slam(SlamSettings(reference_depth=0))
-    fixed.step(torch.full((1, 1, H, W), 2.4), K)
     assert fixed.scale == 1.0
+    fixed.step(torch.full((1, 1, H, W), 2.4), K)
+    assert fixed.scale == 1.0 and fixed.effective_settings()["max_distance"] == 0.5
+    adaptive = build_slam(SlamSettings(adaptive_threshold=True))
+    adaptive.step(torch.full((1, 1, H, W), 2.4), K)
+    assert adaptive.effective_settings()["max_distance"] is None and adaptive.effective_settings()["gates"] is None
+    assert build_slam(SlamSettings(odometry="gt")).effective_settings().keys() == {
+        "scene_scale", "reference_depth", "first_frame_median_depth", "voxel_size"}
+
+
+def test_a_room_is_mapped_and_aligned_at_the_scaled_sizes():
+    """The scale reaches the parts: a room's map is fused at the scaled voxel (more points than at the street
+    voxel) and its ICP sources are thinned at the scaled source voxel, as if those sizes had been asked for."""
+    from dcslam.slam.frame import prepare_frame
+
+    scene, K = StreetScene(4), kitti_K(H, W)
+    T = street_trajectory(3, step=0.1)
+    depth = torch.stack([scene.render(T[i], K, H, W) for i in range(3)]).float()[:, None] * 0.2
+    scaled = build_slam(SlamSettings(voxel_size=0.2, source_voxel=0.2, reference_depth=12.0))
+    poses = scaled.run(depth, K)
+    s = scaled.scale
+    assert 0 < s < 1
+    asked = build_slam(SlamSettings(voxel_size=0.2 * s, source_voxel=0.2 * s, max_distance=0.5 * s,
+                                    reference_depth=0))
+    assert torch.equal(asked.run(depth, K), poses) and torch.equal(asked.map.points, scaled.map.points)
+    street = build_slam(SlamSettings(voxel_size=0.2, source_voxel=0.2, reference_depth=0))
+    street.run(depth, K)
+    assert len(scaled.map) > len(street.map)
+    frame = prepare_frame(depth[1:2], K, settings=scaled.frame_settings)
+    scaled.precompute(frame)                     # the scale is known: the sources are thinned at the scaled voxel
+    assert ("icp-sources", 0.2 * s) in frame.cache
 
 
 def test_a_prepared_frame_gives_the_step_of_its_depth():

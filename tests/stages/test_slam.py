@@ -84,3 +84,38 @@ class TestConfidenceUse:
             SlamStageConfig(confidence="ignore", min_confidence=0.2)
         with pytest.raises(DcslamError, match="give one above 0"):
             SlamStageConfig(confidence="mask")
+
+
+def test_a_room_run_records_its_effective_settings(tmp_path):
+    """A room (median depth ~2 m) runs at settings scaled down from the street's: the summary keeps the requested
+    ones under settings and the ones used under effective_settings."""
+    from dcslam.io.drive import DriveFile
+    from dcslam.stages.prepare_tum import PrepareTumConfig, run as prepare
+    from dcslam.synth.indoor import generate_indoor
+    from dcslam.workspace import Workspace
+
+    ws = Workspace(tmp_path / "room")
+    generate_indoor(ws.root / "tum", sequences=1, frames=3, seed=1, scale=0.1)
+    prepare(ws, PrepareTumConfig())
+    (result,) = run(ws, SlamStageConfig(depth="dense", odometry="icp"))
+    summary = json.loads((ws.slam / "dense" / f"{result.drive}.json").read_text())
+    requested, effective = summary["settings"], summary["effective_settings"]
+    assert requested["voxel_size"] == 0.2 and requested["source_voxel"] == 0.2 and requested["max_distance"] == 0.5
+    with DriveFile(ws.drives / f"{result.drive}.h5") as drive:
+        depth = drive.depth("dense", 0)
+    median = float(np.median(depth[depth > 0]))
+    assert effective["first_frame_median_depth"] == pytest.approx(median, rel=0.1)
+    scale = effective["scene_scale"]
+    assert scale == pytest.approx(effective["first_frame_median_depth"] / 12.0) and 0.05 < scale < 0.5
+    assert effective["reference_depth"] == 12.0
+    assert effective["voxel_size"] == pytest.approx(0.2 * scale)
+    assert effective["source_voxel"] == pytest.approx(0.2 * scale)
+    assert effective["max_distance"] == pytest.approx(0.5 * scale)
+    assert effective["gates"] == pytest.approx([2.0 * scale, 1.0 * scale, 0.5 * scale])
+    assert result.summary["effective_settings"] == effective
+
+
+def test_a_street_run_records_scale_one(ws):
+    summary = run(ws, SlamStageConfig(odometry="gt", frames=2, voxel_size=0.1, reference_depth=0))[0].summary
+    assert summary["effective_settings"] == {"scene_scale": 1.0, "reference_depth": 0.0,
+                                             "first_frame_median_depth": None, "voxel_size": 0.1}
