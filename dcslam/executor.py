@@ -296,15 +296,15 @@ class SlurmExecutor:
             params["slurm_setup"] = list(s.setup)
         return params
 
-    def submit(self, tasks: list[Task]) -> list[tuple[object, Task]]:
-        """Submit ``tasks``: one job array per (kind, GPUs) group; returns (submitit job, task) pairs."""
+    def submit(self, tasks: list[Task]) -> Iterator[tuple[object, Task]]:
+        """Submit ``tasks``: one job array per (kind, GPUs) group; yields (submitit job, task) pairs as each group is
+        submitted (so that a failure or an interrupt part way cancels the groups already in the queue)."""
         import submitit
 
         groups: dict[tuple[str, int], list[Task]] = {}
         for task in tasks:
             kind = task.kind
             groups.setdefault((kind, self.settings.resources[kind].gpus_for(task)), []).append(task)
-        submitted = []
         for (kind, gpus), group in groups.items():
             executor = submitit.AutoExecutor(folder=self.folder / "%j", cluster="slurm")
             executor.update_parameters(**self._parameters(kind, gpus))
@@ -316,8 +316,7 @@ class SlurmExecutor:
                 raise DcslamError(f"sbatch refused the {kind} jobs ({message[-1] if message else error}); check the "
                                   "[slurm] table of --config (partition, account, qos, resources)") from None
             self.submitted += [job.job_id for job in jobs]
-            submitted += list(zip(jobs, group))
-        return submitted
+            yield from zip(jobs, group)
 
     def run(self, tasks: list[Task]) -> Iterator[Outcome]:
         pending: dict[str, tuple[object, Task]] = {}
@@ -330,12 +329,20 @@ class SlurmExecutor:
                 queued = _queued_jobs()
                 for job_id, (job, task) in list(pending.items()):
                     outcome = _finished(job, task)
-                    if outcome is None and job_id not in queued:
+                    if outcome is None and queued is not None and job_id not in queued:
                         vanished.setdefault(job_id, time.monotonic())
                         if time.monotonic() - vanished[job_id] > VANISHED_GRACE_S:
                             outcome = Outcome(task, error=f"job {job_id} left the queue without a result "
                                                           f"({_last_line(job) or 'no log line'})",
                                               job=job_id, log=_log_path(job))
+                    elif outcome is None and queued is not None and queued[job_id] in NEVER_STARTS:
+                        res = self.settings.resources[task.kind]
+                        outcome = Outcome(task, error=f"job {job_id} can never start: Slurm says {queued[job_id]} "
+                                                      f"(it asks {res.cpus} CPUs, {res.mem_gb:g} GB, "
+                                                      f"{res.time_min} min, {res.gpus_for(task)} GPUs); lower "
+                                                      f"[slurm.{task.kind}] of --config or choose another partition",
+                                          job=job_id, log=_log_path(job))
+                        self.cancel([job_id])
                     if outcome is not None:
                         del pending[job_id]
                         yield outcome
@@ -361,7 +368,7 @@ class SlurmExecutor:
             deadline = time.monotonic() + CANCEL_WAIT_S
             while time.monotonic() < deadline:
                 queued = _queued_jobs()
-                if not any(job_id in queued or job_id.split("_")[0] in queued for job_id in job_ids):
+                if queued is not None and not any(job_id in queued for job_id in job_ids):
                     return
                 time.sleep(1.0)
         finally:
@@ -369,29 +376,29 @@ class SlurmExecutor:
                 signal.signal(signum, handler)
 
 
-def _queued_jobs() -> set[str]:
-    """Ids of this user's jobs still in the queue (pending, running, completing), array tasks one by one; an array's
-    pending tasks that squeue shows folded also give the array's own id."""
+#: Why a pending job waits, when waiting cannot help: it asks more than the partition, account or QoS allows.
+NEVER_STARTS = ("PartitionConfig", "PartitionNodeLimit", "PartitionTimeLimit", "BadConstraints", "InvalidAccount",
+                "InvalidQOS")
+
+
+def _queued_jobs() -> dict[str, str] | None:
+    """This user's jobs in the queue (pending, running, completing) → the reason a pending one waits ("" when
+    running); array tasks one by one, and an array's own id for its tasks that squeue still shows folded. None when
+    squeue does not answer (then every job counts as queued)."""
     try:
-        done = subprocess.run(["squeue", "--me", "-h", "-r", "-o", "%i"], capture_output=True, text=True,
+        done = subprocess.run(["squeue", "--me", "-h", "-r", "-o", "%i %T %r"], capture_output=True, text=True,
                               timeout=60)
     except (OSError, subprocess.TimeoutExpired):
-        return _EVERYTHING
+        return None
     if done.returncode != 0:
-        return _EVERYTHING  # squeue unreachable for a moment: treat every job as still queued
-    ids = set()
-    for line in done.stdout.split():
-        ids.add(line)
-        ids.add(line.split("_")[0])
-    return ids
-
-
-class _Everything(set):
-    def __contains__(self, item) -> bool:
-        return True
-
-
-_EVERYTHING = _Everything()
+        return None
+    queued = {}
+    for line in done.stdout.splitlines():
+        job_id, state, reason = (line.split(None, 2) + ["", ""])[:3]
+        why = reason.strip() if state == "PENDING" else ""
+        queued[job_id] = why
+        queued.setdefault(job_id.split("_")[0], why)
+    return queued
 
 
 def _finished(job, task: Task) -> Outcome | None:
