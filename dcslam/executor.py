@@ -258,7 +258,7 @@ def slurm_job(run: Callable, workspace, config) -> tuple[str, object]:
 
 #: Seconds a job may be gone from the queue before its result file must be there (a shared filesystem's delay).
 VANISHED_GRACE_S = 20.0
-#: Seconds to wait, after cancelling, for the cancelled jobs to leave the queue.
+#: Seconds to wait for jobs that are cancelled, or have written their result, to leave the queue.
 CANCEL_WAIT_S = 60.0
 
 
@@ -320,9 +320,11 @@ class SlurmExecutor:
 
     def run(self, tasks: list[Task]) -> Iterator[Outcome]:
         pending: dict[str, tuple[object, Task]] = {}
+        ran: set[str] = set()
         try:
             for job, task in self.submit(tasks):
                 pending[job.job_id] = (job, task)
+                ran.add(job.job_id)
                 self.log(f"[slurm] {task.name}: job {job.job_id}")
             vanished: dict[str, float] = {}
             while pending:
@@ -351,6 +353,17 @@ class SlurmExecutor:
         finally:
             if pending:
                 self.cancel(list(pending))
+            # a job that wrote its result may still be exiting: return with none of this run's jobs in the queue
+            self.wait_gone(sorted(ran))
+
+    def wait_gone(self, job_ids: list[str]) -> None:
+        """Wait (at most :data:`CANCEL_WAIT_S`) until none of ``job_ids`` is in the queue."""
+        deadline = time.monotonic() + CANCEL_WAIT_S
+        while job_ids and time.monotonic() < deadline:
+            queued = _queued_jobs()
+            if queued is not None and not any(job_id in queued for job_id in job_ids):
+                return
+            time.sleep(0.5)
 
     def cancel(self, job_ids: list[str]) -> None:
         """``scancel`` ``job_ids`` and wait (at most :data:`CANCEL_WAIT_S`) until they have left the queue."""
@@ -365,12 +378,7 @@ class SlurmExecutor:
         try:
             subprocess.run(["scancel", *job_ids], check=False, capture_output=True, timeout=60)
             self.log(f"[slurm] cancelled {len(job_ids)} job(s): {' '.join(job_ids)}")
-            deadline = time.monotonic() + CANCEL_WAIT_S
-            while time.monotonic() < deadline:
-                queued = _queued_jobs()
-                if queued is not None and not any(job_id in queued for job_id in job_ids):
-                    return
-                time.sleep(1.0)
+            self.wait_gone(job_ids)
         finally:
             for signum, handler in previous.items():
                 signal.signal(signum, handler)
