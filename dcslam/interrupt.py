@@ -1,4 +1,8 @@
-"""Ctrl-C that is never swallowed.
+"""Ctrl-C (and SIGTERM) that is never swallowed.
+
+SIGTERM (what ``kill``, a batch system or a container runtime sends) is handled exactly as SIGINT: it raises
+:class:`KeyboardInterrupt` in the main thread, the command publishes nothing more, says it was interrupted and exits
+128 + the signal's number (130 for SIGINT, 143 for SIGTERM; :func:`exit_code`).
 
 Python raises :class:`KeyboardInterrupt` wherever the main thread happens to be when SIGINT arrives; when that is a
 finalizer or a weak-reference callback (h5py closing a file, a ``WeakValueDictionary`` cleaning up), Python prints
@@ -12,22 +16,30 @@ import signal
 import sys
 
 _received = False
+_signal: int | None = None  # the first interrupting signal received
 _told = False
+
+#: The signals that interrupt a command.
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 def _handler(signum, frame) -> None:
-    global _received
+    global _received, _signal
     _received = True
+    if _signal is None:
+        _signal = signum
     raise KeyboardInterrupt
 
 
 def install() -> None:
-    """Record SIGINT and raise :class:`KeyboardInterrupt` (the command line calls this once, in the main thread).
+    """Record SIGINT and SIGTERM and raise :class:`KeyboardInterrupt` (the command line calls this once, in the main
+    thread).
 
     A :class:`KeyboardInterrupt` that Python cannot raise (it landed in a finalizer or a weak-reference callback) is
     not printed as ``Exception ignored ... Traceback``: it is recorded, and :func:`check` raises it at the next safe
     point. Every other unraisable exception still goes to Python's own hook."""
-    signal.signal(signal.SIGINT, _handler)
+    for signum in SIGNALS:
+        signal.signal(signum, _handler)
     default = sys.unraisablehook
 
     def hook(unraisable) -> None:
@@ -41,12 +53,24 @@ def install() -> None:
 
 
 def received() -> bool:
-    """Whether a SIGINT arrived since :func:`install`."""
+    """Whether a SIGINT or SIGTERM arrived since :func:`install`."""
     return _received
 
 
+def exit_code() -> int:
+    """The exit status of an interrupted command: 128 + the first signal's number (143 for SIGTERM); 130 (as for
+    Ctrl-C) when the interrupt came without a signal (a :class:`KeyboardInterrupt` raised some other way)."""
+    return 128 + (_signal if _signal is not None else signal.SIGINT)
+
+
+def ignore() -> None:
+    """Ignore SIGINT and SIGTERM from now on (the outcome is decided: Python is shutting down)."""
+    for signum in SIGNALS:
+        signal.signal(signum, signal.SIG_IGN)
+
+
 def check() -> None:
-    """Raise :class:`KeyboardInterrupt` if a SIGINT arrived, even one that an earlier finalizer swallowed."""
+    """Raise :class:`KeyboardInterrupt` if a SIGINT or SIGTERM arrived, even one that a finalizer swallowed."""
     if _received:
         raise KeyboardInterrupt
 

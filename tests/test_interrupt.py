@@ -18,12 +18,14 @@ pytestmark = pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptio
 
 @pytest.fixture
 def handler():
-    previous, hook = signal.getsignal(signal.SIGINT), sys.unraisablehook
+    previous, hook = {s: signal.getsignal(s) for s in interrupt.SIGNALS}, sys.unraisablehook
     interrupt.install()
     yield
-    signal.signal(signal.SIGINT, previous)
+    for signum, action in previous.items():
+        signal.signal(signum, action)
     sys.unraisablehook = hook
     interrupt._received = interrupt._told = False
+    interrupt._signal = None
 
 
 class _Resource:
@@ -87,3 +89,20 @@ def test_other_unraisable_exceptions_still_reach_pythons_hook(handler):
     Broken()
     gc.collect()
     assert seen == [ValueError] and not interrupt.received()
+
+
+def test_sigterm_is_an_interrupt_whose_exit_code_is_143(handler):
+    with pytest.raises(KeyboardInterrupt):
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(1000):  # the handler runs between bytecodes
+            pass
+    assert interrupt.received() and interrupt.exit_code() == 143
+    with pytest.raises(KeyboardInterrupt):
+        os.kill(os.getpid(), signal.SIGINT)
+        for _ in range(1000):
+            pass
+    assert interrupt.exit_code() == 143  # the first signal decides
+
+
+def test_an_interrupt_without_a_signal_exits_130(handler):
+    assert interrupt.exit_code() == 130

@@ -7,9 +7,8 @@ __all__ = ["app", "main"]
 
 
 def main() -> None:
-    """The ``dcslam`` command: exit 0, 1 (a known error), 2 (a usage error) or 130 (interrupted by Ctrl-C)."""
-    import signal
-
+    """The ``dcslam`` command: exit 0, 1 (a known error), 2 (a usage error), 130 (interrupted by Ctrl-C) or 143
+    (by SIGTERM)."""
     try:
         interrupt.install()
         app()
@@ -17,14 +16,14 @@ def main() -> None:
         _interrupted()
     except SystemExit as done:
         # Typer turns a Ctrl-C outside the command (while it parses options) into a silent exit 130, and click or a
-        # finalizer may swallow one: every way out after a Ctrl-C says so and exits 130
+        # finalizer may swallow one: every way out after a Ctrl-C says so and exits 130 (143: SIGTERM)
         if done.code == 130 or interrupt.received():
             _interrupted()
         raise
     finally:
-        # the outcome is decided and written: a Ctrl-C while Python shuts down (which can take a second with torch
-        # loaded) changes nothing, and must neither print "Exception ignored" nor kill the process
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        # the outcome is decided and written: a Ctrl-C or SIGTERM while Python shuts down (which can take a second
+        # with torch loaded) changes nothing, and must neither print "Exception ignored" nor kill the process
+        interrupt.ignore()
     if interrupt.received():
         _interrupted()
 
@@ -33,4 +32,4 @@ def _interrupted() -> None:
     import sys
 
     interrupt.tell(lambda line: sys.stderr.write(line + "\n"))
-    sys.exit(130)
+    sys.exit(interrupt.exit_code())

@@ -36,7 +36,8 @@ def fail(message: str) -> None:
 
 
 def known_errors(command):
-    """Turn :class:`~dcslam.errors.DcslamError` into one line on stderr and exit code 1, Ctrl-C into exit 130."""
+    """Turn :class:`~dcslam.errors.DcslamError` into one line on stderr and exit code 1, Ctrl-C into exit 130
+    (SIGTERM into 143)."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
@@ -53,7 +54,7 @@ def known_errors(command):
             from dcslam import interrupt
 
             interrupt.tell(lambda line: typer.echo(line, err=True))
-            raise typer.Exit(130) from None
+            raise typer.Exit(interrupt.exit_code()) from None
 
     return wrapper
 

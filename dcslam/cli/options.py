@@ -95,7 +95,7 @@ def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, rep
     """
     from dcslam.stages.config import options_of
 
-    fields = options_of(config_cls)
+    fields = [f for f in options_of(config_cls) if not f.metadata.get("file_only")]  # the command's options
 
     def command(ctx: typer.Context, **kwargs):
         from dcslam.stages.config import config_key, from_mapping, read_config_file, to_toml

@@ -32,6 +32,10 @@ def init_from_env(device_type: str = "cpu") -> tuple[int, int]:
     if dist.is_initialized():
         return dist.get_rank(), dist.get_world_size()
     backend = "nccl" if device_type == "cuda" else "gloo"
+    if device_type == "cuda":  # one GPU per process: the job's (or machine's) GPU number LOCAL_RANK
+        import torch
+
+        torch.cuda.set_device(int(os.environ.get("LOCAL_RANK", "0")))
     dist.init_process_group(backend=backend)
     return dist.get_rank(), dist.get_world_size()
 

@@ -4,8 +4,9 @@ A stage's options are the fields of its configuration dataclass. Each field carr
 command line needs and nothing else declares again: ``help``, and optionally ``choices`` (an unknown value is a usage
 error), ``min`` / ``max``, ``flags`` (option names when they are not ``--field-name``), ``show_default``,
 ``metavar``, ``validate`` (a function that raises DcslamError on a bad value: a usage error on the command line),
-``key`` (the configuration-file key when it is not the field's name) and ``internal`` (a field set by code, never an
-option or a config-file key). :func:`dcslam.settings.option` builds such a field.
+``key`` (the configuration-file key when it is not the field's name), ``internal`` (a field set by code, never an
+option or a config-file key) and ``file_only`` (a table of the configuration file, e.g. ``[slurm]``, never a
+command-line option). :func:`dcslam.settings.option` builds such a field.
 
 A configuration file holds the same keys as the options (``map_frames``, not ``--map-frames``), in TOML (read with
 :mod:`tomllib`) or YAML (read with PyYAML when it is installed). :func:`to_toml` writes the configuration a command
@@ -153,7 +154,14 @@ def _toml_value(value) -> str:
         return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(value, list):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):  # an inline table: {key = value, ...}
+        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()) + "}"
     raise DcslamError(f"cannot write {value!r} as TOML")
+
+
+def _toml_key(key: str) -> str:
+    bare = key.replace("_", "").replace("-", "").isalnum() and key.isascii()
+    return key if bare else _toml_value(str(key))
 
 
 def to_toml(config, title: str | None = None) -> str:

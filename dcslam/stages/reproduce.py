@@ -98,6 +98,7 @@ PROFILES = {
                     "sparse, dense, IP-Basic and the four models also over whole test drives (about 200 m)"),
 }
 TABLES = ("5.2", "5.1", "beams")
+EXECUTORS = ("local", "slurm")
 
 
 @dataclass(frozen=True)
@@ -117,6 +118,13 @@ class ReproduceConfig:
                          "reproduce` did not make itself (runs trained, layers made by hand).")
     jobs: int = option(1, min=1, help="Worker processes for the SLAM runs (one per layer and test drive, one torch "
                                       "thread each); e.g. the number of CPU cores.")
+    executor: str = option("local", choices=EXECUTORS, help="Where the independent stages (trainings of a round, "
+                           "predictions, filters, SLAM runs) run: local (--jobs worker processes) or slurm (one "
+                           "Slurm job each, through submitit; the workspace on a filesystem the nodes share; "
+                           "partition, account, resources: the [slurm] table of --config).")
+    slurm: dict = option(default_factory=dict, file_only=True, help="The [slurm] table of a --config file "
+                         "(dcslam.executor.SlurmSettings): partition, account, qos, sbatch options, setup lines, "
+                         "poll_seconds and [slurm.<kind>] resources (cpus, mem_gb, time_min, gpus).")
 
     def __post_init__(self) -> None:
         if self.jobs < 1:
@@ -125,6 +133,11 @@ class ReproduceConfig:
             raise DcslamError(f"unknown table {self.table!r}; expected 5.2, 5.1 or beams")
         if self.profile not in PROFILES:
             raise DcslamError(f"unknown profile {self.profile!r}; expected one of {', '.join(PROFILES)}")
+        if self.executor not in EXECUTORS:
+            raise DcslamError(f"unknown executor {self.executor!r}; expected local or slurm")
+        from dcslam.executor import SlurmSettings
+
+        SlurmSettings.from_table(self.slurm)  # a mistake in [slurm] fails before anything runs
 
 
 @dataclass
@@ -153,9 +166,11 @@ class Pipeline:
 
     planning = False  # True for a pipeline that only lists its stages (then ``splits`` is the split it plans with)
 
-    def __init__(self, workspace: Workspace, log: Callable[[str], None] = lambda line: None, force: bool = False):
+    def __init__(self, workspace: Workspace, log: Callable[[str], None] = lambda line: None, force: bool = False,
+                 executor=None):
         self.ws = workspace
         self.force = force
+        self.executor = executor  # a dcslam.executor.Executor for run_all; None: local workers (run_all's jobs)
         self.state = workspace.root / ".reproduce"
         self.log = log
         self.timings: dict[str, float] = {}
@@ -247,55 +262,72 @@ class Pipeline:
         write_json_atomic(self._stamp(stage), {**self._record(stage), "complete": True, "seconds": seconds})
 
     def run_all(self, stages: list[Stage], jobs: int = 1) -> None:
-        """Run independent ``stages`` (none reads another's outputs), in ``jobs`` worker processes when > 1."""
+        """Run independent ``stages`` (none reads another's outputs) through the pipeline's executor (default: a
+        :class:`~dcslam.executor.LocalExecutor` of ``jobs`` worker processes; in this process when ``jobs`` is 1).
+
+        Each stage is stamped as it finishes, so an interrupt keeps the finished ones. A stage that fails stops the
+        others (workers terminated, Slurm jobs cancelled) and raises :class:`DcslamError` naming it (and, on Slurm,
+        its job and log); it and the stopped ones stay stamped as not complete."""
+        from dcslam.executor import LocalExecutor, Task
+
         todo = []
         for stage in stages:
             if self.up_to_date(stage):
                 self.log(f"[skip] {stage.name}: up to date")
             else:
                 todo.append(stage)
-        if jobs <= 1 or len(todo) <= 1:
+        executor = self.executor or LocalExecutor(jobs)
+        if not todo:
+            return
+        if executor.in_process(len(todo)):
             for stage in todo:
                 self.run(stage)
             return
-        from concurrent.futures import as_completed
-
-        from dcslam.workers import process_pool
-
-        with process_pool(jobs, len(todo)) as pool:
-            futures = {}
-            for stage in todo:
-                self._claim(stage)
-                self.log(f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} "
-                         f"{' '.join(f'{k}={v}' for k, v in changed(stage.config).items())} (worker)".rstrip())
-                futures[pool.submit(_timed, stage.run, self.ws, stage.config)] = stage
-            for future in as_completed(futures):  # each stamped as it finishes: an interrupt keeps finished ones
-                stage = futures[future]
-                try:
-                    seconds = future.result()
-                except DcslamError as error:
-                    for other in futures:
-                        other.cancel()
-                    raise DcslamError(f"stage {stage.name} failed ({error}); fix it and rerun: finished stages "
-                                      "will be skipped") from None
-                self._done(stage, seconds)
-
-
-def _timed(run: Callable, ws: Workspace, config) -> float:
-    start = time.perf_counter()
-    run(ws, config, force=True)
-    return time.perf_counter() - start
+        by_name = {}
+        for stage in todo:
+            self._claim(stage)
+            options = " ".join(f"{k}={v}" for k, v in changed(stage.config).items())
+            where = "worker" if isinstance(executor, LocalExecutor) else "job"
+            self.log(f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} {options} ({where})"
+                     if options else f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} ({where})")
+            by_name[stage.name] = stage
+        outcomes = executor.run([Task(s.name, s.run, s.config, self.ws) for s in todo])
+        try:
+            for outcome in outcomes:
+                stage = by_name[outcome.task.name]
+                if not outcome.ok:
+                    details = outcome.task.labels()
+                    if outcome.job is not None:
+                        details.append(f"Slurm job {outcome.job}, log {outcome.log}")
+                    raise DcslamError(f"stage {stage.name} failed ({outcome.error})"
+                                      f"{''.join(f'; {d}' for d in details)}; fix it and rerun: finished stages will "
+                                      "be skipped")
+                self._done(stage, outcome.seconds)
+        finally:
+            outcomes.close()  # stops what is still running when this gave up early
 
 
 def run(ws: Workspace, config: ReproduceConfig, *, log: Callable[[str], None] = lambda line: None) -> Path:
     """Run the experiment at the profile's scale; return the Markdown file of the requested table."""
+    executor = make_executor(ws, config, log)
     if config.table == "beams":
         from dcslam.stages import reproduce_beams
 
         return reproduce_beams.reproduce(ws, reproduce_beams.PROFILES[config.profile], kitti_root=config.kitti,
-                                         seed=config.seed, log=log, force=config.force, jobs=config.jobs)
+                                         seed=config.seed, log=log, force=config.force, jobs=config.jobs,
+                                         executor=executor)
     return reproduce(ws, PROFILES[config.profile], table=config.table, kitti_root=config.kitti, seed=config.seed,
-                     log=log, force=config.force, jobs=config.jobs)
+                     log=log, force=config.force, jobs=config.jobs, executor=executor)
+
+
+def make_executor(ws: Workspace, config: ReproduceConfig, log: Callable[[str], None] = lambda line: None):
+    """The executor ``config`` asks for: None (local workers, ``jobs`` of them) or a
+    :class:`~dcslam.executor.SlurmExecutor` whose job folders and logs are ``<workspace>/logs/slurm/``."""
+    if config.executor == "local":
+        return None
+    from dcslam.executor import SlurmExecutor, SlurmSettings
+
+    return SlurmExecutor(ws.root / "logs" / "slurm", SlurmSettings.from_table(config.slurm), log=log)
 
 
 def split_by_counts(names: list[str], counts: tuple[int, int, int]) -> dict[str, list[str]]:
@@ -361,12 +393,13 @@ def make_drives(pipe: Pipeline, *, drives: int, frames: int, split: tuple[int, i
 
 def reproduce(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_root: Path | None = None,
               seed: int = 0, log: Callable[[str], None] = lambda line: None, force: bool = False,
-              jobs: int = 1) -> Path:
+              jobs: int = 1, executor=None) -> Path:
     """Run the experiment at ``profile``'s scale; return the Markdown file of the requested table.
 
     ``force``: overwrite outputs this pipeline did not make (see :meth:`Pipeline.run`); ``jobs``: worker processes
-    for the independent SLAM stages."""
-    return compose(Pipeline(workspace, log, force=force), profile, table, kitti_root, seed, jobs)
+    for the independent SLAM stages; ``executor``: where independent stages run instead (e.g. a
+    :class:`~dcslam.executor.SlurmExecutor`; None: ``jobs`` local workers)."""
+    return compose(Pipeline(workspace, log, force=force, executor=executor), profile, table, kitti_root, seed, jobs)
 
 
 def compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | None, seed: int,
@@ -404,14 +437,16 @@ def compose(pipe: Pipeline, profile: Profile, table: str, kitti_root: Path | Non
                                  inputs=lambda r=run_name: [ws.runs / r / "model.pt", *test] if r in runs else test))
         layers[run_name] = (made, f"predicted/{run_name}")
     pipe.run_all(predictions, jobs)
+    filters = []  # independent of one another: each reads one run's predictions
     for run_name in RECIPES:  # the thesis's recipes only: filtering the pose runs too would lengthen the quick profile
         for fname, specs in profile.filters.items():
             name = f"{run_name}+{fname}"
             made = [ws.filtered / name / p.name for p in test]
             config = filter_stage.FilterConfig(filters=list(specs), depth="predicted", run=run_name, name=name)
-            pipe.run(Stage(f"filter-{name}", filter_stage.run, config,
-                           outputs=lambda made=made: made, inputs=lambda m=layers[run_name][0]: m))
+            filters.append(Stage(f"filter-{name}", filter_stage.run, config,
+                                 outputs=lambda made=made: made, inputs=lambda m=layers[run_name][0]: m))
             layers[name] = (made, f"filtered/{name}")
+    pipe.run_all(filters, jobs)
     slam_stages = [_slam_stage(ws, profile, layer, reference, drive, source)
                    for layer, (files, reference) in layers.items() for drive, source in zip(test, files)]
     slam_stages += [_slam_stage(ws, profile, layer, layers[layer][1], drive, source, whole=True)

@@ -165,10 +165,11 @@ def _have_exact(drives: list[Path]) -> bool:
 
 
 def reproduce(ws: Workspace, profile: BeamsProfile, kitti_root: Path | None = None, seed: int = 0,
-              log: Callable[[str], None] = lambda line: None, force: bool = False, jobs: int = 1) -> Path:
-    """Run the beams experiment at ``profile``'s scale; return the Markdown file of its table (``force``, ``jobs``:
-    as :func:`dcslam.stages.reproduce.reproduce`)."""
-    return compose(Pipeline(ws, log, force=force), profile, kitti_root, seed, jobs)
+              log: Callable[[str], None] = lambda line: None, force: bool = False, jobs: int = 1,
+              executor=None) -> Path:
+    """Run the beams experiment at ``profile``'s scale; return the Markdown file of its table (``force``, ``jobs``,
+    ``executor``: as :func:`dcslam.stages.reproduce.reproduce`)."""
+    return compose(Pipeline(ws, log, force=force, executor=executor), profile, kitti_root, seed, jobs)
 
 
 def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = None, seed: int = 0,

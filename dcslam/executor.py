@@ -1,0 +1,437 @@
+"""Where independent stages run: in local worker processes (:class:`LocalExecutor`, the default) or as Slurm jobs
+(:class:`SlurmExecutor`, through submitit), behind one interface.
+
+An executor is handed :class:`Task` s that do not read one another's outputs and yields one :class:`Outcome` per task
+as each finishes (in any order); the caller (:meth:`dcslam.stages.reproduce.Pipeline.run_all`) stamps each one.
+Closing the iterator before it is exhausted (a failure, Ctrl-C, SIGTERM) stops the work still running: local
+workers are terminated, Slurm jobs cancelled with ``scancel``, so nothing keeps writing after the caller gave up.
+
+On Slurm, every task is one job; tasks of one kind (``train``, ``predict``, ``filter``, ``slam``, ``score``,
+``other``) asking the same resources are submitted together as one job array. The workspace must be on a filesystem
+the nodes share (the jobs read and write it), and so must the Python environment (the jobs run this interpreter).
+Each job's submitit folder, with its stdout / stderr logs, is ``<workspace>/logs/slurm/<job id>/``. The ``[slurm]``
+table of ``dcslam reproduce --config FILE`` sets the partition, account, QoS, extra sbatch options, commands run
+before each job and each kind's resources (:class:`SlurmSettings`); submitit itself is imported only here, only
+when a Slurm executor is made (``pip install 'dcslam[slurm]'``).
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Protocol
+
+from dcslam.errors import DcslamError
+
+KINDS = ("train", "predict", "filter", "slam", "score", "other")
+
+
+@dataclass(frozen=True)
+class Task:
+    """One stage to run: ``run(workspace, config, force=True)`` of a dcslam.stages module."""
+
+    name: str
+    run: Callable
+    config: object
+    workspace: object  # dcslam.workspace.Workspace
+
+    @property
+    def kind(self) -> str:
+        """``train``, ``predict``, ``filter``, ``slam``, ``score`` (from the stage function's module) or ``other``."""
+        module = self.run.__module__.rsplit(".", 1)[-1]
+        if module.startswith("reproduce") or module == "score":
+            return "score"
+        return module if module in KINDS else "other"
+
+    def labels(self) -> list[str]:
+        """``drive …`` and ``seed …`` when the task's configuration has them (what a failure message names)."""
+        labels = []
+        drives = getattr(self.config, "drive", None)
+        if drives:
+            labels.append(f"drive {', '.join(map(str, drives)) if isinstance(drives, list) else drives}")
+        seed = getattr(self.config, "seed", None)
+        if seed is not None:
+            labels.append(f"seed {seed}")
+        return labels
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How one task ended: ``seconds`` it ran, or ``error`` (one line); ``job`` and ``log`` on Slurm."""
+
+    task: Task
+    seconds: float | None = None
+    error: str | None = None
+    job: str | None = None
+    log: Path | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+class Executor(Protocol):
+    """Runs independent tasks; see the module docstring."""
+
+    def in_process(self, tasks: int) -> bool:
+        """Whether ``tasks`` tasks are better run one after the other in this process (the caller then does)."""
+
+    def run(self, tasks: list[Task]) -> Iterator[Outcome]:
+        """Start every task; yield each one's outcome as it finishes. Closing the iterator early stops the rest."""
+
+
+def timed(run: Callable, workspace, config) -> float:
+    """Run one stage with ``force=True``; return the seconds it took (what a worker or a job runs)."""
+    start = time.perf_counter()
+    run(workspace, config, force=True)
+    return time.perf_counter() - start
+
+
+class LocalExecutor:
+    """``jobs`` spawned worker processes of one thread each (:func:`dcslam.workers.process_pool`)."""
+
+    def __init__(self, jobs: int = 1):
+        self.jobs = jobs
+
+    def in_process(self, tasks: int) -> bool:
+        return self.jobs <= 1 or tasks <= 1
+
+    def run(self, tasks: list[Task]) -> Iterator[Outcome]:
+        from concurrent.futures import as_completed
+
+        from dcslam.workers import process_pool
+
+        pool = process_pool(self.jobs, len(tasks))
+        futures = {}
+        finished = False
+        try:
+            futures = {pool.submit(timed, task.run, task.workspace, task.config): task for task in tasks}
+            for future in as_completed(futures):
+                task = futures[future]
+                try:
+                    seconds = future.result()
+                except DcslamError as error:
+                    yield Outcome(task, error=str(error))
+                else:
+                    yield Outcome(task, seconds=seconds)
+            finished = True
+        finally:
+            if finished:
+                pool.shutdown(wait=True)
+            else:  # given up: no worker keeps writing outputs nobody will stamp
+                for future in futures:
+                    future.cancel()
+                workers = list(getattr(pool, "_processes", {}).values())  # ProcessPoolExecutor's own table
+                pool.shutdown(wait=False, cancel_futures=True)
+                for process in workers:
+                    if process.is_alive():
+                        process.terminate()
+                for process in workers:
+                    process.join(timeout=10)
+
+
+@dataclass(frozen=True)
+class Resources:
+    """What one job of a kind asks Slurm for; ``gpus`` None: one per training process (``nproc``) for trainings
+    and predictions whose ``device`` is ``cuda``, none otherwise."""
+
+    cpus: int = 1
+    mem_gb: float = 4
+    time_min: int = 60
+    gpus: int | None = None
+
+    def gpus_for(self, task: Task) -> int:
+        if self.gpus is not None:
+            return self.gpus
+        if task.kind in ("train", "predict") and getattr(task.config, "device", "") == "cuda":
+            return max(1, int(getattr(task.config, "nproc", 1)))
+        return 0
+
+
+#: Each kind's resources unless the ``[slurm.<kind>]`` table says otherwise.
+DEFAULT_RESOURCES = {
+    "train": Resources(cpus=4, mem_gb=16, time_min=720),
+    "predict": Resources(cpus=2, mem_gb=8, time_min=120),
+    "filter": Resources(cpus=1, mem_gb=4, time_min=60),
+    "slam": Resources(cpus=1, mem_gb=4, time_min=120),
+    "score": Resources(cpus=1, mem_gb=4, time_min=60),
+    "other": Resources(cpus=1, mem_gb=4, time_min=60),
+}
+
+
+@dataclass(frozen=True)
+class SlurmSettings:
+    """The ``[slurm]`` table of a ``dcslam reproduce`` configuration file::
+
+        [slurm]
+        partition = "gpu"                 # sbatch --partition (default: the cluster's default partition)
+        account = "my-project"            # --account
+        qos = "normal"                    # --qos
+        sbatch = {constraint = "a100"}    # any other sbatch option: name = value (true: a bare flag)
+        setup = ["module load cuda"]      # shell lines run in each job before dcslam
+        poll_seconds = 2                  # how often the queue and the jobs' results are looked at
+        [slurm.train]                     # resources of one kind: train, predict, filter, slam, score, other
+        cpus = 8
+        mem_gb = 32
+        time_min = 600
+        gpus = 1                          # default: one per process for --device cuda trainings and predictions
+    """
+
+    partition: str | None = None
+    account: str | None = None
+    qos: str | None = None
+    sbatch: dict = field(default_factory=dict)
+    setup: tuple[str, ...] = ()
+    poll_seconds: float = 2.0
+    resources: dict = field(default_factory=lambda: dict(DEFAULT_RESOURCES))
+
+    @classmethod
+    def from_table(cls, table: dict, source: str = "[slurm]") -> "SlurmSettings":
+        """Settings from the ``[slurm]`` table (unknown keys, wrong types: :class:`DcslamError` naming the key)."""
+        if not isinstance(table, dict):
+            raise DcslamError(f"{source}: expected a table ([slurm]), got {table!r}")
+        scalars = {"partition": str, "account": str, "qos": str, "poll_seconds": (int, float)}
+        known = (*scalars, "sbatch", "setup", *KINDS)
+        values: dict = {}
+        resources = dict(DEFAULT_RESOURCES)
+        for key, value in table.items():
+            where = f"{source} {key}"
+            if key not in known:
+                raise DcslamError(f"{source}: unknown key {key!r}; expected one of {', '.join(known)}")
+            if key in scalars:
+                if not isinstance(value, scalars[key]) or isinstance(value, bool):
+                    raise DcslamError(f"{where}: expected {'a number' if key == 'poll_seconds' else 'a string'}, "
+                                      f"got {value!r}")
+                values[key] = value
+            elif key == "sbatch":
+                if not isinstance(value, dict) or any(isinstance(v, (dict, list)) for v in value.values()):
+                    raise DcslamError(f"{where}: expected a table of sbatch options (constraint = \"a100\"), got "
+                                      f"{value!r}")
+                values[key] = dict(value)
+            elif key == "setup":
+                if not isinstance(value, list) or not all(isinstance(line, str) for line in value):
+                    raise DcslamError(f"{where}: expected a list of shell lines, got {value!r}")
+                values[key] = tuple(value)
+            else:
+                resources[key] = _resources(resources[key], value, where)
+        if values.get("poll_seconds", 1) <= 0:
+            raise DcslamError(f"{source} poll_seconds: must be > 0, got {values['poll_seconds']}")
+        return cls(**values, resources=resources)
+
+
+def _resources(default: Resources, table, where: str) -> Resources:
+    if not isinstance(table, dict):
+        raise DcslamError(f"{where}: expected a table (cpus, mem_gb, time_min, gpus), got {table!r}")
+    names = [f.name for f in fields(Resources)]
+    for key, value in table.items():
+        if key not in names:
+            raise DcslamError(f"{where}: unknown key {key!r}; expected one of {', '.join(names)}")
+        number = (int, float) if key == "mem_gb" else int
+        if not isinstance(value, number) or isinstance(value, bool) or value < (0 if key == "gpus" else 1):
+            raise DcslamError(f"{where} {key}: expected a {'number' if key == 'mem_gb' else 'whole number'} >= "
+                              f"{0 if key == 'gpus' else 1}, got {value!r}")
+    return replace(default, **table)
+
+
+def slurm_job(run: Callable, workspace, config) -> tuple[str, object]:
+    """What one Slurm job runs: the stage, with as many threads as the job has CPUs; ``("ok", seconds)`` or
+    ``("error", message)`` for a known error (a bug still fails the job with its traceback)."""
+    cpus = os.environ.get("SLURM_CPUS_PER_TASK")
+    if cpus:
+        from dcslam.workers import THREAD_VARIABLES
+
+        for name in THREAD_VARIABLES:
+            os.environ[name] = cpus
+        torch = sys.modules.get("torch")
+        if torch is not None:
+            torch.set_num_threads(int(cpus))
+    try:
+        return "ok", timed(run, workspace, config)
+    except DcslamError as error:
+        return "error", str(error)
+
+
+#: Seconds a job may be gone from the queue before its result file must be there (a shared filesystem's delay).
+VANISHED_GRACE_S = 20.0
+#: Seconds to wait for jobs that are cancelled, or have written their result, to leave the queue.
+CANCEL_WAIT_S = 60.0
+
+
+class SlurmExecutor:
+    """Each task a Slurm job, submitted through submitit; see the module docstring."""
+
+    def __init__(self, folder: Path, settings: SlurmSettings | None = None, log: Callable[[str], None] = print):
+        try:
+            import submitit  # noqa: F401
+        except ImportError:
+            raise DcslamError("--executor slurm needs submitit: pip install 'dcslam[slurm]' (or pip install "
+                              "submitit)") from None
+        if shutil.which("sbatch") is None:
+            raise DcslamError("--executor slurm: sbatch is not on PATH; run dcslam reproduce where Slurm jobs can be "
+                              "submitted (a login node), or use --executor local")
+        self.folder = Path(folder)
+        self.settings = settings or SlurmSettings()
+        self.log = log
+        self.submitted: list[str] = []  # every job id this executor submitted
+
+    def in_process(self, tasks: int) -> bool:
+        return False
+
+    def _parameters(self, kind: str, gpus: int) -> dict:
+        """submitit parameters of one kind's jobs."""
+        s, res = self.settings, self.settings.resources[kind]
+        params = {"name": f"dcslam-{kind}", "timeout_min": res.time_min, "cpus_per_task": res.cpus,
+                  "mem_gb": res.mem_gb, "nodes": 1, "tasks_per_node": 1, "slurm_additional_parameters": dict(s.sbatch)}
+        if gpus:
+            params["gpus_per_node"] = gpus
+        for name in ("partition", "account", "qos"):
+            if getattr(s, name):
+                params[f"slurm_{name}"] = getattr(s, name)
+        if s.setup:
+            params["slurm_setup"] = list(s.setup)
+        return params
+
+    def submit(self, tasks: list[Task]) -> Iterator[tuple[object, Task]]:
+        """Submit ``tasks``: one job array per (kind, GPUs) group; yields (submitit job, task) pairs as each group is
+        submitted (so that a failure or an interrupt part way cancels the groups already in the queue)."""
+        import submitit
+
+        groups: dict[tuple[str, int], list[Task]] = {}
+        for task in tasks:
+            kind = task.kind
+            groups.setdefault((kind, self.settings.resources[kind].gpus_for(task)), []).append(task)
+        for (kind, gpus), group in groups.items():
+            executor = submitit.AutoExecutor(folder=self.folder / "%j", cluster="slurm")
+            executor.update_parameters(**self._parameters(kind, gpus))
+            try:
+                with executor.batch():
+                    jobs = [executor.submit(slurm_job, t.run, t.workspace, t.config) for t in group]
+            except Exception as error:  # sbatch refused (a partition that does not exist, resources too large)
+                message = str(error).strip().splitlines()
+                raise DcslamError(f"sbatch refused the {kind} jobs ({message[-1] if message else error}); check the "
+                                  "[slurm] table of --config (partition, account, qos, resources)") from None
+            self.submitted += [job.job_id for job in jobs]
+            yield from zip(jobs, group)
+
+    def run(self, tasks: list[Task]) -> Iterator[Outcome]:
+        pending: dict[str, tuple[object, Task]] = {}
+        ran: set[str] = set()
+        try:
+            for job, task in self.submit(tasks):
+                pending[job.job_id] = (job, task)
+                ran.add(job.job_id)
+                self.log(f"[slurm] {task.name}: job {job.job_id}")
+            vanished: dict[str, float] = {}
+            while pending:
+                queued = _queued_jobs()
+                for job_id, (job, task) in list(pending.items()):
+                    outcome = _finished(job, task)
+                    if outcome is None and queued is not None and job_id not in queued:
+                        vanished.setdefault(job_id, time.monotonic())
+                        if time.monotonic() - vanished[job_id] > VANISHED_GRACE_S:
+                            outcome = Outcome(task, error=f"job {job_id} left the queue without a result "
+                                                          f"({_last_line(job) or 'no log line'})",
+                                              job=job_id, log=_log_path(job))
+                    elif outcome is None and queued is not None and queued[job_id] in NEVER_STARTS:
+                        res = self.settings.resources[task.kind]
+                        outcome = Outcome(task, error=f"job {job_id} can never start: Slurm says {queued[job_id]} "
+                                                      f"(it asks {res.cpus} CPUs, {res.mem_gb:g} GB, "
+                                                      f"{res.time_min} min, {res.gpus_for(task)} GPUs); lower "
+                                                      f"[slurm.{task.kind}] of --config or choose another partition",
+                                          job=job_id, log=_log_path(job))
+                        self.cancel([job_id])
+                    if outcome is not None:
+                        del pending[job_id]
+                        yield outcome
+                if pending:
+                    time.sleep(self.settings.poll_seconds)
+        finally:
+            if pending:
+                self.cancel(list(pending))
+            # a job that wrote its result may still be exiting: return with none of this run's jobs in the queue
+            self.wait_gone(sorted(ran))
+
+    def wait_gone(self, job_ids: list[str]) -> None:
+        """Wait (at most :data:`CANCEL_WAIT_S`) until none of ``job_ids`` is in the queue."""
+        deadline = time.monotonic() + CANCEL_WAIT_S
+        while job_ids and time.monotonic() < deadline:
+            queued = _queued_jobs()
+            if queued is not None and not any(job_id in queued for job_id in job_ids):
+                return
+            time.sleep(0.5)
+
+    def cancel(self, job_ids: list[str]) -> None:
+        """``scancel`` ``job_ids`` and wait (at most :data:`CANCEL_WAIT_S`) until they have left the queue."""
+        import signal
+
+        previous = {}
+        for signum in (signal.SIGINT, signal.SIGTERM):  # a second Ctrl-C must not leave the jobs running
+            try:
+                previous[signum] = signal.signal(signum, signal.SIG_IGN)
+            except ValueError:  # not the main thread: signals are not ours to hold
+                pass
+        try:
+            subprocess.run(["scancel", *job_ids], check=False, capture_output=True, timeout=60)
+            self.log(f"[slurm] cancelled {len(job_ids)} job(s): {' '.join(job_ids)}")
+            self.wait_gone(job_ids)
+        finally:
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
+
+
+#: Why a pending job waits, when waiting cannot help: it asks more than the partition, account or QoS allows.
+NEVER_STARTS = ("PartitionConfig", "PartitionNodeLimit", "PartitionTimeLimit", "BadConstraints", "InvalidAccount",
+                "InvalidQOS")
+
+
+def _queued_jobs() -> dict[str, str] | None:
+    """This user's jobs in the queue (pending, running, completing) → the reason a pending one waits ("" when
+    running); array tasks one by one, and an array's own id for its tasks that squeue still shows folded. None when
+    squeue does not answer (then every job counts as queued)."""
+    try:
+        done = subprocess.run(["squeue", "--me", "-h", "-r", "-o", "%i %T %r"], capture_output=True, text=True,
+                              timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    if done.returncode != 0:
+        return None
+    queued = {}
+    for line in done.stdout.splitlines():
+        job_id, state, reason = (line.split(None, 2) + ["", ""])[:3]
+        why = reason.strip() if state == "PENDING" else ""
+        queued[job_id] = why
+        queued.setdefault(job_id.split("_")[0], why)
+    return queued
+
+
+def _finished(job, task: Task) -> Outcome | None:
+    """The outcome of ``job`` if its result file is there, else None."""
+    if not job.paths.result_pickle.exists():
+        return None
+    try:
+        status, value = job.result()
+    except Exception as error:  # the job raised something other than a DcslamError: its traceback is in the log
+        lines = [line for line in str(error).splitlines() if line.strip()]
+        return Outcome(task, error=f"job {job.job_id} failed: {lines[-1].strip() if lines else type(error).__name__}",
+                       job=job.job_id, log=_log_path(job))
+    if status == "ok":
+        return Outcome(task, seconds=float(value), job=job.job_id, log=_log_path(job))
+    return Outcome(task, error=str(value), job=job.job_id, log=_log_path(job))
+
+
+def _log_path(job) -> Path:
+    return Path(job.paths.stderr)
+
+
+def _last_line(job) -> str:
+    """The last line of the job's stderr log (where Slurm writes why it killed a job), if any."""
+    try:
+        lines = [line.strip() for line in _log_path(job).read_text(errors="replace").splitlines() if line.strip()]
+    except OSError:
+        return ""
+    return lines[-1] if lines else ""

@@ -1,0 +1,204 @@
+"""``dcslam reproduce --executor slurm`` on a real (single-node) Slurm: the stages run as Slurm jobs and give the
+tables the local executor gives; a failed job names its stage, drive, seed and log; SIGTERM cancels the jobs and the
+rerun resubmits only what is missing.
+
+Drives: three tiny KITTI-format drives (16 frames of 64 × 96, tests.fixtures.kitti), through ``--kitti``."""
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from dcslam.errors import DcslamError
+from dcslam.executor import SlurmExecutor, SlurmSettings
+from dcslam.stages import slam, train
+from dcslam.stages.reproduce import Pipeline, Stage
+from dcslam.workspace import Workspace
+from tests.fixtures.kitti import write_tiny_drive
+
+pytestmark = [pytest.mark.cluster, pytest.mark.timeout(1800)]
+
+SEEDS = 1  # training seeds per recipe; more than one adds reproduce's --seeds N (and so more jobs)
+PROFILE = ["--profile", "smoke", *([] if SEEDS == 1 else ["--seeds", str(SEEDS)])]
+# One CPU and 1 GB per job: the node is this machine; the local run's workers have one thread each too.
+SLURM_CONFIG = """\
+[slurm]
+poll_seconds = 1
+[slurm.train]
+cpus = 1
+mem_gb = 1
+time_min = 30
+[slurm.predict]
+cpus = 1
+mem_gb = 1
+[slurm.filter]
+mem_gb = 1
+[slurm.slam]
+mem_gb = 1
+"""
+SETTINGS = tomllib.loads(SLURM_CONFIG)["slurm"]
+JOB_STAGES = ("train-", "predict-", "filter-", "slam-")  # what runs through the executor; the rest in reproduce
+MESSAGE = "interrupted: no partial output was kept; rerun the command to finish"
+
+
+def _env() -> dict:
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parents[2]), *sys.path]),
+            "DCSLAM_PROGRESS": "0"}
+
+
+def dcslam(*args, timeout: float = 1200) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "dcslam", *map(str, args)], capture_output=True, text=True,
+                          env=_env(), timeout=timeout)
+
+
+def queued() -> list[str]:
+    """This user's jobs in the queue: 'id name state' lines."""
+    done = subprocess.run(["squeue", "--me", "-h", "-r", "-o", "%i %j %T"], capture_output=True, text=True,
+                          check=True)
+    return done.stdout.split("\n")[:-1] if done.stdout else []
+
+
+def stamps(ws: Path) -> dict[str, dict]:
+    return {p.stem: json.loads(p.read_text()) for p in (ws / ".reproduce").glob("*.json") if p.stem != "splits"}
+
+
+@pytest.fixture(scope="module")
+def runs(slurm_cluster, tmp_path_factory):
+    """The smoke profile on the tiny drives into two workspaces: local workers (``--jobs 2``), and Slurm jobs."""
+    root = tmp_path_factory.mktemp("cluster")
+    kitti = root / "kitti"
+    for i in range(3):
+        write_tiny_drive(kitti, name=f"2011_09_26_drive_{1000 + i:04d}_sync", n_frames=16, size=(64, 96), seed=i)
+    (kitti / "SYNTHETIC").write_text("tiny drives of the cluster tests\n")  # split as generated drives are
+    config = root / "slurm.toml"
+    config.write_text(SLURM_CONFIG)
+    common = ["reproduce", *PROFILE, "--kitti", kitti]
+    seconds = {}
+    start = time.perf_counter()
+    local = dcslam(*common, "--jobs", 2, "-w", root / "local")
+    seconds["local"] = time.perf_counter() - start
+    assert local.returncode == 0, local.stderr
+    start = time.perf_counter()
+    on_slurm = dcslam(*common, "--executor", "slurm", "--config", config, "-w", root / "slurm")
+    seconds["slurm"] = time.perf_counter() - start
+    assert on_slurm.returncode == 0, on_slurm.stderr
+    print(f"smoke profile: local {seconds['local']:.0f} s, slurm {seconds['slurm']:.0f} s")
+    return {"root": root, "kitti": kitti, "config": config, "common": common, "local": root / "local",
+            "slurm": root / "slurm", "log": on_slurm.stderr, "ctld": slurm_cluster}
+
+
+def test_slurm_gives_the_tables_of_the_local_run(runs):
+    for table in ("table_5_2.md", "table_5_1.md"):
+        got, want = (runs[kind] / "results" / table for kind in ("slurm", "local"))
+        assert got.read_text() == want.read_text(), table
+    assert set(stamps(runs["slurm"])) == set(stamps(runs["local"]))
+    assert all(stamp["complete"] for stamp in stamps(runs["slurm"]).values())
+
+
+def test_every_independent_stage_ran_as_a_slurm_job(runs):
+    jobs = dict(re.findall(r"^\[slurm\] (\S+): job (\S+)$", runs["log"], flags=re.M))  # stage → job id
+    expected = {name for name in stamps(runs["local"]) if name.startswith(JOB_STAGES)}
+    assert set(jobs) == expected and len(expected) >= 30
+    ctld = runs["ctld"].read_text()
+    for stage, job in jobs.items():
+        folder = runs["slurm"] / "logs" / "slurm" / job
+        assert (folder / f"{job}_0_result.pkl").exists() and (folder / f"{job}_0_log.err").exists(), stage
+        pattern = re.escape(job) + r"(\(\d+\))?"
+        started = rf"(sched: Allocate JobId={pattern} NodeList=|sched/backfill: _start_job: Started JobId={pattern} )"
+        assert re.search(started, ctld), (stage, job)
+        assert re.search(rf"_job_complete: JobId={pattern} WEXITSTATUS 0", ctld), (stage, job)
+    arrays = {job.split("_")[0] for stage, job in jobs.items() if stage.startswith("slam-")}
+    assert len(arrays) == 1 and all("_" in jobs[s] for s in jobs if s.startswith("slam-"))  # one array for SLAM
+    assert queued() == []
+
+
+def test_a_rerun_on_slurm_submits_nothing(runs):
+    again = dcslam(*runs["common"], "--executor", "slurm", "--config", runs["config"], "-w", runs["slurm"])
+    assert again.returncode == 0, again.stderr
+    assert "[slurm]" not in again.stderr and "[run]" not in again.stderr, again.stderr
+
+
+def test_a_failed_job_names_its_stage_drive_seed_and_log(runs, tmp_path):
+    shutil.copytree(runs["slurm"] / "drives", tmp_path / "drives")
+    ws = Workspace(tmp_path)
+    pipe = Pipeline(ws, executor=SlurmExecutor(tmp_path / "logs", SlurmSettings.from_table(SETTINGS)))
+    broken_train = Stage("train-broken", train.run, train.TrainStageConfig(name="broken", init="absent", seed=5),
+                         outputs=lambda: [tmp_path / "runs" / "broken" / "model.pt"])
+    broken_slam = Stage("slam-broken", slam.run, slam.SlamStageConfig(drive=["absent_drive"], frames=2),
+                        outputs=lambda: [tmp_path / "slam" / "dense" / "absent_drive.json"])
+    for stage, label in ((broken_train, "seed 5"), (broken_slam, "drive absent_drive")):
+        with pytest.raises(DcslamError) as failed:
+            pipe.run_all([stage])
+        message = str(failed.value)
+        assert message.startswith(f"stage {stage.name} failed (") and f"; {label}; Slurm job " in message, message
+        log = Path(re.search(r", log (\S+);", message).group(1))
+        assert log.is_file() and log.is_relative_to(tmp_path / "logs")
+        assert not json.loads((tmp_path / ".reproduce" / f"{stage.name}.json").read_text())["complete"]
+    assert queued() == []
+
+
+def test_a_job_that_can_never_start_is_a_failure_not_a_wait(runs, tmp_path):
+    table = {**SETTINGS, "slam": {"cpus": 4096}}  # more CPUs than any node of the partition
+    pipe = Pipeline(Workspace(tmp_path), executor=SlurmExecutor(tmp_path / "logs", SlurmSettings.from_table(table)))
+    stage = Stage("slam-huge", slam.run, slam.SlamStageConfig(drive=["absent_drive"], frames=2),
+                  outputs=lambda: [tmp_path / "slam" / "dense" / "absent_drive.json"])
+    with pytest.raises(DcslamError, match=r"stage slam-huge failed \(job \S+ can never start: Slurm says \w+ "
+                                          r"\(it asks 4096 CPUs|sbatch refused the slam jobs"):
+        pipe.run_all([stage])
+    assert not json.loads((tmp_path / ".reproduce" / "slam-huge.json").read_text())["complete"]
+    assert queued() == []
+
+
+def test_sigterm_cancels_the_jobs_and_the_rerun_submits_only_what_is_missing(runs, tmp_path):
+    args = [*runs["common"], "--table", "5.1", "--executor", "slurm", "--config", runs["config"], "-w", tmp_path]
+    err = tmp_path.parent / f"{tmp_path.name}.stderr"
+    with open(err, "w") as stderr:
+        proc = subprocess.Popen([sys.executable, "-m", "dcslam", *map(str, args)], stdout=subprocess.DEVNULL,
+                                stderr=stderr, text=True, env=_env())
+        try:
+            while proc.poll() is None and not any(line.endswith(" RUNNING") and " dcslam-train " in line
+                                                  for line in queued()):
+                time.sleep(0.2)
+            assert proc.poll() is None, err.read_text()
+            submitted = re.findall(r"^\[slurm\] (train-\S+): job (\S+)$", err.read_text(), flags=re.M)
+            proc.send_signal(signal.SIGTERM)
+            proc.wait(timeout=180)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    log = err.read_text()
+    assert proc.returncode == 143, log
+    assert log.strip().splitlines()[-1] == MESSAGE and "Traceback" not in log, log
+    assert queued() == []  # cancelled, and gone from the queue before reproduce exited
+    assert submitted and "[slurm] cancelled" in log
+    made = stamps(tmp_path)
+    cancelled = [name for name, _ in submitted if not made[name]["complete"]]
+    assert cancelled, made  # the interrupt fell among the trainings
+    for name, stamp in made.items():  # what claims completion was made
+        if stamp["complete"] and name.startswith("train-"):
+            run = tmp_path / "runs" / name.removeprefix("train-")
+            assert (run / "model.pt").exists() and (run / "metrics.jsonl").exists(), name
+    ctld = runs["ctld"].read_text()
+    for _, job in submitted:
+        if not made[next(n for n, j in submitted if j == job)]["complete"]:
+            assert re.search(rf"JobId={re.escape(job)}(\(\d+\))?.*(CANCELLED|KILL)|"
+                             rf"(REQUEST_KILL_JOB|kill).*JobId={re.escape(job.split('_')[0])}", ctld), job
+
+    again = dcslam(*args)
+    assert again.returncode == 0, again.stderr
+    rerun = dict(re.findall(r"^\[slurm\] (\S+): job (\S+)$", again.stderr, flags=re.M))
+    skipped = set(re.findall(r"^\[skip\] (\S+): up to date$", again.stderr, flags=re.M))
+    assert set(cancelled) <= set(rerun)
+    assert {name for name, stamp in made.items() if stamp["complete"]} <= skipped
+    assert (tmp_path / "results" / "table_5_1.md").read_text() == \
+        (runs["local"] / "results" / "table_5_1.md").read_text()
+    assert queued() == []

@@ -1,0 +1,186 @@
+"""The executors of independent stages (dcslam.executor) without a Slurm cluster: the [slurm] table, the kinds and
+resources of tasks, the error when submitit or sbatch is missing, local workers stopped when the caller gives up,
+and what Pipeline.run_all does with an executor's outcomes. On a real Slurm: tests/cluster/."""
+import json
+import os
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from dcslam.cli import app
+from dcslam.errors import DcslamError
+from dcslam.executor import (DEFAULT_RESOURCES, LocalExecutor, Outcome, Resources, SlurmExecutor, SlurmSettings,
+                             Task)
+from dcslam.stages import filter as filter_stage
+from dcslam.stages import predict, score, slam, synth, train
+from dcslam.stages.config import to_toml
+from dcslam.stages.reproduce import Pipeline, ReproduceConfig, Stage
+from dcslam.stages.slam import SlamStageConfig
+from dcslam.workspace import Workspace
+
+runner = CliRunner()
+
+
+def test_slurm_table_is_read_with_each_kinds_resources():
+    settings = SlurmSettings.from_table({"partition": "gpu", "account": "proj", "qos": "high",
+                                         "sbatch": {"constraint": "a100", "exclusive": True},
+                                         "setup": ["module load cuda"], "poll_seconds": 0.5,
+                                         "train": {"cpus": 8, "mem_gb": 32, "time_min": 600, "gpus": 2},
+                                         "slam": {"mem_gb": 2.5}})
+    assert (settings.partition, settings.account, settings.qos) == ("gpu", "proj", "high")
+    assert settings.sbatch == {"constraint": "a100", "exclusive": True} and settings.setup == ("module load cuda",)
+    assert settings.resources["train"] == Resources(cpus=8, mem_gb=32, time_min=600, gpus=2)
+    assert settings.resources["slam"] == Resources(cpus=1, mem_gb=2.5, time_min=DEFAULT_RESOURCES["slam"].time_min)
+    assert settings.resources["predict"] == DEFAULT_RESOURCES["predict"]
+    assert SlurmSettings.from_table({}) == SlurmSettings()
+
+
+@pytest.mark.parametrize("table, message", [
+    ({"partiton": "gpu"}, "unknown key 'partiton'"),
+    ({"partition": 3}, "partition: expected a string"),
+    ({"train": {"cpu": 2}}, "train: unknown key 'cpu'"),
+    ({"slam": {"cpus": 0}}, "slam cpus: expected a whole number >= 1"),
+    ({"slam": {"time_min": 1.5}}, "slam time_min: expected a whole number"),
+    ({"train": 4}, "train: expected a table"),
+    ({"sbatch": ["--exclusive"]}, "sbatch: expected a table of sbatch options"),
+    ({"setup": "module load cuda"}, "setup: expected a list of shell lines"),
+    ({"poll_seconds": 0}, "poll_seconds: must be > 0"),
+])
+def test_slurm_table_mistakes_name_the_key(table, message):
+    with pytest.raises(DcslamError, match=message):
+        SlurmSettings.from_table(table)
+
+
+def test_a_mistake_in_the_slurm_table_of_the_config_file_is_one_line_before_anything_runs(tmp_path):
+    config = tmp_path / "reproduce.toml"
+    config.write_text('executor = "slurm"\n[slurm]\nqueue = "gpu"\n')
+    result = runner.invoke(app, ["reproduce", "--config", str(config), "--workspace", str(tmp_path / "ws")])
+    assert result.exit_code == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: [slurm]: unknown key 'queue'; expected one of partition")
+    assert not (tmp_path / "ws").exists()
+
+
+def test_the_slurm_table_is_printed_back_as_toml(tmp_path):
+    table = {"partition": "gpu", "sbatch": {"constraint": "a100"}, "train": {"cpus": 8, "gpus": 1}}
+    config = ReproduceConfig(executor="slurm", slurm=table)
+    assert tomllib.loads(to_toml(config))["slurm"] == table
+    path = tmp_path / "reproduce.toml"
+    path.write_text(to_toml(config))
+    result = runner.invoke(app, ["reproduce", "--config", str(path), "--print-config", "-w", str(tmp_path / "ws")])
+    assert result.exit_code == 0, result.output
+    assert tomllib.loads(result.stdout)["slurm"] == table and tomllib.loads(result.stdout)["executor"] == "slurm"
+
+
+def test_slurm_is_not_a_command_line_option():
+    result = runner.invoke(app, ["reproduce", "--slurm", "x"])
+    assert result.exit_code == 2
+
+
+def test_tasks_know_their_kind_and_name_drive_and_seed(tmp_path):
+    ws = Workspace(tmp_path)
+    kinds = {train.run: "train", predict.run: "predict", filter_stage.run: "filter", slam.run: "slam",
+             score.run_tables: "score", synth.run: "other"}
+    for run, kind in kinds.items():
+        assert Task("x", run, None, ws).kind == kind
+    assert Task("s", slam.run, SlamStageConfig(drive=["d1"]), ws).labels() == ["drive d1"]
+    assert Task("t", train.run, train.TrainStageConfig(seed=3), ws).labels() == ["seed 3"]
+    assert Task("o", synth.run, None, ws).labels() == []
+
+
+def test_gpus_follow_the_device_and_the_processes_of_a_training(tmp_path):
+    ws = Workspace(tmp_path)
+    res = DEFAULT_RESOURCES["train"]
+    assert res.gpus_for(Task("t", train.run, train.TrainStageConfig(device="cuda", nproc=2), ws)) == 2
+    assert res.gpus_for(Task("t", train.run, train.TrainStageConfig(device="cpu"), ws)) == 0
+    assert res.gpus_for(Task("t", train.run, train.TrainStageConfig(), ws)) == 0  # auto: no GPU asked
+    assert DEFAULT_RESOURCES["predict"].gpus_for(Task("p", predict.run, predict.PredictConfig(run="r", device="cuda"),
+                                                      ws)) == 1
+    assert DEFAULT_RESOURCES["slam"].gpus_for(Task("s", slam.run, SlamStageConfig(), ws)) == 0
+    assert Resources(gpus=3).gpus_for(Task("s", slam.run, SlamStageConfig(), ws)) == 3
+
+
+def test_slurm_executor_without_submitit_is_one_line(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "submitit", None)  # import submitit now raises ImportError
+    with pytest.raises(DcslamError, match=r"--executor slurm needs submitit: pip install 'dcslam\[slurm\]'"):
+        SlurmExecutor(tmp_path)
+    result = runner.invoke(app, ["reproduce", "--executor", "slurm", "--profile", "smoke", "-w", str(tmp_path / "w")])
+    assert result.exit_code == 1
+    assert len(result.stderr.strip().splitlines()) == 1 and "needs submitit" in result.stderr
+    assert not (tmp_path / "w" / ".reproduce").exists()  # nothing ran
+
+
+def test_slurm_executor_without_sbatch_says_where_to_run(tmp_path, monkeypatch):
+    pytest.importorskip("submitit")
+    monkeypatch.setenv("PATH", str(tmp_path))
+    with pytest.raises(DcslamError, match="sbatch is not on PATH.*--executor local"):
+        SlurmExecutor(tmp_path)
+
+
+def _sleep_then_touch(ws, config, *, force=False):
+    """A stage for the worker tests (module level, so a spawned worker can import it): ``frames`` 0 waits (its pid
+    in ``out``) until terminated; otherwise it writes ``out``."""
+    if config.frames == 0:
+        config.out.write_text(str(os.getpid()))
+        time.sleep(600)
+    config.out.write_text("done")
+
+
+def test_local_workers_are_stopped_when_the_caller_gives_up(tmp_path):
+    ws = Workspace(tmp_path)
+    waiting = tmp_path / "waiting.pid"
+    tasks = [Task("wait", _sleep_then_touch, SlamStageConfig(frames=0, out=waiting), ws),
+             Task("quick", _sleep_then_touch, SlamStageConfig(frames=1, out=tmp_path / "quick.txt"), ws)]
+    outcomes = LocalExecutor(jobs=2).run(tasks)
+    first = next(outcomes)
+    assert first.task.name == "quick" and first.ok and (tmp_path / "quick.txt").read_text() == "done"
+    while not waiting.exists() or not waiting.read_text():
+        time.sleep(0.05)
+    pid = int(waiting.read_text())
+    outcomes.close()
+    with pytest.raises(ProcessLookupError):  # terminated and reaped, not left running
+        os.kill(pid, 0)
+
+
+class _Scripted:
+    """An executor whose outcomes are given: the first task ok, every other one failed in a 'job'."""
+
+    def __init__(self):
+        self.closed = False
+        self.given: list[Task] = []
+
+    def in_process(self, tasks: int) -> bool:
+        return False
+
+    def run(self, tasks):
+        self.given = tasks
+        try:
+            yield Outcome(tasks[0], seconds=1.5, job="7_0", log=Path("/logs/7_0_0_log.err"))
+            for task in tasks[1:]:
+                yield Outcome(task, error="no luck", job="7_1", log=Path("/logs/7_1_0_log.err"))
+        finally:
+            self.closed = True
+
+
+def test_run_all_stamps_what_finished_and_names_the_failed_job(tmp_path):
+    ws = Workspace(tmp_path)
+    made = [tmp_path / "a.txt", tmp_path / "b.txt"]
+    stages = [Stage("slam-a", slam.run, SlamStageConfig(drive=["drive_a"]), outputs=lambda: [made[0]]),
+              Stage("train-b", train.run, train.TrainStageConfig(seed=4), outputs=lambda: [made[1]])]
+    executor = _Scripted()
+    lines = []
+    pipe = Pipeline(ws, log=lines.append, executor=executor)
+    with pytest.raises(DcslamError) as failed:
+        pipe.run_all(stages, jobs=1)  # an executor that is not in-process runs even one job's worth of stages
+    assert str(failed.value) == ("stage train-b failed (no luck); seed 4; Slurm job 7_1, log /logs/7_1_0_log.err; "
+                                 "fix it and rerun: finished stages will be skipped")
+    assert [t.name for t in executor.given] == ["slam-a", "train-b"] and executor.closed
+    stamps = {name: json.loads((tmp_path / ".reproduce" / f"{name}.json").read_text()) for name in ("slam-a",
+                                                                                                   "train-b")}
+    assert stamps["slam-a"]["complete"] and stamps["slam-a"]["seconds"] == 1.5
+    assert not stamps["train-b"]["complete"]  # claims nothing
+    assert any(line.startswith("[run]  slam-a: slam") and line.endswith("(job)") for line in lines), lines
