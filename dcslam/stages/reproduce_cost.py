@@ -206,7 +206,7 @@ def planned_drives(ws, profile, kitti_root: Path | None, splits: dict[str, list[
 
 
 def _hours(seconds: float | None) -> str:
-    return "unmeasured" if seconds is None else f"{seconds / 3600:.2f}"
+    return "unmeasured" if seconds is None else f"{seconds / 3600:.3g}"
 
 
 def plan_text(ws, config) -> str:
@@ -231,7 +231,7 @@ def plan_text(ws, config) -> str:
              f"  {'stage kind':<18}{'stages':>7}{'units':>12}  {'unit':<45}{'s/unit':>9}{'CPU-hours':>11}"]
     for kind, (n, units, seconds) in result.rows.items():
         per = f"{costs.per_unit[kind]:.3g}" if kind in costs.per_unit else "—"
-        lines.append(f"  {kind:<18}{n:>7}{units:>12.0f}  {UNITS[kind]:<45}{per:>9}{_hours(seconds):>11}")
+        lines.append(f"  {kind:<18}{n:>7}{units:>12.4g}  {UNITS[kind]:<45}{per:>9}{_hours(seconds):>11}")
     unmeasured = [kind for kind, (_, _, s) in result.rows.items() if s is None]
     lines.append(f"  {'total':<18}{len(todo):>7}{'':>12}  {'':<45}{'':>9}{_hours(result.total_seconds):>11}"
                  + (f" (without {', '.join(unmeasured)}: no unit cost measured)" if unmeasured else ""))
