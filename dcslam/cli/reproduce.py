@@ -41,7 +41,6 @@ def report(result) -> None:
 
 reproduce_command = stage_command(app, "reproduce", reproduce.ReproduceConfig, run, report, help=HELP, force=False,
                                   examples=("dcslam reproduce --profile smoke -w /tmp/check    # a few minutes",
-                                            "dcslam reproduce --table 5.1 --kitti /data/kitti",
                                             "dcslam reproduce --table beams --jobs 2 --print-config   # its stages, "
                                             "then drop --print-config to run it (make reproduce-beams)",
                                             "dcslam reproduce --profile study --dry-run   # what 3 seeds x 8 drives "

@@ -8,7 +8,8 @@ error), ``min`` / ``max``, ``flags`` (option names when they are not ``--field-n
 
 A configuration file holds the same keys as the options (``map_frames``, not ``--map-frames``), in TOML (read with
 :mod:`tomllib`) or YAML (read with PyYAML when it is installed). :func:`to_toml` writes the configuration a command
-would run, so that it can be edited and given back with ``--config``.
+would run, so that it can be edited and given back with ``--config``. :class:`Options` holds some fields of a
+configuration (a profile's or a recipe's share of it), checked against the dataclass's fields when made.
 """
 from __future__ import annotations
 

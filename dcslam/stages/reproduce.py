@@ -18,6 +18,13 @@ A profile chooses the scale: ``quick`` (the default: at least 4 test drives, abo
 SLAM runs one stage per (layer, test drive); they are independent, so ``jobs`` > 1 runs them in that many worker
 processes with one torch thread each. ``table="beams"`` runs the beams experiment instead
 (:mod:`dcslam.stages.reproduce_beams`, which reuses this module's pipeline and :func:`make_drives`).
+
+``seeds`` (``--seeds``, or the profile's; the ``study`` profile: 3) trains every trained run that many times, the
+``k``-th named :func:`dcslam.report.seeds.seed_run_name` (``<run>`` for k = 0, so one seed keeps today's names and
+tables; ``<run>-s<k>`` after) with seed ``seed + k``, and predicts, filters and runs SLAM on each; the untrained
+layers run once. Every :class:`Stage` carries the training seed of the run it trains or uses. Before it starts,
+:func:`run` logs the stages and their estimated cost (:mod:`dcslam.stages.reproduce_cost`; ``--dry-run``: only that).
+Profiles and recipes are :class:`dcslam.stages.config.Options` of the stage configurations, checked when made.
 """
 from __future__ import annotations
 
