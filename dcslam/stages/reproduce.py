@@ -375,6 +375,8 @@ def run(ws: Workspace, config: ReproduceConfig, *, log: Callable[[str], None] = 
     run and its estimated cost first (:mod:`dcslam.stages.reproduce_cost`); with ``dry_run`` that is all (None)."""
     from dcslam.stages.reproduce_cost import plan_text
 
+    if config.kitti is not None and not config.dry_run:
+        check_kitti_root(config.kitti)  # before the plan: a wrong root is one line, not a plan and then an error
     log(plan_text(ws, config))
     if config.dry_run:
         return None
@@ -422,6 +424,12 @@ def training_rounds(runs: dict[str, dict]) -> list[list[str]]:
     return [first, [name for name in runs if name not in first]]
 
 
+def check_kitti_root(kitti: Path) -> None:
+    """A :class:`DcslamError` unless ``kitti`` is a folder."""
+    if not Path(kitti).is_dir():
+        raise DcslamError(f"KITTI root {kitti} does not exist or is not a folder; pass --kitti DIR")
+
+
 def make_drives(pipe: Pipeline, *, drives: int, frames: int, split: tuple[int, int, int] | None,
                 kitti_root: Path | None = None, seed: int = 0, beams: tuple[int, ...] = (), jobs: int = 1
                 ) -> tuple[list[Path], list[Path]]:
@@ -433,8 +441,8 @@ def make_drives(pipe: Pipeline, *, drives: int, frames: int, split: tuple[int, i
     if kitti_root is None:
         pipe.run(Stage("synth", synth.run, synth.SynthConfig(drives=drives, frames=frames, seed=seed, jobs=jobs),
                        outputs=lambda: [ws.kitti / "SYNTHETIC"]))
-    elif not kitti.is_dir() and not pipe.planning:  # a plan may name a root that is not mounted here
-        raise DcslamError(f"KITTI root {kitti} does not exist or is not a folder; pass --kitti DIR")
+    elif not pipe.planning:  # a plan may name a root that is not mounted here
+        check_kitti_root(kitti)
     split_file = None
     if kitti_root is None and split:
         split_file = _split_file(ws) if pipe.planning else _profile_splits(ws, kitti, split)
