@@ -207,7 +207,7 @@ def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(tmp_path
     result = runner.invoke(app, ["reproduce", "--print-config", "--workspace", str(ws)])
     assert result.exit_code == 0, result.output
     printed = tomllib.loads(result.stdout)  # still a --config file of reproduce: the stages are comments
-    assert printed == {"table": "5.2", "profile": "quick", "seed": 0, "force": False, "jobs": 1}
+    assert printed == {"table": "5.2", "profile": "quick", "seed": 0, "force": False, "jobs": 1, "dry_run": False}
     assert not ws.exists()  # nothing run, nothing written
     stages = read_stage_configs(result.stdout)
     names = list(stages)
