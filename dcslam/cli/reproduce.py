@@ -21,12 +21,19 @@ def _log(line: str) -> None:
 
 
 def run(ws, config: reproduce.ReproduceConfig):
+    if config.dry_run:  # the plan and its cost on stdout, nothing run or written
+        from dcslam.stages.reproduce_cost import plan_text
+
+        typer.echo(plan_text(ws, config))
+        return None
     start = time.perf_counter()
     markdown = reproduce.run(ws, config, log=_log)
     return markdown, time.perf_counter() - start
 
 
 def report(result) -> None:
+    if result is None:
+        return
     markdown, seconds = result
     summary(markdown.read_text())
     _log(f"done in {seconds / 60:.1f} min; tables, CSV and PNGs in {markdown.parent}")
@@ -34,7 +41,8 @@ def report(result) -> None:
 
 reproduce_command = stage_command(app, "reproduce", reproduce.ReproduceConfig, run, report, help=HELP, force=False,
                                   examples=("dcslam reproduce --profile smoke -w /tmp/check    # a few minutes",
-                                            "dcslam reproduce --table 5.1 --kitti /data/kitti",
                                             "dcslam reproduce --table beams --jobs 2 --print-config   # its stages, "
-                                            "then drop --print-config to run it (make reproduce-beams)"),
+                                            "then drop --print-config to run it (make reproduce-beams)",
+                                            "dcslam reproduce --profile study --dry-run   # what 3 seeds x 8 drives "
+                                            "will run and cost"),
                                   describe=stage_configs_toml)

@@ -120,13 +120,20 @@ PER_DRIVE_KEYS = ("poses", "failed", "localisation", "ate_rmse_m", "rpe_rmse_m",
                   "frames", "odometry", "mapper", "solver", "association", "voxel_size", "beams", "pairing")
 
 
-def per_drive_table(results: list[LayerResult]) -> Table:
-    """Every figure of every row of Table 5.2 on every test drive (``results/table_5_2_per_drive.csv``)."""
-    columns = [Column("method", "method"), Column("layer", "layer"), Column("drive", "drive")] + [
-        Column(k, k) for k in PER_DRIVE_KEYS]
-    rows = [{"method": r.label, "layer": r.layer, "drive": drive, **values}
-            for r in results for drive, values in r.per_drive().items()]
+def per_drive_table(results: list) -> Table:
+    """Every figure of every row of Table 5.2 on every test drive and training seed (``seed``: that of the run
+    behind the layer, empty for layers without one; ``results/table_5_2_per_drive.csv``)."""
+    columns = [Column("method", "method"), Column("layer", "layer"), Column("seed", "seed"),
+               Column("drive", "drive")] + [Column(k, k) for k in PER_DRIVE_KEYS]
+    rows = [{"method": r.label, "layer": _seed_layer(r, seed), "seed": seed, "drive": drive, **values}
+            for r in results for seed, drive, values in r.per_drive_rows()]
     return Table("Table 5.2 per drive", columns, rows)
+
+
+def _seed_layer(result, seed) -> str:
+    """The layer of ``result``'s run of training seed ``seed`` (a row over seeds has one per seed)."""
+    members = getattr(result, "members", None)
+    return next(m.layer for m in members if m.seed == seed) if members else result.layer
 
 
 def _depth_example_rows(ws: Workspace, results: list[LayerResult], drive: str):

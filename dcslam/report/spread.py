@@ -79,3 +79,86 @@ def differs(values, reference, confidence: float = CONFIDENCE) -> bool | None:
     if diff.std == 0:
         return diff.mean != 0
     return not (diff.ci_low <= 0 <= diff.ci_high)
+
+
+#: Resamples of :func:`two_level_interval`, and the seed of its random generator (fixed: a table made twice from the
+#: same runs prints the same intervals).
+BOOTSTRAP_RESAMPLES = 10000
+BOOTSTRAP_SEED = 0
+TWO_LEVEL_METHOD = (f"two-level percentile bootstrap ({BOOTSTRAP_RESAMPLES} resamples, generator seed "
+                    f"{BOOTSTRAP_SEED}): training seeds resampled with replacement, then the test drives with "
+                    "replacement, the same drives for every resampled seed (each drive is run by every seed)")
+
+
+def _matrix(values) -> np.ndarray:
+    x = np.asarray(values, dtype=np.float64)
+    if x.ndim != 2 or x.size == 0:
+        raise DcslamError(f"values of shape {x.shape}: expected (S seeds, D drives) with S, D > 0")
+    if not np.all(np.isfinite(x)):
+        raise DcslamError("values that are not all finite")
+    return x
+
+
+def two_level_interval(values, confidence: float = CONFIDENCE, resamples: int = BOOTSTRAP_RESAMPLES,
+                       seed: int = BOOTSTRAP_SEED) -> tuple[float, float]:
+    """The ``confidence`` interval of the mean of ``values`` (S seeds, D drives) that counts both sources of spread:
+    each of ``resamples`` bootstrap samples draws S seeds with replacement, then D drives with replacement (one draw
+    of drives for all the drawn seeds: the drives are shared, so their effect must not average out across seeds),
+    and takes the mean of that (S, D) sample; the interval is the percentiles of those means. A single seed reduces
+    it to the bootstrap over drives, a single drive to the bootstrap over seeds."""
+    x = _matrix(values)
+    s, d = x.shape
+    rng = np.random.default_rng(seed)
+    means = np.empty(resamples)
+    chunk = max(1, 2_000_000 // (s * d))
+    for start in range(0, resamples, chunk):
+        n = min(chunk, resamples - start)
+        rows = rng.integers(0, s, size=(n, s))
+        cols = rng.integers(0, d, size=(n, d))
+        means[start:start + n] = x[rows[:, :, None], cols[:, None, :]].mean(axis=(1, 2))
+    tail = 100 * (1 - confidence) / 2
+    low, high = np.percentile(means, [tail, 100 - tail])
+    return float(low), float(high)
+
+
+@dataclass(frozen=True)
+class SeedSpread:
+    """Summary of values over ``seeds`` training seeds × ``drives`` test drives: their ``mean``, the two-level
+    bootstrap interval of it (:func:`two_level_interval`), ``seed_std`` (the sample std of the per-seed means over
+    the drives: the seed-to-seed spread alone; None for one seed), the ``median`` of all values and the
+    ``failures`` among the runs."""
+
+    seeds: int
+    drives: int
+    mean: float
+    ci_low: float
+    ci_high: float
+    seed_std: float | None
+    median: float
+    failures: int = 0
+
+    def text(self, fmt: str = "{:.3f}") -> str:
+        """``mean [low, high]`` (the interval is not symmetric about the mean)."""
+        return f"{fmt.format(self.mean)} [{fmt.format(self.ci_low)}, {fmt.format(self.ci_high)}]"
+
+
+def seed_spread(values, failures: int = 0, confidence: float = CONFIDENCE) -> SeedSpread:
+    """The :class:`SeedSpread` of ``values`` (S, D), finite numbers."""
+    x = _matrix(values)
+    low, high = two_level_interval(x, confidence)
+    per_seed = x.mean(axis=1)
+    return SeedSpread(x.shape[0], x.shape[1], float(x.mean()), low, high,
+                      float(per_seed.std(ddof=1)) if len(per_seed) > 1 else None, float(np.median(x)), failures)
+
+
+def differs_two_level(values, reference, confidence: float = CONFIDENCE) -> bool | None:
+    """Whether a row measured by several seeds on the same drives differs from ``reference`` beyond the spread:
+    the two-level interval of the per-run differences excludes zero. ``values`` (S, D); ``reference`` (S, D) (paired
+    by seed and drive) or (1, D) (a row without seeds, paired by drive). ``None`` with fewer than 2 drives."""
+    a, b = _matrix(values), _matrix(reference)
+    if b.shape[1] != a.shape[1] or b.shape[0] not in (1, a.shape[0]):
+        raise DcslamError(f"paired values of shapes {a.shape} and {b.shape}: expected (S, D) and (S, D) or (1, D)")
+    if a.shape[1] < 2:
+        return None
+    low, high = two_level_interval(a - b, confidence)
+    return not (low <= 0 <= high)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import functools
 import math
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from dcslam.errors import DcslamError
@@ -21,7 +21,8 @@ from dcslam.eval.depth import DepthErrors, mean_errors
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
 from dcslam.report.layers import (TrajectoryPair, find_layer, score_layer_depth, score_layer_trajectories,
                                   slam_settings)
-from dcslam.report.spread import differs, spread
+from dcslam.report.seeds import paired, seed_groups
+from dcslam.report.spread import TWO_LEVEL_METHOD, seed_spread, spread
 from dcslam.report.tables import IP_BASIC, RECIPES, Column, RunSummary, Table
 from dcslam.workspace import Workspace
 
@@ -62,6 +63,7 @@ class LayerResult:
     settings: dict[str, dict] = field(default_factory=dict)
     missing: list[str] = field(default_factory=list)
     failure_threshold: float = FAILURE_THRESHOLD
+    seed: int | None = None     # training seed of the run behind the layer (None: no trained model)
 
     @functools.cached_property
     def scores(self) -> dict:
@@ -92,6 +94,21 @@ class LayerResult:
                                       f"`dcslam slam --depth {self.layer} --force` on every test drive")
                 found.setdefault(key, (drive, value))
         return {k: v for k, (_, v) in found.items()}
+
+    def localisation_by_seed(self) -> dict[int | None, dict[str, float]]:
+        """``{seed: {drive: localisation}}`` (one seed: this layer's); see :func:`dcslam.report.seeds.paired`."""
+        return {self.seed: {d: s.localisation for d, s in self.scores.items()}}
+
+    def localisation_spread(self):
+        """The :class:`dcslam.report.spread.Spread` of the localisation over the drives."""
+        return spread([s.localisation for s in self.scores.values()])
+
+    def with_failure_threshold(self, threshold: float) -> "LayerResult":
+        return replace(self, failure_threshold=threshold)
+
+    def per_drive_rows(self) -> list[tuple[int | None, str, dict]]:
+        """``(seed, drive, figures)`` of every drive (:meth:`per_drive`)."""
+        return [(self.seed, drive, values) for drive, values in self.per_drive().items()]
 
     def per_drive(self) -> dict[str, dict]:
         """Every figure of each drive: ``{drive: {metric: value}}`` (the per-drive CSV's rows)."""
@@ -145,14 +162,165 @@ class LayerResult:
             if reference is self:
                 row["vs_sparse"] = "reference"
             elif reference is not None and reference.pairs:
-                common = [d for d in self.pairs if d in reference.pairs]
-                verdict = differs([self.scores[d].localisation for d in common],
-                                  [reference.scores[d].localisation for d in common])
-                row["vs_sparse"] = {None: "one drive", True: "differs", False: "within spread"}[verdict]
+                row["vs_sparse"] = VERDICTS[paired(self, reference)[0]]
         if self.pairs and not any(f"{k}_drives" in row for k in DRIFT_KEYS):
             longest = max(r.get("path_m") or 0.0 for r in per_drive.values())
             row["drift_note"] = f"drives too short (longest {longest:.0f} m < 100 m)"
         return row
+
+
+VERDICTS = {None: "one drive", True: "differs", False: "within spread"}
+
+
+@dataclass
+class SeedResults:
+    """One row over the runs of a recipe trained with several seeds: ``members`` are the :class:`LayerResult` of
+    each seed's layer (their ``seed`` set), scored on the same drives. Every figure of :meth:`row` is the mean over
+    seeds × drives with the two-level bootstrap interval (:func:`dcslam.report.spread.seed_spread`), its
+    seed-to-seed spread (the std of the per-seed means) and the failed runs among all seeds × drives. ``layer``,
+    ``pairs`` and ``depth`` are the first seed's (plots and depth examples show one seed)."""
+
+    label: str
+    members: list[LayerResult]
+
+    def __post_init__(self) -> None:
+        if len(self.members) < 2:
+            raise DcslamError(f"row {self.label}: a row over seeds needs at least 2 runs, got {len(self.members)}")
+
+    layer = property(lambda self: self.members[0].layer)
+    layers = property(lambda self: [m.layer for m in self.members])
+    seeds = property(lambda self: [m.seed for m in self.members])
+    failure_threshold = property(lambda self: self.members[0].failure_threshold)
+    missing = property(lambda self: [f"{m.layer}: {text}" for m in self.members for text in m.missing])
+
+    @property
+    def pairs(self) -> dict:
+        return self.members[0].pairs if all(m.pairs for m in self.members) else {}
+
+    @property
+    def depth(self) -> dict:
+        return self.members[0].depth if all(m.depth for m in self.members) else {}
+
+    @property
+    def localisation(self) -> float | None:
+        if not self.pairs:
+            return None
+        values = [v for m in self.members for v in m.localisation_by_seed()[m.seed].values()]
+        return sum(values) / len(values)
+
+    def localisation_by_seed(self) -> dict[int | None, dict[str, float]]:
+        return {m.seed: m.localisation_by_seed()[m.seed] for m in self.members}
+
+    def localisation_spread(self):
+        """The :class:`dcslam.report.spread.SeedSpread` of the localisation over seeds × drives."""
+        by_seed = self.localisation_by_seed()
+        drives = self.drives()
+        return seed_spread([[by_seed[s][d] for d in drives] for s in by_seed], self.failures())
+
+    def drives(self) -> list[str]:
+        """The drives every seed's run has (those of the first seed, in its order)."""
+        first = self.members[0].pairs
+        return [d for d in first if all(d in m.pairs for m in self.members)]
+
+    def failures(self) -> int:
+        return sum(m.failed(d) for m in self.members for d in m.pairs)
+
+    def with_failure_threshold(self, threshold: float) -> "SeedResults":
+        return replace(self, members=[m.with_failure_threshold(threshold) for m in self.members])
+
+    def run_settings(self) -> dict:
+        """The SLAM settings shared by every run of every seed; fails when they were run differently."""
+        found = {}
+        for member in self.members:
+            for key, value in member.run_settings().items():
+                if key in found and found[key][1] != value:
+                    raise DcslamError(f"row {self.label} mixes SLAM runs made with {key}={found[key][1]} "
+                                      f"({found[key][0]}) and {key}={value} ({member.layer}); rerun `dcslam slam "
+                                      f"--depth {member.layer} --force` on every test drive")
+                found.setdefault(key, (member.layer, value))
+        return {k: v for k, (_, v) in found.items()}
+
+    def per_drive_rows(self) -> list[tuple[int | None, str, dict]]:
+        return [row for m in self.members for row in m.per_drive_rows()]
+
+    def layer_text(self) -> str:
+        return f"{self.members[0].layer} (seeds {', '.join(str(s) for s in self.seeds)})"
+
+    def row(self, reference: "LayerResult | SeedResults | None" = None) -> dict:
+        """The row of a table: for each figure its mean over seeds × drives (``<metric>``), the two-level interval
+        (``_ci_low``, ``_ci_high``), the seed-to-seed spread (``_seed_std``), the median of every run
+        (``_median``) and ``<metric>_text`` (``mean [low, high]``); ``seeds``, ``drives``, ``failures`` (failed
+        runs of all seeds) and ``vs_sparse`` against ``reference`` (:func:`dcslam.report.seeds.paired`)."""
+        row = {"method": self.label, "layer": self.layer_text(), "seeds": len(self.members),
+               "missing": "; ".join(self.missing) or None}
+        if not self.pairs:
+            return row
+        drives = self.drives()
+        tables = [m.per_drive() for m in self.members]
+        for key in SPREAD_KEYS:
+            if key in DRIFT_KEYS:
+                have = [d for d in drives if all(t[d].get(key) is not None for t in tables)]
+                if not have:
+                    continue
+                row[f"{key}_drives"] = len(have)
+            elif any(t[d].get(key) is None for t in tables for d in drives):
+                continue  # a figure some run lacks (e.g. aligned ATE of a straight line) is not averaged
+            else:
+                have = drives
+            values = [[t[d][key] for d in have] for t in tables]
+            fmt = next(c.fmt for c in SPREAD_COLUMNS if c.key == key)
+            flat = [v for seed_values in values for v in seed_values]
+            if not all(math.isfinite(v) for v in flat):
+                row.update({key: math.inf, f"{key}_text": f"inf ({sum(not math.isfinite(v) for v in flat)} "
+                                                          "run(s) without a finite value)"})
+                continue
+            sp = seed_spread(values)
+            row.update({key: sp.mean, f"{key}_ci_low": sp.ci_low, f"{key}_ci_high": sp.ci_high,
+                        f"{key}_seed_std": sp.seed_std, f"{key}_median": sp.median, f"{key}_text": sp.text(fmt)})
+        row["drives"] = len(drives)
+        row["failures"] = self.failures()
+        if "localisation_median" in row:
+            row["localisation_median_text"] = f"{row['localisation_median']:.4f}"
+            row["localisation_seed_std_text"] = f"{row['localisation_seed_std']:.4f}"
+        if reference is not None and reference.pairs:
+            row["vs_sparse"] = VERDICTS[paired(self, reference)[0]]
+        if not any(f"{k}_drives" in row for k in DRIFT_KEYS):
+            longest = max(r.get("path_m") or 0.0 for t in tables for r in t.values())
+            row["drift_note"] = f"drives too short (longest {longest:.0f} m < 100 m)"
+        return row
+
+
+def seeded(results: list) -> bool:
+    """Whether any row of ``results`` is over several training seeds."""
+    return any(isinstance(r, SeedResults) for r in results)
+
+
+SEEDS_NOTE = ("rows over several training seeds (seeds: their number; layer: the first seed's run and the seeds): "
+              "every figure is the mean over seeds × test drives with its 95 % interval [low, high] from a "
+              f"{TWO_LEVEL_METHOD}; seed-to-seed std: the std of the per-seed mean localisations (the spread from "
+              "training alone); failed: failed runs of all seeds × drives; vs sparse: whether the same two-level "
+              "interval of the per-run differences from sparse depth (paired by drive) excludes zero. Rows without "
+              "seeds: the t-interval over drives")
+
+
+def with_seed_columns(columns: list[Column], seeds: bool) -> list[Column]:
+    """``columns`` with, when ``seeds``, the number of seeds after ``drives`` and the seed-to-seed std of the
+    localisation after its median (tables without rows over seeds keep their columns)."""
+    if not seeds:
+        return list(columns)
+    out = []
+    for column in columns:
+        out.append(column)
+        if column.key == "drives":
+            out.append(Column("seeds", "seeds"))
+        elif column.key == "localisation_median_text":
+            out.append(Column("localisation_seed_std_text", "seed-to-seed std"))
+    return out
+
+
+def csv_suffixes(seeds: bool) -> tuple[str, ...]:
+    """The CSV columns of each figure: mean, std, interval and median (and with ``seeds`` the seed-to-seed std)."""
+    return ("", "_std", "_ci_low", "_ci_high", "_median") + (("_seed_std",) if seeds else ())
 
 
 def _depth_per_drive(per_frame: dict[str, list]) -> dict[str, DepthErrors]:
@@ -200,27 +368,55 @@ def filters_of(ws: Workspace, source_layer: str) -> list[str]:
     return names
 
 
+def score_runs(ws: Workspace, label: str, runs: list[RunSummary], drives: list[str], suffix: str = "",
+               **options) -> "LayerResult | SeedResults":
+    """The row of ``runs`` (the seeds of one run, :func:`dcslam.report.seeds.seed_groups`): layer
+    ``<run name><suffix>`` of each run scored by :func:`score_layer` (``options``), one :class:`LayerResult` for a
+    single run, a :class:`SeedResults` over several."""
+    scored = []
+    for run in runs:
+        result = score_layer(ws, label, f"{run.name}{suffix}", drives, **options)
+        result.seed = run.seed
+        scored.append(result)
+    return scored[0] if len(scored) == 1 else SeedResults(label, scored)
+
+
 def table_5_2_results(ws: Workspace, runs: list[RunSummary], drives: list[str], devkit_exact: bool = False,
                       max_time_diff: float = EVO_MAX_TIME_DIFF_S,
-                      failure_threshold: float = FAILURE_THRESHOLD) -> list[LayerResult]:
-    """Every row of Table 5.2 as a :class:`LayerResult` (models, no model, IP-Basic, models after best filter)."""
+                      failure_threshold: float = FAILURE_THRESHOLD) -> list:
+    """Every row of Table 5.2 as a :class:`LayerResult` (models, no model, IP-Basic, models after best filter); the
+    runs of one recipe trained with several seeds (:func:`dcslam.report.seeds.seed_groups`) as one
+    :class:`SeedResults`."""
+    options = dict(devkit_exact=devkit_exact, max_time_diff=max_time_diff, failure_threshold=failure_threshold)
+
     def score(label, name):
         return score_layer(ws, label, name, drives, devkit_exact, max_time_diff, failure_threshold)
 
+    groups = seed_groups(runs)
     results = []
     for recipe in RECIPES:
-        ours = [r for r in runs if r.recipe == recipe]
+        ours = [g for g in groups if g[0].recipe == recipe]
         if not ours:
             results.append(LayerResult(label=recipe, layer="—", missing=[f"no run trained as {recipe}"]))
-        results += [score(recipe, run.name) for run in ours]
-    results += [score(run.recipe, run.name) for run in runs if run.recipe not in RECIPES]  # e.g. the pose loss
+        results += [score_runs(ws, recipe, group, drives, **options) for group in ours]
+    results += [score_runs(ws, g[0].recipe, g, drives, **options)  # e.g. the pose loss
+                for g in groups if g[0].recipe not in RECIPES]
     results.append(score("sparse depth", "sparse"))
     results.append(score("dense depth", "dense"))
     found = [name for name in IP_BASIC if find_layer(ws, name) is not None]
     results += [score("IP-Basic", name) for name in found] or [
         LayerResult(label="IP-Basic", layer="—", missing=[f"no layer {' or '.join(IP_BASIC)} (dcslam predict)"])]
-    for run in runs:
-        candidates = [score(f"{run.recipe} + best filter", name) for name in filters_of(ws, run.name)]
+    for group in groups:
+        run, label = group[0], f"{group[0].recipe} + best filter"
+        names = filters_of(ws, run.name)
+        if len(group) == 1:
+            candidates = [score(label, name) for name in names]
+            for candidate in candidates:
+                candidate.seed = run.seed
+        else:  # a filter every seed's run went through, named after the run (<run><suffix>)
+            suffixes = [name[len(run.name):] for name in names if name.startswith(run.name)]
+            suffixes = [x for x in suffixes if all(f"{r.name}{x}" in filters_of(ws, r.name) for r in group[1:])]
+            candidates = [score_runs(ws, label, group, drives, suffix, **options) for suffix in suffixes]
         if not candidates and run.recipe not in RECIPES:
             continue  # recipes beyond the thesis's (the pose loss) are not filtered by the reproduction
         scored = [c for c in candidates if c.localisation is not None and c.depth]
@@ -228,7 +424,7 @@ def table_5_2_results(ws: Workspace, runs: list[RunSummary], drives: list[str], 
             results.append(min(scored, key=lambda c: c.localisation))
         else:
             what = "filtered layers with slam results" if candidates else "filtered layer"
-            results.append(LayerResult(label=f"{run.recipe} + best filter", layer="—",
+            results.append(LayerResult(label=label, layer="—",
                                        missing=[f"no {what} of {run.name} (dcslam filter, dcslam slam)"]))
     return results
 
@@ -266,10 +462,11 @@ def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str], devki
     spread; the CSV holds every mean, std, interval and median. Rows whose SLAM runs were made with other settings
     than the others show the difference in ``SLAM settings``; a row whose drives were run differently fails."""
     figures = thesis.get("table_5_2", {}).get("rows", {})
-    table = Table(f"Table 5.2 — {len(drives)} test drive(s) ({', '.join(drives)})", TABLE_5_2_COLUMNS)
-    table.csv_columns = [Column(k, k) for k in ("method", "layer", "drives", "failures", "vs_sparse")] + [
-        Column(f"{c.key}{suffix}", "") for c in SPREAD_COLUMNS
-        for suffix in ("", "_std", "_ci_low", "_ci_high", "_median")] + [
+    table = Table(f"Table 5.2 — {len(drives)} test drive(s) ({', '.join(drives)})",
+                  with_seed_columns(TABLE_5_2_COLUMNS, seeded(results)))
+    table.csv_columns = [Column(k, k) for k in ("method", "layer", "drives", *(("seeds",) if seeded(results) else ()),
+                                                "failures", "vs_sparse")] + [
+        Column(f"{c.key}{suffix}", "") for c in SPREAD_COLUMNS for suffix in csv_suffixes(seeded(results))] + [
         Column(f"{k}_drives", "") for k in DRIFT_KEYS] + [
         Column(f"thesis_{k}", "") for k in ("localisation", "mae", "rmse")] + [
         Column("slam_settings", ""), Column("missing", ""), Column("notes", "")]
@@ -293,7 +490,8 @@ def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str], devki
         "MAE, RMSE, iMAE, iRMSE: " + ("exactly as the KITTI devkit" if devkit_exact else
                                      "KITTI devkit with two departures (--devkit-exact removes them)"),
         "ATE, RPE: as evo computes them; t_rel / r_rel: KITTI odometry devkit over 100-800 m segments",
-        ("trained rows: one training run per recipe, so their spread is across test drives only" if single_runs
+        (SEEDS_NOTE if seeded(results) else
+         "trained rows: one training run per recipe, so their spread is across test drives only" if single_runs
          else "trained rows: each training run of a recipe is its own row"),
         "thesis columns: the thesis's figures (dcslam/report/thesis_tables.json); x: not computed there; —: no "
         "such row",

@@ -12,12 +12,11 @@ are not repeated here: they are the same layers' as in Table 5.2.
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
 
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
-from dcslam.report.table_5_2 import (TABLE_5_2_COLUMNS, LayerResult, annotate, most_common_settings, score_layer,
-                                     settings_text)
+from dcslam.report.table_5_2 import (SEEDS_NOTE, TABLE_5_2_COLUMNS, SeedResults, annotate, csv_suffixes,
+                                     most_common_settings, score_layer, seeded, settings_text, with_seed_columns)
 from dcslam.report.tables import IP_BASIC, Column, RunSummary, Table
 from dcslam.workspace import Workspace
 
@@ -49,12 +48,25 @@ def layer_label(layer: str, runs: list[RunSummary]) -> str:
 
 
 def table_5_2_long_results(ws: Workspace, runs: list[RunSummary], drives: list[str],
-                           max_time_diff: float = EVO_MAX_TIME_DIFF_S) -> list[LayerResult]:
-    """A :class:`LayerResult` (trajectories only) for every layer with whole-drive SLAM outputs in ``slam-long/``;
-    empty when there are none. A layer lacking some test drive is kept, with what is missing."""
-    return [score_layer(ws, layer_label(layer, runs), layer, drives, max_time_diff=max_time_diff,
-                        slam_root=ws.slam_long, depth=False)
-            for layer in long_layers(ws.slam_long)]
+                           max_time_diff: float = EVO_MAX_TIME_DIFF_S) -> list:
+    """A :class:`LayerResult` (trajectories only) for every layer with whole-drive SLAM outputs in ``slam-long/``,
+    the layers of the seeds of one run (:func:`dcslam.report.seeds.seed_groups`) as one :class:`SeedResults`; empty
+    when there are none. A layer lacking some test drive is kept, with what is missing."""
+    from dcslam.report.seeds import seed_groups
+
+    settings = {run.name: run.settings for run in runs}
+    seeds = {run.name: run.seed for run in runs}
+    results = []
+    for group in seed_groups(long_layers(ws.slam_long), name=lambda layer: layer,
+                             settings=lambda layer: settings.get(layer, {"layer": layer})):
+        scored = []
+        for layer in group:
+            result = score_layer(ws, layer_label(layer, runs), layer, drives, max_time_diff=max_time_diff,
+                                 slam_root=ws.slam_long, depth=False)
+            result.seed = seeds.get(layer)
+            scored.append(result)
+        results.append(scored[0] if len(scored) == 1 else SeedResults(scored[0].label, scored))
+    return results
 
 
 def _range_text(values: list[float], fmt: str) -> str | None:
@@ -64,7 +76,7 @@ def _range_text(values: list[float], fmt: str) -> str | None:
     return fmt.format(low) if fmt.format(low) == fmt.format(high) else f"{fmt.format(low)}–{fmt.format(high)}"
 
 
-def table_5_2_long(results: list[LayerResult], drives: list[str]) -> Table:
+def table_5_2_long(results: list, drives: list[str]) -> Table:
     """The long-drive table: one row per result, figures as mean ± the 95 % t-interval's half-width over the test
     drives (the CSV also holds std, interval and median); rows differ from sparse depth only beyond the paired
     interval; a row whose drives are all shorter than 100 m says so instead of a drift.
@@ -72,11 +84,12 @@ def table_5_2_long(results: list[LayerResult], drives: list[str]) -> Table:
     A drive fails here only when its run was flagged (rejected or degraded steps): the thesis's error, a mean over
     poses from the start, grows with a drive's length, so Table 5.2's threshold on it (made for 30 frames) does not
     apply."""
-    results = [replace(r, failure_threshold=math.inf) for r in results]
-    table = Table(f"Table 5.2, whole drives — {len(drives)} test drive(s), SLAM over every frame", LONG_COLUMNS)
-    table.csv_columns = [Column(k, k) for k in ("method", "layer", "drives", "frames_text", "path_text", "failures",
-                                                "vs_sparse")] + [
-        Column(f"{key}{suffix}", "") for key in FIGURES for suffix in ("", "_std", "_ci_low", "_ci_high", "_median")
+    results = [r.with_failure_threshold(math.inf) for r in results]
+    table = Table(f"Table 5.2, whole drives — {len(drives)} test drive(s), SLAM over every frame",
+                  with_seed_columns(LONG_COLUMNS, seeded(results)))
+    table.csv_columns = [Column(k, k) for k in ("method", "layer", "drives", *(("seeds",) if seeded(results) else ()),
+                                                "frames_text", "path_text", "failures", "vs_sparse")] + [
+        Column(f"{key}{suffix}", "") for key in FIGURES for suffix in csv_suffixes(seeded(results))
     ] + [Column(f"{k}_drives", "") for k in FIGURES[-2:]] + [
         Column("slam_settings", ""), Column("missing", ""), Column("notes", "")]
     reference = next((r for r in results if r.layer == "sparse"), None)
@@ -84,7 +97,7 @@ def table_5_2_long(results: list[LayerResult], drives: list[str]) -> Table:
     common = most_common_settings(list(settings.values()))
     for result in results:
         row = result.row(reference)
-        per_drive = result.per_drive().values()
+        per_drive = [values for _, _, values in result.per_drive_rows()]
         row["frames_text"] = _range_text([r["poses"] for r in per_drive if "poses" in r], "{:d}")
         row["path_text"] = _range_text([r["path_m"] for r in per_drive if r.get("path_m") is not None], "{:.0f}")
         table.rows.append(annotate(row, result, settings.get(id(result)), common))
@@ -98,5 +111,5 @@ def table_5_2_long(results: list[LayerResult], drives: list[str]) -> Table:
         "t_rel / r_rel: KITTI odometry devkit drift over 100–800 m segments from every 10th frame, averaged over the "
         "drives long enough; a drive shorter than 100 m has none (notes give the longest path)",
         f"SLAM settings of the rows (those of most rows; a row made otherwise says how in SLAM settings): "
-        f"{settings_text(common) or 'none recorded'}"]
+        f"{settings_text(common) or 'none recorded'}"] + ([SEEDS_NOTE] if seeded(results) else [])
     return table

@@ -22,7 +22,8 @@ from pathlib import Path
 
 from dcslam.errors import DcslamError
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
-from dcslam.report.spread import differs, spread
+from dcslam.report.seeds import paired
+from dcslam.report.spread import TWO_LEVEL_METHOD
 from dcslam.report.table_5_2 import FAILURE_THRESHOLD, LayerResult, score_layer
 from dcslam.report.tables import Column, Table
 from dcslam.workspace import Workspace
@@ -67,25 +68,58 @@ def prediction_name(completer: str, beams: int) -> str:
     return f"{completer}-sparse{beams}"
 
 
-def layer_name(item: BeamsInput, beams: int | None) -> str:
-    """The layer behind ``item`` at ``beams`` beams (``beams`` is ignored for the beam-independent inputs)."""
+def layer_name(item: BeamsInput, beams: int | None, run: str | None = None) -> str:
+    """The layer behind ``item`` at ``beams`` beams (``beams`` is ignored for the beam-independent inputs); ``run``:
+    the trained completer's run when it is not ``item.completer`` itself (another training seed's,
+    :func:`dcslam.report.seeds.seed_run_name`)."""
     if not item.per_beam:
         return "dense" if item.label == "annotated dense" else "exact"
     if item.completer is None:
         return sparse_kind(beams)
-    name = prediction_name(item.completer, beams)
+    name = prediction_name(run or item.completer, beams)
     return f"{name}+{MASKED}" if item.masked else name
+
+
+def seed_runs(ws: Workspace, completer: str) -> list[tuple[str, int | None]]:
+    """The runs of ``completer`` trained with different seeds (``runs/<completer>``, ``runs/<completer>-s<k>``, by
+    k; :func:`dcslam.report.seeds.seed_run_name`) with each one's training seed from its ``config.json``; just
+    ``completer`` (seed unknown) when there are fewer than two such runs."""
+    import json
+
+    from dcslam.report.seeds import seed_base
+
+    found = []
+    if ws.runs.is_dir():
+        for folder in ws.runs.iterdir():
+            base, k = seed_base(folder.name)
+            if base == completer and (folder / "config.json").is_file():
+                try:
+                    seed = json.loads((folder / "config.json").read_text()).get("settings", {}).get("seed")
+                except json.JSONDecodeError:
+                    raise DcslamError(f"{folder / 'config.json'}: not valid JSON") from None
+                found.append((k, folder.name, seed))
+    if len(found) < 2:
+        seed = found[0][2] if found and found[0][1] == completer else None
+        return [(completer, seed)]
+    return [(name, seed) for _, name, seed in sorted(found)]
 
 
 def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_diff: float = EVO_MAX_TIME_DIFF_S,
                   failure_threshold: float = FAILURE_THRESHOLD,
-                  jobs: int = 1) -> dict[tuple[int | None, str], LayerResult]:
+                  jobs: int = 1) -> dict:
     """Scores of every (beam count, input): ``{(beams, label): result}``, beam counts from the largest; the
-    beam-independent inputs last, under ``(None, label)``. Missing inputs are recorded in each result (see
-    :func:`dcslam.report.table_5_2.score_layer`). ``jobs`` > 1 scores the rows in that many worker processes."""
+    beam-independent inputs last, under ``(None, label)``. A trained completer with runs of several seeds
+    (:func:`seed_runs`) gives a :class:`dcslam.report.table_5_2.SeedResults` over them, other inputs a
+    :class:`LayerResult`. Missing inputs are recorded in each result (see
+    :func:`dcslam.report.table_5_2.score_layer`). ``jobs`` > 1 scores the layers in that many worker processes."""
+    from dcslam.report.table_5_2 import SeedResults
+
     keys = [(b, i) for b in sorted(beams, reverse=True) for i in INPUTS if i.per_beam]
     keys += [(None, i) for i in INPUTS if not i.per_beam]
-    work = [(ws, item.label, layer_name(item, b), drives, max_time_diff, failure_threshold) for b, item in keys]
+    runs = {c: seed_runs(ws, c) for c in TRAINED}
+    members = {key: runs[key[1].completer] if key[1].completer in TRAINED else [(None, None)] for key in keys}
+    work = [(ws, item.label, layer_name(item, b, run), drives, max_time_diff, failure_threshold)
+            for b, item in keys for run, _ in members[(b, item)]]
     if jobs <= 1:
         scored = [_score(*args) for args in work]
     else:
@@ -93,7 +127,14 @@ def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_d
 
         with process_pool(jobs, len(work)) as pool:
             scored = list(pool.map(_score, *zip(*work)))
-    return {(b, item.label): result for (b, item), result in zip(keys, scored)}
+    results, at = {}, 0
+    for b, item in keys:
+        group = scored[at:at + len(members[(b, item)])]
+        at += len(group)
+        for result, (_, seed) in zip(group, members[(b, item)]):
+            result.seed = seed
+        results[(b, item.label)] = group[0] if len(group) == 1 else SeedResults(item.label, group)
+    return results
 
 
 def _score(ws, label, layer, drives, max_time_diff, failure_threshold) -> LayerResult:
@@ -153,20 +194,17 @@ COLUMNS = [Column("beams", "beams"), Column("input", "input"), Column("layer", "
 FIGURES = ("localisation", "mae_mm", "rmse_mm", "ate_rmse_m", "rpe_rmse_m", "rpe_rmse_deg")
 
 
-def _verdict(result: LayerResult, reference: LayerResult | None) -> str | None:
+def _verdict(result, reference) -> str | None:
     if reference is None or not reference.pairs or not result.pairs:
         return None
     if result is reference:
         return "reference"
-    common = [d for d in result.pairs if d in reference.pairs]
-    mine = [result.scores[d].localisation for d in common]
-    theirs = [reference.scores[d].localisation for d in common]
-    verdict = differs(mine, theirs)
+    verdict, difference = paired(result, reference)
     if verdict is None:
         return "one drive"
     if not verdict:
         return "within spread"
-    return "better" if sum(mine) < sum(theirs) else "worse"
+    return "better" if difference < 0 else "worse"
 
 
 def _gap_closed(result: LayerResult, sparse: LayerResult | None, exact: LayerResult | None) -> float | None:
@@ -180,12 +218,16 @@ def _gap_closed(result: LayerResult, sparse: LayerResult | None, exact: LayerRes
 def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[int], drives: list[str]) -> Table:
     """The beams table: one row per (beam count, input), then the beam-independent rows (compared with the 64-beam
     sparse input, or the largest beam count's). Refuses rows made with different SLAM settings."""
+    from dcslam.report.table_5_2 import csv_suffixes, seeded, with_seed_columns
+
     settings = common_settings(results)
     frames = {p.T_est.shape[0] for r in results.values() for p in r.pairs.values()}
-    table = Table(f"The beams experiment — {len(drives)} test drive(s) ({', '.join(drives)})", COLUMNS)
-    table.csv_columns = [Column(k, k) for k in ("beams", "input", "layer", "drives", "failures", "vs_sparse",
-                                                "gap_closed")] + [
-        Column(f"{k}{s}", "") for k in FIGURES for s in ("", "_std", "_ci_low", "_ci_high", "_median")] + [
+    seeds = seeded(list(results.values()))
+    table = Table(f"The beams experiment — {len(drives)} test drive(s) ({', '.join(drives)})",
+                  with_seed_columns(COLUMNS, seeds))
+    table.csv_columns = [Column(k, k) for k in ("beams", "input", "layer", "drives", *(("seeds",) if seeds else ()),
+                                                "failures", "vs_sparse", "gap_closed")] + [
+        Column(f"{k}{s}", "") for k in FIGURES for s in csv_suffixes(seeds)] + [
         Column("missing", "")]
     exact = results.get((None, "exact"))
     top = max(beams)
@@ -215,6 +257,11 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
         f"{next(iter(results.values())).failure_threshold:g} m + rad (kept in the means)" if results else "",
         "SLAM settings of every row: " + (", ".join(f"{k}={settings[k]}" for k in sorted(settings)) or "none "
                                            "recorded"),
+        (f"rows over several training seeds (seeds: their number; layer: the first seed's): every figure is the "
+         f"mean over seeds × test drives with its 95 % interval [low, high] from a {TWO_LEVEL_METHOD}; "
+         "seed-to-seed std: the std of the per-seed mean localisations; failed: failed runs of all seeds × drives; "
+         "vs sparse (and the findings' comparisons): the same two-level interval of the per-run differences "
+         "(paired by drive, and by seed between two rows over seeds)" if seeds else ""),
         *findings(results, beams)]
     table.notes = [n for n in table.notes if n]
     return table
@@ -255,10 +302,13 @@ def per_drive_table(results: dict[tuple[int | None, str], LayerResult]) -> Table
     """Every figure of every row on every test drive (``results/table_beams_per_drive.csv``)."""
     from dcslam.report.scores import PER_DRIVE_KEYS
 
-    columns = [Column("beams", "beams"), Column("input", "input"), Column("layer", "layer"),
+    from dcslam.report.scores import _seed_layer
+
+    columns = [Column("beams", "beams"), Column("input", "input"), Column("layer", "layer"), Column("seed", "seed"),
                Column("drive", "drive")] + [Column(k, k) for k in PER_DRIVE_KEYS]
-    rows = [{"beams": b if b is not None else "any", "input": label, "layer": r.layer, "drive": drive, **values}
-            for (b, label), r in results.items() for drive, values in r.per_drive().items()]
+    rows = [{"beams": b if b is not None else "any", "input": label, "layer": _seed_layer(r, seed), "seed": seed,
+             "drive": drive, **values}
+            for (b, label), r in results.items() for seed, drive, values in r.per_drive_rows()]
     return Table("The beams experiment per drive", columns, rows)
 
 
@@ -274,7 +324,7 @@ def plot_localisation_vs_beams(path: Path | str, results: dict[tuple[int | None,
     xs = sorted(beams)
     per_beam = [item for item in INPUTS if item.per_beam]
     for i, item in enumerate(per_beam):
-        points = [(b, spread([s.localisation for s in results[(b, item.label)].scores.values()]))
+        points = [(b, results[(b, item.label)].localisation_spread())
                   for b in xs if (b, item.label) in results and results[(b, item.label)].pairs]
         if not points:
             continue
@@ -289,7 +339,7 @@ def plot_localisation_vs_beams(path: Path | str, results: dict[tuple[int | None,
         result = results.get((None, item.label))
         if result is None or not result.pairs:
             continue
-        s = spread([v.localisation for v in result.scores.values()])
+        s = result.localisation_spread()
         colour = f"C{len(per_beam) + j}"
         ax.axhline(s.mean, color=colour, ls="--", lw=1.2, label=f"{item.label} (any beam count)")
         if s.ci_low is not None:

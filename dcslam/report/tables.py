@@ -88,6 +88,8 @@ class RunSummary:
     selected_by: str
     best: dict            # the validation record of the best checkpoint
     validations: int
+    seed: int | None = None  # its training seed
+    settings: dict = field(default_factory=dict)  # its `dcslam train` settings (config.json)
 
 
 def read_run(run_dir: Path) -> RunSummary:
@@ -118,8 +120,25 @@ def read_run(run_dir: Path) -> RunSummary:
     if not usable:
         raise DcslamError(f"{metrics_path}: validation records have no {key!r} value")
     best = min(usable, key=lambda r: r[key])
-    return RunSummary(name=run_dir.name, recipe=recipe_of(settings), selected_by=key, best=best,
-                      validations=len(validations))
+    return RunSummary(name=run_dir.name, recipe=recipe_of(_seed_free(run_dir.name, settings)), selected_by=key,
+                      best=best, validations=len(validations), seed=settings.get("seed"), settings=settings)
+
+
+def _seed_free(name: str, settings: dict) -> dict:
+    """``settings`` of run ``name`` with the run it was fine-tuned from named as the recipe names it: the ``k``-th
+    seed's run of a recipe (``<run>-s<k>``) starts from the ``k``-th seed's run of its source, which is the source
+    recipe's run (``pose-from-chamfer-8-s1`` from ``chamfer-8-s1``: "pose, fine-tuned from chamfer-8")."""
+    from pathlib import PurePath
+
+    from dcslam.depth.recipes import init_run
+    from dcslam.report.seeds import seed_base
+
+    _, k = seed_base(name)
+    source, source_k = seed_base(init_run(settings))
+    if k == 0 or source_k != k:
+        return settings
+    init = PurePath(settings["init"])
+    return {**settings, "init": str(init.parent.parent / source / init.name)}
 
 
 def list_runs(ws: Workspace) -> list[RunSummary]:
@@ -135,21 +154,48 @@ def table_5_1(runs: list[RunSummary], thesis: dict) -> Table:
                Column("mse", "MSE (m²)"), Column("thesis_mse", "thesis MSE"),
                Column("mae_mm", "MAE (mm)", "{:.1f}"), Column("thesis_mae", "thesis MAE"),
                Column("rmse_mm", "RMSE (mm)", "{:.1f}"), Column("thesis_rmse", "thesis RMSE")]
+    from dcslam.report.seeds import seed_groups
+
     figures = thesis.get("table_5_1", {}).get("rows", {})
+    groups = seed_groups(runs)
+    seeded = any(len(g) > 1 for g in groups)
+    if seeded:  # one row per seed's run, then the recipe's mean ± std over its seeds
+        columns.insert(2, Column("seed", "seed"))
     table = Table("Table 5.1 — validation of each training recipe (best checkpoint of each run)", columns)
+    figures_5_1 = ("chamfer", "mse", "mae_mm", "rmse_mm")
     for recipe in RECIPES + tuple(sorted({r.recipe for r in runs} - set(RECIPES))):
-        ours = [r for r in runs if r.recipe == recipe]
+        ours = [g for g in groups if g[0].recipe == recipe]
         theirs = {f"thesis_{k}": v for k, v in figures.get(recipe, {}).items()}
         if not ours:
             table.rows.append({"recipe": recipe, "run": "missing: no run", **theirs})
-        for run in ours:
-            table.rows.append({"recipe": recipe, "run": run.name, "epoch": run.best.get("epoch"),
-                               **{k: run.best.get(k) for k in ("chamfer", "mse", "mae_mm", "rmse_mm")}, **theirs})
+        for group in ours:
+            for run in group:
+                table.rows.append({"recipe": recipe, "run": run.name, "seed": run.seed if seeded else None,
+                                   "epoch": run.best.get("epoch"),
+                                   **{k: run.best.get(k) for k in figures_5_1}, **theirs})
+            if len(group) > 1:
+                table.rows.append({"recipe": recipe, "run": f"mean ± std of {len(group)} seeds",
+                                   **{k: _mean_std_text([r.best.get(k) for r in group], columns, k)
+                                      for k in figures_5_1}, **theirs})
     table.notes.append("best checkpoint: lowest validation chamfer for chamfer runs, lowest validation MSE for MSE "
                        "runs (the model.pt each run keeps)")
     table.notes.append(f"thesis columns: the thesis's own figures ({thesis.get('citation', 'thesis_tables.json')}); "
                        "— where the thesis did not compute it ('x')")
+    if seeded:
+        table.notes.append("a recipe trained with several seeds: one row per seed's run, then the mean ± the sample "
+                           "std over its seeds' best checkpoints")
     return table
+
+
+def _mean_std_text(values: list, columns: list[Column], key: str) -> str | None:
+    """``mean ± std`` (sample std) of the numbers among ``values``, in column ``key``'s format; None without two."""
+    numbers = [float(v) for v in values if isinstance(v, (int, float)) and not isinstance(v, bool)]
+    if len(numbers) < 2:
+        return None
+    fmt = next(c.fmt for c in columns if c.key == key)
+    mean = sum(numbers) / len(numbers)
+    std = math.sqrt(sum((v - mean) ** 2 for v in numbers) / (len(numbers) - 1))
+    return f"{fmt.format(mean)} ± {fmt.format(std)}"
 
 
 def table_5_3(thesis: dict) -> Table:

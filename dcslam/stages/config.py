@@ -10,7 +10,8 @@ command-line option). :func:`dcslam.settings.option` builds such a field.
 
 A configuration file holds the same keys as the options (``map_frames``, not ``--map-frames``), in TOML (read with
 :mod:`tomllib`) or YAML (read with PyYAML when it is installed). :func:`to_toml` writes the configuration a command
-would run, so that it can be edited and given back with ``--config``.
+would run, so that it can be edited and given back with ``--config``. :class:`Options` holds some fields of a
+configuration (a profile's or a recipe's share of it), checked against the dataclass's fields when made.
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ import dataclasses
 import hashlib
 import types
 import typing
+from collections.abc import Mapping
 from pathlib import Path
 
 from dcslam.errors import DcslamError
@@ -182,3 +184,69 @@ def code_version() -> str:
         digest.update(str(path.relative_to(root)).encode())
         digest.update(path.read_bytes())
     return f"{__version__}+{digest.hexdigest()[:16]}"
+
+
+class Options(Mapping):
+    """Some fields of a stage's configuration dataclass ``config`` (a profile's or a recipe's share of a
+    ``dcslam train`` / ``dcslam slam`` configuration), checked against the dataclass's fields when made, so that a
+    misspelt or mistyped option fails where it is written, not when the stage runs.
+
+    A read-only mapping of field name → value; ``a | b`` is ``a`` with ``b``'s fields set (``b`` checked too);
+    :meth:`build` makes the configuration itself (whose own checks then run).
+    """
+
+    __slots__ = ("config", "_values")
+
+    def __init__(self, config: type, values: Mapping | None = None, /, **more) -> None:
+        if not dataclasses.is_dataclass(config):
+            raise DcslamError(f"options of {config!r}: expected a configuration dataclass")
+        merged = {**(values or {}), **more}
+        fields = {f.name for f in options_of(config)}
+        for key, value in merged.items():
+            if key not in fields:
+                import difflib
+
+                close = difflib.get_close_matches(key, sorted(fields), n=1)
+                hint = f"did you mean {close[0]!r}?" if close else f"expected one of {', '.join(sorted(fields))}"
+                raise DcslamError(f"{config.__name__} has no option {key!r}; {hint}")
+            _check_type(config, key, value)
+        object.__setattr__(self, "config", config)
+        object.__setattr__(self, "_values", merged)
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"{type(self).__name__} is read-only")
+
+    def __getitem__(self, key: str):
+        return self._values[key]
+
+    def __iter__(self):
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def __or__(self, other: Mapping) -> "Options":
+        return Options(self.config, {**self._values, **other})
+
+    def __repr__(self) -> str:
+        return f"Options({self.config.__name__}, {self._values!r})"
+
+    def build(self, **more):
+        """The configuration: these fields, then ``more`` (checked as fields too), the others at their defaults."""
+        return self.config(**(self | more))
+
+
+def _check_type(config: type, key: str, value) -> None:
+    """Fail unless ``value`` has the type of field ``key`` of ``config`` (as a configuration file's value would)."""
+    base, optional, is_list = split_type(field_type(config, key))
+    source = f"{config.__name__} option"
+    if value is None:
+        if not optional:
+            raise DcslamError(f"{source} {key} cannot be None")
+    elif is_list:
+        if not isinstance(value, (list, tuple)):
+            raise DcslamError(f"{source} {key} must be a list, got {value!r}")
+        for item in value:
+            _convert(item, base, key, source)
+    elif base in (int, float, str, bool, Path):
+        _convert(value, base, key, source)

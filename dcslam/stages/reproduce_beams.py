@@ -16,7 +16,7 @@ profile sets the scale; its ``train`` is the one dict of training options (run n
 """
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,7 +28,8 @@ from dcslam.report.table_beams import (FULL_BEAMS, INPUTS, IP_BASIC_RUN, TRAINED
 from dcslam.stages import filter as filter_stage
 from dcslam.stages import predict, prepare, slam, train
 from dcslam.stages.config import option
-from dcslam.stages.reproduce import Pipeline, Stage, make_drives, training_rounds
+from dcslam.report.seeds import seed_run_name
+from dcslam.stages.reproduce import Pipeline, Stage, make_drives, profile_options, train_options, training_rounds
 from dcslam.workspace import Workspace
 
 
@@ -39,8 +40,9 @@ class BeamsProfile:
     name: str
     drives: int                          # generated drives
     frames: int                          # raw frames per generated drive (depth exists for frames 5 … N−6)
-    train: dict[str, dict]               # run name (sparse-conv, nconv, nconv-guided, nconv-pose) → `dcslam train`
-                                         # options; a run with ``init`` is trained after the run it starts from
+    train: Mapping[str, Mapping]         # run name (sparse-conv, nconv, nconv-guided, nconv-pose) → `dcslam train`
+                                         # options (checked against TrainStageConfig's fields when the profile is
+                                         # made); a run with ``init`` is trained after the run it starts from
     slam_frames: int                     # frames of each test drive fed to SLAM
     beams: tuple[int, ...] = (64, 32, 16, 8)
     # nconv's "masked" rows keep each frame's most confident quarter of pixels: a fixed threshold (0.5) emptied the
@@ -48,10 +50,19 @@ class BeamsProfile:
     # quarter localised best of 25/50/75 % (RESULTS.md, "Confidence in SLAM")
     confidence_keep: float = 0.25
     split: tuple[int, int, int] | None = None
-    slam: dict = field(default_factory=dict)  # SLAM settings other than the defaults (fields of SlamSettings)
+    slam: Mapping = field(default_factory=dict)  # SLAM settings other than the defaults (fields of SlamStageConfig)
     description: str = ""
+    seeds: int = 1                       # training seeds per trained run (``dcslam reproduce --seeds`` overrides it)
 
     def __post_init__(self) -> None:
+        fixed = frozenset(("name", "seed"))
+        object.__setattr__(self, "train", {run: profile_options(f"beams {self.name}", f"train[{run!r}]",
+                                                                train.TrainStageConfig, options, fixed)
+                                           for run, options in self.train.items()})
+        object.__setattr__(self, "slam", profile_options(f"beams {self.name}", "slam", slam.SlamStageConfig,
+                                                         self.slam, frozenset(("depth", "drive", "frames", "out"))))
+        if self.seeds < 1:
+            raise DcslamError(f"beams profile {self.name}: seeds must be >= 1, got {self.seeds}")
         if set(self.train) != set(TRAINED):
             raise DcslamError(f"beams profile {self.name}: train must hold options for exactly "
                               f"{', '.join(TRAINED)}, got {', '.join(self.train) or 'none'}")
@@ -69,9 +80,14 @@ class BeamsProfile:
             raise DcslamError(f"beams profile {self.name}: split {self.split} must be >= 1 drive each and add up "
                               f"to {self.drives} drives")
 
-    def train_config(self, run: str, seed: int) -> train.TrainStageConfig:
-        """The ``dcslam train`` configuration of run ``run`` (its ``model`` defaults to the run's name)."""
-        return train.TrainStageConfig(**{"model": run, **self.train[run]}, name=run, seed=seed)
+    def train_config(self, run: str, seed: int, k: int = 0) -> train.TrainStageConfig:
+        """The ``dcslam train`` configuration of run ``run`` (its ``model`` defaults to the run's name) for the
+        ``k``-th training seed: named :func:`seed_run_name` (``run``, k), trained with seed ``seed + k`` and
+        fine-tuned from the ``k``-th run of the run it starts from."""
+        options = self.train[run]
+        if options.get("init") is not None:
+            options = options | {"init": seed_run_name(options["init"], k)}
+        return (train_options(model=run) | options).build(name=seed_run_name(run, k), seed=seed + k)
 
     def stages_of_training(self) -> list[list[str]]:
         """The runs in the order they can be trained: those from scratch, then those fine-tuned from them."""
@@ -117,6 +133,14 @@ PROFILES = {
                "nconv-guided": {"epochs": 5, "max_frames": 200, **_CORRECT},
                "nconv-pose": {**_POSE, "epochs": 1, "max_frames": 200}},
         description="the thesis's scale: 15 / 4 / 5 drives of 200 frames, full resolution (use a GPU)"),
+    "study": BeamsProfile(
+        name="study", drives=14, frames=42, split=(5, 1, 8), slam_frames=30, beams=(64, 16, 8), seeds=3,
+        train={"sparse-conv": {**_QUICK, **_CORRECT}, "nconv": {**_QUICK, **_CORRECT},
+               "nconv-guided": {**_QUICK, **_CORRECT}, "nconv-pose": {**_POSE, **_POSE_QUICK}},
+        description="the quick profile's training at a scale whose rows can be told apart: 14 generated drives of "
+                    "42 frames (5 train / 1 val / 8 test, the drives of the Table 5.2 study profile), 64/16/8 "
+                    "beams, every trained completer with 3 training seeds, SLAM on the first 30 frames of each test "
+                    "drive; intervals over seeds and drives"),
 }
 
 
@@ -166,26 +190,38 @@ def _have_exact(drives: list[Path]) -> bool:
 
 def reproduce(ws: Workspace, profile: BeamsProfile, kitti_root: Path | None = None, seed: int = 0,
               log: Callable[[str], None] = lambda line: None, force: bool = False, jobs: int = 1,
-              executor=None) -> Path:
+              seeds: int = 1, executor=None) -> Path:
     """Run the beams experiment at ``profile``'s scale; return the Markdown file of its table (``force``, ``jobs``,
-    ``executor``: as :func:`dcslam.stages.reproduce.reproduce`)."""
-    return compose(Pipeline(ws, log, force=force, executor=executor), profile, kitti_root, seed, jobs)
+    ``seeds``, ``executor``: as :func:`dcslam.stages.reproduce.reproduce`)."""
+    return compose(Pipeline(ws, log, force=force, executor=executor), profile, kitti_root, seed, jobs, seeds)
 
 
 def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = None, seed: int = 0,
-            jobs: int = 1) -> Path:
-    """Hand every stage of the beams experiment to ``pipe`` in order; return the Markdown file of its table."""
+            jobs: int = 1, seeds: int = 1) -> Path:
+    """Hand every stage of the beams experiment to ``pipe`` in order; return the Markdown file of its table. Every
+    learned completer is trained ``seeds`` times (the ``k``-th run :func:`seed_run_name` (run, k), seed
+    ``seed + k``) and each run predicted, filtered and run through SLAM; IP-Basic and the untrained layers once."""
+    if seeds < 1:
+        raise DcslamError(f"seeds must be >= 1, got {seeds}")
     ws = pipe.ws
     test, learn = make_drives(pipe, drives=profile.drives, frames=profile.frames, split=profile.split,
                               kitti_root=kitti_root, seed=seed, jobs=jobs,
                               beams=tuple(b for b in profile.beams if b != FULL_BEAMS))
     for runs in profile.stages_of_training():
-        pipe.run_all([Stage(f"train-{run}", train.run, profile.train_config(run, seed),
-                            outputs=lambda r=run: [ws.runs / r / "model.pt", ws.runs / r / "metrics.jsonl"],
-                            inputs=lambda r=run: learn + _init_model(ws, profile.train[r])) for run in runs], jobs)
+        stages = []
+        for k in range(seeds):
+            for run in runs:
+                config = profile.train_config(run, seed, k)
+                stages.append(Stage(f"train-{config.name}", train.run, config,
+                                    outputs=lambda r=config.name: [ws.runs / r / "model.pt",
+                                                                   ws.runs / r / "metrics.jsonl"],
+                                    inputs=lambda c=config: learn + _init_model(ws, {"init": c.init}),
+                                    seed=seed + k))
+        pipe.run_all(stages, jobs)
+    completers = [(IP_BASIC_RUN, None)] + [(seed_run_name(run, k), seed + k) for k in range(seeds) for run in TRAINED]
     predictions = []
     for b in profile.beams:
-        for completer in (IP_BASIC_RUN, *TRAINED):
+        for completer, run_seed in completers:
             out = ws.predictions / prediction_name(completer, b)
             made = [out / p.name for p in test]
             config = (predict.PredictConfig(model=completer, input=sparse_kind(b), output=out)
@@ -193,17 +229,20 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
                       predict.PredictConfig(run=completer, input=sparse_kind(b), output=out))
             needs = [] if completer == IP_BASIC_RUN else [ws.runs / completer / "model.pt"]
             predictions.append(Stage(f"predict-{out.name}", predict.run, config, outputs=lambda m=made: m,
-                                     inputs=lambda n=needs: [*n, *test]))
+                                     inputs=lambda n=needs: [*n, *test], seed=run_seed))
     pipe.run_all(predictions, jobs)
     masked = []
     for item in (i for i in INPUTS if i.masked):
-        for b in profile.beams:
-            name, source = layer_name(item, b), prediction_name(item.completer, b)
-            made = [ws.filtered / name / p.name for p in test]
-            config = filter_stage.FilterConfig(filters=[f"confidence:min=0,keep={profile.confidence_keep:g}"],
-                                               depth="predicted", run=source, name=name)
-            masked.append(Stage(f"filter-{name}", filter_stage.run, config, outputs=lambda m=made: m,
-                                inputs=lambda s=source: [ws.predictions / s / p.name for p in test]))
+        for k in range(seeds):
+            run = seed_run_name(item.completer, k)
+            for b in profile.beams:
+                name, source = layer_name(item, b, run), prediction_name(run, b)
+                made = [ws.filtered / name / p.name for p in test]
+                config = filter_stage.FilterConfig(filters=[f"confidence:min=0,keep={profile.confidence_keep:g}"],
+                                                   depth="predicted", run=source, name=name)
+                masked.append(Stage(f"filter-{name}", filter_stage.run, config, outputs=lambda m=made: m,
+                                    inputs=lambda s=source: [ws.predictions / s / p.name for p in test],
+                                    seed=seed + k))
     pipe.run_all(masked, jobs)
 
     slam_stages, slam_outputs = [], []
@@ -213,18 +252,22 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
     for item in INPUTS:
         if item.label == "exact" and not exact:
             continue
-        for b in (profile.beams if item.per_beam else [None]):
-            layer = layer_name(item, b)
-            folder = None if item.completer in (None, "") else (ws.filtered if item.masked else ws.predictions)
-            reference = layer if folder is None else f"{'filtered' if item.masked else 'predicted'}/{layer}"
-            for drive in test:
-                made = [ws.slam / layer / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt")]
-                slam_outputs += made
-                config = slam.SlamStageConfig(**{"odometry": "icp", **profile.slam}, depth=reference,
-                                              drive=[drive.stem], frames=profile.slam_frames)
-                source = [] if folder is None else [folder / layer / drive.name]
-                slam_stages.append(Stage(f"slam-{layer}-{drive.stem}", slam.run, config, outputs=lambda m=made: m,
-                                         inputs=lambda d=drive, s=source: [d, *s]))
+        trained = item.completer in TRAINED
+        for k in range(seeds if trained else 1):
+            run = seed_run_name(item.completer, k) if trained else None
+            for b in (profile.beams if item.per_beam else [None]):
+                layer = layer_name(item, b, run)
+                folder = None if item.completer in (None, "") else (ws.filtered if item.masked else ws.predictions)
+                reference = layer if folder is None else f"{'filtered' if item.masked else 'predicted'}/{layer}"
+                for drive in test:
+                    made = [ws.slam / layer / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt")]
+                    slam_outputs += made
+                    config = slam.SlamStageConfig(**{"odometry": "icp", **profile.slam}, depth=reference,
+                                                  drive=[drive.stem], frames=profile.slam_frames)
+                    source = [] if folder is None else [folder / layer / drive.name]
+                    slam_stages.append(Stage(f"slam-{layer}-{drive.stem}", slam.run, config,
+                                             outputs=lambda m=made: m, inputs=lambda d=drive, s=source: [d, *s],
+                                             seed=seed + k if trained else None))
     pipe.run_all(slam_stages, jobs)
     table = BeamsTableConfig(beams=list(profile.beams), drive=[p.stem for p in test], jobs=jobs)
     pipe.run(Stage("score-beams", run_table, table, outputs=lambda: [ws.results / "table_beams.md"],

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from dcslam.stages.reproduce import PROFILES, Pipeline, Profile, ReproduceConfig, Stage, compose, split_by_counts
+from dcslam.stages.reproduce import Pipeline, Profile, ReproduceConfig, Stage, compose, split_by_counts
 from dcslam.workspace import Workspace
 
 
@@ -39,16 +39,17 @@ def planned_splits(ws: Workspace, profile: Profile, kitti_root: Path | None = No
 
 
 def planned_stages(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_root: Path | None = None,
-                   seed: int = 0) -> list[Stage]:
+                   seed: int = 0, seeds: int = 1) -> list[Stage]:
     """The stages :func:`dcslam.stages.reproduce.reproduce` would run, in order, with their configurations (test
-    drives from :func:`planned_splits`); nothing is run or written."""
+    drives from :func:`planned_splits`; ``seeds`` training seeds per trained run, each stage's ``seed`` that of the
+    run it trains or uses); nothing is run or written."""
     pipe = _Listing(workspace, planned_splits(workspace, profile, kitti_root))
     if table == "beams":  # ``profile`` is then a :class:`dcslam.stages.reproduce_beams.BeamsProfile`
         from dcslam.stages import reproduce_beams
 
-        reproduce_beams.compose(pipe, profile, kitti_root, seed)
+        reproduce_beams.compose(pipe, profile, kitti_root, seed, seeds=seeds)
     else:
-        compose(pipe, profile, table, kitti_root, seed)
+        compose(pipe, profile, table, kitti_root, seed, seeds=seeds)
     return pipe.stages
 
 
@@ -58,13 +59,9 @@ def stage_configs_toml(workspace: Workspace, config: ReproduceConfig) -> str:
     reproduce``; :func:`read_stage_configs` reads them back."""
     from dcslam.stages.config import to_toml
 
-    if config.table == "beams":
-        from dcslam.stages.reproduce_beams import PROFILES as BEAMS_PROFILES
+    from dcslam.stages.reproduce import profile_of, seeds_of
 
-        profile = BEAMS_PROFILES[config.profile]
-    else:
-        profile = PROFILES[config.profile]
-    stages = planned_stages(workspace, profile, config.table, config.kitti, config.seed)
+    stages = planned_stages(workspace, profile_of(config), config.table, config.kitti, config.seed, seeds_of(config))
     lines = [f"# the {len(stages)} stages this runs, in order, with their configurations (informative: a stage is "
              "skipped when its outputs are up to date; each line below is TOML after '#> ')"]
     for stage in stages:

@@ -100,3 +100,26 @@ def test_train_choices_come_from_the_registries():
 
     assert config.MODELS == tuple(ARCHITECTURES)
     assert config.MASKS is recipes.MASKS is losses.MASKS and config.LOSSES is recipes.LOSSES
+
+
+def test_options_are_checked_against_the_config_fields_when_made():
+    from dcslam.stages.config import Options
+    from dcslam.stages.train import TrainStageConfig
+
+    options = Options(TrainStageConfig, {"loss": "chamfer"}, map_frames=8)
+    assert dict(options) == {"loss": "chamfer", "map_frames": 8} and options.config is TrainStageConfig
+    with pytest.raises(DcslamError, match="no option 'max_frame'; did you mean 'max_frames'"):
+        Options(TrainStageConfig, max_frame=2)
+    with pytest.raises(DcslamError, match="epochs must be int"):
+        Options(TrainStageConfig, epochs="2")
+    with pytest.raises(DcslamError, match="input_mix must be a list"):
+        Options(TrainStageConfig, input_mix="sparse")
+    with pytest.raises(DcslamError, match="no option 'bogus'"):
+        options | {"bogus": 1}  # what is merged in is checked too
+    merged = options | {"map_frames": 1, "epochs": 3}
+    assert merged["map_frames"] == 1 and options["map_frames"] == 8  # a new Options; the first unchanged
+    built = merged.build(name="x", seed=4)
+    assert (built.loss, built.map_frames, built.epochs, built.name, built.seed, built.lr) == (
+        "chamfer", 1, 3, "x", 4, TrainStageConfig().lr)
+    with pytest.raises(AttributeError):
+        options.config = None

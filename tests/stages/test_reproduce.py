@@ -204,7 +204,7 @@ def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(cli, tmp
     assert result.exit_code == 0, result.output
     printed = tomllib.loads(result.stdout)  # still a --config file of reproduce: the stages are comments
     assert printed == {"table": "5.2", "profile": "quick", "seed": 0, "force": False, "jobs": 1, "executor": "local",
-                       "slurm": {}}
+                       "slurm": {}, "dry_run": False}
     assert not ws.exists()  # nothing run, nothing written
     stages = read_stage_configs(result.stdout)
     names = list(stages)
@@ -225,3 +225,43 @@ def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(cli, tmp
                                     "--workspace", ws).stdout)
     assert list(thesis)[-1] == "score-tables" and not any(n.startswith("slam") for n in thesis)
     assert thesis["train-mse-dense"]["max_frames"] == 200
+
+
+def test_two_seeds_at_smoke_scale_write_the_seed_and_interval_columns(cli, tmp_path, monkeypatch):
+    """--seeds 2 on one thesis recipe (the other recipes left out to keep it short: their rows say so): each seed's
+    run is trained, predicted, filtered and run through SLAM; Table 5.2 gives the recipe one row over both seeds
+    with its interval and seed-to-seed spread, the per-drive CSV a seed column, Table 5.1 a row per seed."""
+    import csv
+
+    from dcslam.stages import reproduce as module
+
+    monkeypatch.setattr(module, "RECIPES", {"mse-sparse": module.RECIPES["mse-sparse"]})
+    monkeypatch.setattr(module, "POSE_RECIPES", {})
+    result = cli("reproduce", "--profile", "smoke", "--seeds", "2", "--workspace", tmp_path)
+    assert result.exit_code == 0, result.output
+    assert "2 training seed(s) per trained run (seeds 0, 1)" in result.stderr and "CPU-hours" in result.stderr
+    for run, seed in (("mse-sparse", 0), ("mse-sparse-s1", 1)):
+        assert json.loads((tmp_path / "runs" / run / "config.json").read_text())["settings"]["seed"] == seed
+    test_drive = json.loads((tmp_path / "drives" / "splits.json").read_text())["test"][0]
+    for layer in ("mse-sparse-s1", "mse-sparse-s1+edges", "sparse"):
+        assert (tmp_path / "slam" / layer / f"{test_drive}.txt").exists(), layer
+    assert not (tmp_path / "slam" / "sparse-s1").exists()  # untrained layers once
+    results = tmp_path / "results"
+    with open(results / "table_5_2.csv") as f:
+        rows = {row["method"]: row for row in csv.DictReader(f)}
+    trained, sparse = rows["MSE sparse mask"], rows["sparse depth"]
+    assert trained["seeds"] == "2" and trained["layer"] == "mse-sparse (seeds 0, 1)" and sparse["seeds"] == ""
+    low, mean, high = (float(trained[k]) for k in ("localisation_ci_low", "localisation", "localisation_ci_high"))
+    assert low <= mean <= high and float(trained["localisation_seed_std"]) >= 0
+    assert rows["MSE sparse mask + best filter"]["seeds"] == "2"
+    with open(results / "table_5_2_per_drive.csv") as f:
+        per_drive = list(csv.DictReader(f))
+    assert sorted((r["layer"], r["seed"]) for r in per_drive if r["method"] == "MSE sparse mask") == [
+        ("mse-sparse", "0"), ("mse-sparse-s1", "1")]
+    assert "mean ± std of 2 seeds" in (results / "table_5_1.md").read_text()
+    stages = planned_stages(Workspace(tmp_path), PROFILES["smoke"], seeds=2)
+    assert {p.stem for p in (tmp_path / ".reproduce").glob("*.json")} - {"splits"} == {s.name for s in stages}
+    assert {(s.name, s.seed) for s in stages if s.name.startswith("train-")} == {
+        ("train-mse-sparse", 0), ("train-mse-sparse-s1", 1)}
+    assert {s.seed for s in stages if "sparse-s1" in s.name} == {1} and \
+        {s.seed for s in stages if s.name.startswith(("synth", "slam-dense", "predict-ip-basic"))} == {None}

@@ -1,0 +1,78 @@
+"""What dcslam reproduce prints before it runs: its stages and their cost from measured stage timings."""
+import json
+
+import pytest
+
+from dcslam.errors import DcslamError
+from dcslam.stages.reproduce import PROFILES, ReproduceConfig
+from dcslam.stages.reproduce_cost import (DriveFrames, estimate, measure, plan_text, planned_drives, shipped_costs,
+                                          stage_work, unit_costs)
+from dcslam.stages.reproduce_plan import planned_splits, planned_stages
+from dcslam.workspace import Workspace
+
+DRIVES = DriveFrames({"a": 30, "b": 30, "c": 20, "t1": 32, "t2": 12},
+                     {"train": ["a", "b"], "val": ["c"], "test": ["t1", "t2"]})
+
+
+def test_work_of_each_stage_kind():
+    assert stage_work("synth", {"drives": 4, "frames": 42}, DRIVES, 0) == ("synth", 168.0)
+    assert stage_work("prepare-kitti", {}, DRIVES, 0) == ("prepare-kitti", 124.0)
+    train = {"loss": "chamfer", "epochs": 2, "max_frames": 25, "stride": 1, "scale": 0.5}
+    assert stage_work("train-chamfer-8", train, DRIVES, 0) == ("train-chamfer", 2 * (25 + 25 + 20) * 0.25)
+    assert stage_work("predict-nconv", {"run": "nconv", "model": None}, DRIVES, 0) == ("predict", 44.0)
+    assert stage_work("predict-ip-basic-fast", {"run": None, "model": "ip-basic-fast"}, DRIVES, 0)[0] == \
+        "predict-classical"
+    assert stage_work("slam-sparse-t1", {"drive": ["t1"], "frames": 30}, DRIVES, 0) == ("slam", 30.0)
+    assert stage_work("slam-sparse-t2", {"drive": ["t2"], "frames": 30}, DRIVES, 0) == ("slam", 12.0)
+    assert stage_work("slam-long-sparse-t1", {"drive": ["t1"], "frames": 0}, DRIVES, 0) == ("slam-long", 32.0)
+    assert stage_work("score-tables", {}, DRIVES, 7) == ("score", 7.0)
+    with pytest.raises(DcslamError, match="not a stage"):
+        stage_work("bake-bread", {}, DRIVES, 0)
+
+
+def test_unit_costs_are_measured_from_the_stamps_of_finished_stages(tmp_path):
+    from tests.fixtures.depth import write_workspace
+
+    root = write_workspace(tmp_path / "ws")  # drive files a, b (train), c (val), d (test); 6 frames each
+    state = root / ".reproduce"
+    state.mkdir()
+    slam = {"drive": ["drive_d"], "frames": 4}
+    (state / "slam-sparse-drive_d.json").write_text(json.dumps({"config": slam, "complete": True, "seconds": 2.0}))
+    (state / "slam-dense-drive_d.json").write_text(json.dumps({"config": slam, "complete": True, "seconds": 6.0}))
+    (state / "slam-x-drive_d.json").write_text(json.dumps({"config": slam, "complete": False}))  # interrupted
+    (state / "broken.json").write_text("{")
+    assert measure(root) == {"slam": (8.0, 8.0)}  # 2 runs of 4 frames in 8 s: 1 s per SLAM frame
+    costs = unit_costs(root)
+    assert costs.per_unit["slam"] == 1.0 and str(state) in costs.source
+    assert costs.per_unit["synth"] == shipped_costs().per_unit["synth"]  # the kinds it lacks: the shipped ones
+    assert unit_costs(tmp_path / "empty").source == shipped_costs().source
+    with pytest.raises(DcslamError, match="--costs-from .* no finished stage"):
+        unit_costs(root, costs_from=tmp_path / "empty")
+    plan = Workspace(tmp_path / "plan")
+    stages = planned_stages(plan, PROFILES["smoke"])
+    drives = planned_drives(plan, PROFILES["smoke"], None, planned_splits(plan, PROFILES["smoke"]))
+    assert set(drives.frames.values()) == {12 - 10}  # the frames of a generated drive that have depth
+    rows = estimate(stages, drives, costs).rows
+    assert rows["slam"][:2] == (14, 28.0) and rows["slam"][2] == 28.0  # 14 SLAM runs of 2 frames at 1 s each
+
+
+def test_plan_counts_stages_per_seed_and_writes_nothing(tmp_path):
+    ws = Workspace(tmp_path / "ws")
+    one = plan_text(ws, ReproduceConfig(profile="smoke"))
+    two = plan_text(ws, ReproduceConfig(profile="smoke", seeds=2))
+    assert "39 stages" in one and "1 training seed(s)" in one and "(seeds 0)" in one
+    # twice the 7 trainings, 7 predictions, 4 filters and 11 + 0 SLAM runs of trained layers; the rest once
+    assert "68 stages" in two and "2 training seed(s)" in two and "(seeds 0, 1)" in two
+    assert "CPU-hours" in two and "unit costs measured from" in two and not (tmp_path / "ws").exists()
+
+
+def test_dry_run_prints_the_plan_and_exits_0_without_writing(cli, tmp_path):
+    result = cli("reproduce", "--profile", "study", "--dry-run", "-w", str(tmp_path / "ws"))
+    assert result.exit_code == 0, result.output
+    assert "--profile study: 8 test drive(s), 3 training seed(s)" in result.stdout and "total" in result.stdout
+    assert not (tmp_path / "ws").exists()
+    beams = cli("reproduce", "--table", "beams", "--profile", "study", "--dry-run", "-w", tmp_path / "ws")
+    assert beams.exit_code == 0 and "--table beams --profile study" in beams.stdout
+    bad = cli("reproduce", "--dry-run", "--costs-from", str(tmp_path), "-w", str(tmp_path / "ws"))
+    assert bad.exit_code == 1 and "--costs-from" in bad.stderr
+    assert cli("reproduce", "--seeds", "0", "--dry-run", "-w", str(tmp_path)).exit_code == 2
