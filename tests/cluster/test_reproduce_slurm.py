@@ -27,7 +27,7 @@ from tests.fixtures.kitti import write_tiny_drive
 
 pytestmark = [pytest.mark.cluster, pytest.mark.timeout(1800)]
 
-SEEDS = 1  # training seeds per recipe; more than one adds reproduce's --seeds N (and so more jobs)
+SEEDS = 2  # training seeds per recipe: reproduce --seeds 2 (every trained run twice, so twice the jobs)
 PROFILE = ["--profile", "smoke", *([] if SEEDS == 1 else ["--seeds", str(SEEDS)])]
 # One CPU and 1 GB per job: the node is this machine; the local run's workers have one thread each too.
 SLURM_CONFIG = """\
