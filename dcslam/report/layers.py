@@ -127,24 +127,21 @@ def slam_trajectory(ws: Workspace, layer: str, drive: str, root: Path | None = N
 def slam_settings(ws: Workspace, layer: str, drive: str, root: Path | None = None) -> dict:
     """The settings of the SLAM run behind ``slam/<layer>/<drive>.txt`` (:data:`RUN_SETTINGS`, from the summary
     ``<drive>.json`` beside it; ``frames`` is the number asked for, 0 = all: a drive shorter than that runs fewer,
-    which its pose count shows), plus ``suspect``: whether the run rejected steps or its health verdicts flagged it
-    as suspect. Empty when the summary is missing (a trajectory made elsewhere). ``root``: the folder of the layers'
-    SLAM outputs (default ``slam/``)."""
-    import json
+    which its pose count shows), plus ``suspect``: the run's verdict (:func:`dcslam.io.slam_summary.run_verdict`:
+    it rejected steps, or its health flagged it for degraded steps or its drift bound). Empty when the summary is
+    missing (a trajectory made elsewhere). ``root``: the folder of the layers' SLAM outputs (default ``slam/``)."""
+    from dcslam.io.slam_summary import read_summary, run_verdict
 
     path = (ws.slam if root is None else root) / layer / f"{drive}.json"
     if not path.exists():
         return {}
-    try:
-        record = json.loads(path.read_text())
-    except json.JSONDecodeError:
-        raise DcslamError(f"{path}: not valid JSON; rerun `dcslam slam --depth {layer} --force`") from None
+    record = read_summary(path, f"rerun `dcslam slam --depth {layer} --force`")
     settings = {**record.get("settings", {}), **({"beams": record["beams"]} if "beams" in record else {})}
     used = record.get("confidence")
     if isinstance(used, dict) and "mode" in used:    # what was done, not what was asked (a layer may have none)
         settings.update(confidence=used["mode"], min_confidence=used.get("min_confidence", 0.0))
     out = {k: settings[k] for k in RUN_SETTINGS if k in settings}
-    out["suspect"] = bool(record.get("rejected_steps")) or bool(record.get("suspect"))
+    out["suspect"] = run_verdict(record, str(path)).suspect
     return out
 
 
