@@ -66,6 +66,7 @@ def trajectory_table(pairs: dict[str, TrajectoryPair], title: str) -> Table:
     rows = [{"trajectory": name, **pair.score().flat()} for name, pair in pairs.items()]
     keys = [k for k in rows[0] if k != "trajectory"] if rows else list(TRAJECTORY_SHOWN)
     table = Table(title, [Column("trajectory", "trajectory")] + [Column(k, k) for k in keys], rows)
+    table.notes.extend(f"{name}: {pair.left_out()}" for name, pair in pairs.items() if pair.left_out())
     table.notes.append("localisation: thesis accuracy (m + rad, acos argument clamped to [-1, 1]); "
                        "localisation_thesis_clamp: clamped to [0, 1] as the thesis's code did")
     table.notes += [f"{name}: {pair.summary()}" for name, pair in pairs.items()]

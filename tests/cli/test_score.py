@@ -150,7 +150,8 @@ def test_score_trajectory_associates_within_the_time_tolerance(ws, tmp_path):
 
 
 def test_score_trajectory_reads_kitti_pose_files(ws, tmp_path):
-    """A KITTI pose file (no timestamps) is paired by index with the reference's first poses."""
+    """A KITTI pose file (no timestamps) is paired by index with a reference of as many poses; any other length is
+    refused."""
     est = tmp_path / "est.kitti.txt"
     _, T_sparse = read_tum(ws / "slam" / "sparse" / "d0.txt")
     write_kitti_poses(est, T_sparse)
