@@ -390,14 +390,16 @@ class DriveFile:
 
 @dataclass
 class Layer:
-    """A depth layer: ``depth`` (N, H, W) float32 metres (0 = none) with its provenance, and optionally the
-    completer's ``confidence`` (N, H, W) float32 in [0, 1]."""
+    """A depth layer: ``depth`` (N, H, W) float32 metres (0 = none) with its provenance, optionally the
+    completer's ``confidence`` (N, H, W) float32 in [0, 1], and the ``frame_ids`` (N,) of the drive frames it was
+    made from (layers written before they were recorded have none)."""
 
     depth: np.ndarray
     drive: str
     made_by: str
     config: dict = field(default_factory=dict)
     confidence: np.ndarray | None = None
+    frame_ids: np.ndarray | None = None
 
 
 def _check_confidence(confidence: np.ndarray, shape: tuple, where: str) -> None:
@@ -420,10 +422,15 @@ def write_layer(path: Path | str, layer: Layer, force: bool = False) -> Path:
     confidence = None if layer.confidence is None else np.asarray(layer.confidence)
     if confidence is not None:
         _check_confidence(confidence, depth.shape, "layer ")
+    frame_ids = None if layer.frame_ids is None else np.asarray(layer.frame_ids, np.int64)
+    if frame_ids is not None and frame_ids.shape != (n,):
+        raise DcslamError(f"layer frame_ids have shape {frame_ids.shape}, expected ({n},) like its depth")
     with atomic_output(path, force=force) as tmp, h5py.File(tmp, "w") as h5:
         h5.create_dataset("depth", data=depth.astype(np.float32), chunks=(1, h, w), **_COMPRESSION)
         if confidence is not None:
             h5.create_dataset("confidence", data=confidence.astype(np.float32), chunks=(1, h, w), **_COMPRESSION)
+        if frame_ids is not None:
+            h5.create_dataset("frame_ids", data=frame_ids)
         h5.attrs["schema"] = LAYER_SCHEMA
         h5.attrs["drive"] = layer.drive
         h5.attrs["made_by"] = layer.made_by
@@ -444,8 +451,10 @@ def read_layer(path: Path | str, expect_frames: int | None = None) -> Layer:
                 raise DcslamError(f"{path}: not a dcslam depth layer (schema {h5.attrs.get('schema')!r})")
             depth = h5["depth"][()]
             confidence = h5["confidence"][()] if "confidence" in h5 else None
+            frame_ids = h5["frame_ids"][()] if "frame_ids" in h5 else None
             layer = Layer(depth=depth, drive=str(h5.attrs.get("drive", "")), made_by=str(h5.attrs.get("made_by", "")),
-                          config=json.loads(h5.attrs.get("config", "{}")), confidence=confidence)
+                          config=json.loads(h5.attrs.get("config", "{}")), confidence=confidence,
+                          frame_ids=frame_ids)
     except OSError as exc:
         raise DcslamError(f"{path} is not a readable HDF5 layer file ({exc})") from None
     if depth.ndim != 3:
@@ -453,8 +462,32 @@ def read_layer(path: Path | str, expect_frames: int | None = None) -> Layer:
     check_depth(depth, str(path))
     if confidence is not None:
         _check_confidence(confidence, depth.shape, f"{path}: ")
+    if frame_ids is not None and np.shape(frame_ids) != (depth.shape[0],):
+        raise DcslamError(f"{path}: frame_ids of shape {np.shape(frame_ids)}, expected ({depth.shape[0]},)")
     if expect_frames is not None and depth.shape[0] != expect_frames:
         raise DcslamError(f"{path}: layer has {depth.shape[0]} frames but its drive has {expect_frames}")
+    return layer
+
+
+def read_layer_for(drive: "DriveFile", path: Path | str) -> Layer:
+    """Read the layer file ``path`` for ``drive``, refused (:class:`DcslamError`) when it was made for another
+    drive: its ``drive`` attribute names another drive, or its frame count, image size or frame ids differ from the
+    drive's (a layer of another drive saved under this drive's name would otherwise be scored or mapped)."""
+    layer = read_layer(path)
+    names = {drive.name, drive.path.name, drive.path.stem}
+    fix = "run `dcslam predict` or `dcslam filter` for this drive (--force)"
+    if layer.drive and layer.drive not in names:
+        raise DcslamError(f"{path}: a layer of drive {layer.drive!r}, not of {drive.name!r} ({drive.path}); {fix}")
+    if layer.depth.shape[0] != len(drive):
+        raise DcslamError(f"{path}: layer has {layer.depth.shape[0]} frames but its drive has {len(drive)} "
+                          f"({drive.path}); {fix}")
+    if layer.depth.shape[1:] != drive.shape[1:]:
+        raise DcslamError(f"{path}: layer frames are {layer.depth.shape[1:]}, drive frames are {drive.shape[1:]} "
+                          f"({drive.path}); {fix}")
+    if layer.frame_ids is not None and not np.array_equal(layer.frame_ids, drive.frame_ids):
+        i = int(np.flatnonzero(np.asarray(layer.frame_ids) != drive.frame_ids)[0])
+        raise DcslamError(f"{path}: layer frame {i} is KITTI frame {int(layer.frame_ids[i])}, its drive's "
+                          f"{int(drive.frame_ids[i])} ({drive.path}); {fix}")
     return layer
 
 
@@ -469,9 +502,7 @@ def load_depth_and_confidence(drive: DriveFile, source: str | Path) -> tuple[np.
     kinds have none): the layer file is read once."""
     if not isinstance(source, Path) and is_depth_kind(str(source)):
         return np.stack([drive.depth(str(source), i) for i in range(len(drive))]), None
-    layer = read_layer(source, expect_frames=len(drive))
-    if layer.depth.shape[1:] != drive.shape[1:]:
-        raise DcslamError(f"{source}: layer frames are {layer.depth.shape[1:]}, drive frames are {drive.shape[1:]}")
+    layer = read_layer_for(drive, source)
     return layer.depth, layer.confidence
 
 

@@ -115,20 +115,19 @@ def per_drive_table(results: list[LayerResult]) -> Table:
 
 def _depth_example_rows(ws: Workspace, results: list[LayerResult], drive: str):
     """(rgb, rows) for the middle frame of ``drive``: one row per model layer that has depth."""
-    from dcslam.io.drive import DriveFile, read_layer
+    from dcslam.io.drive import DriveFile, read_layer_for
 
     models = [r for r in results if r.depth and r.layer not in ("sparse", "dense")]
     if not models:
         return None, []
+    rows = []
     with DriveFile(drive_file(ws, drive)) as d:
         i = len(d) // 2
         rgb, sparse, dense = d.rgb(i), d.depth("sparse", i), d.depth("dense", i)
-        n = len(d)
-    rows = []
-    for result in models:
-        layer = resolve_layer(ws, result.layer)
-        pred = read_layer(layer.source(drive), expect_frames=n).depth[i]
-        rows.append((f"{result.label} ({result.layer})", sparse, pred, dense))
+        for result in models:
+            layer = resolve_layer(ws, result.layer)
+            pred = read_layer_for(d, layer.source(drive)).depth[i]
+            rows.append((f"{result.label} ({result.layer})", sparse, pred, dense))
     return rgb, rows
 
 
