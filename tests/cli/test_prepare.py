@@ -98,6 +98,19 @@ def test_splits_file_and_notes(tmp_path):
     assert len([p for p in _files(tmp_path / "all") if p.endswith(".h5")]) == 2
 
 
+def test_a_split_file_whose_only_test_drive_is_misspelt_is_refused(tmp_path):
+    root = tmp_path / "kitti"
+    fx.write_tiny_drive(root, "2011_09_26_drive_0002_sync", n_frames=11)
+    fx.write_tiny_drive(root, "2011_09_26_drive_0003_sync", n_frames=11)
+    splits = tmp_path / "s.json"
+    splits.write_text(json.dumps({"train": ["2011_09_26_drive_0002_sync"], "val": [],
+                                  "test": ["2011_09_26_drive_003_sync"]}))
+    result = run("--kitti", root, "--out", tmp_path / "out", "--splits", splits)
+    assert result.exit_code == 1
+    assert f"--splits {splits}: none of its test drive(s) (2011_09_26_drive_003_sync) is under" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
+
+
 def _break(drive: kitti.RawDrive, what: str) -> str:
     """Damage a tiny drive; returns the file name the error must name."""
     if what == "calib":
