@@ -6,6 +6,7 @@ each of which runs this module's :func:`main` on the same configuration file.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -187,6 +188,15 @@ def _prepare_run_dir(run_dir: Path, force: bool, resume: bool) -> None:
     run_dir.mkdir(parents=True, exist_ok=True)
 
 
+def _discard_unstarted(run_dir: Path, made: bool) -> None:
+    """Remove the files of a run that failed before its first epoch (and its folder, if this run ``made`` it)."""
+    for name in RUN_FILES:
+        (run_dir / name).unlink(missing_ok=True)
+    if made:
+        with contextlib.suppress(OSError):
+            run_dir.rmdir()
+
+
 RESUMABLE = ("epochs", "device")  # what a resumed run may change: more epochs, another device
 
 
@@ -248,13 +258,14 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
 
     run_dir = Path(run_dir)
     rank, world = rank_and_world()
+    device = resolve_device(config.device)  # before the run's folder is made: a missing GPU leaves nothing behind
+    made = not run_dir.exists()
     if rank == 0:
         _prepare_run_dir(run_dir, force, resume)
     barrier()
     if resume:
         config = _saved_config(run_dir, config)
     config.check()
-    device = resolve_device(config.device)
     if world > 1 and device.type == "cuda":
         device = torch.device("cuda", rank % torch.cuda.device_count())
     seed_all(config.seed)
@@ -283,6 +294,10 @@ def train(run_dir: Path | str, config, *, force: bool = False, resume: bool = Fa
         if resume and rank == 0:  # only once the epochs are trained
             _record_resume(run_dir, config)
         return result
+    except BaseException:
+        if rank == 0 and not resume and not (run_dir / "last.pt").exists():
+            _discard_unstarted(run_dir, made)  # failed before its first epoch: its rerun must not find "run exists"
+        raise
     finally:
         for frames in open_drives:
             frames.close()
