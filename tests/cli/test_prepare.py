@@ -173,3 +173,23 @@ def test_beams_option(workspace):
         assert drive.kinds == ("sparse", "dense", "sparse@32", "sparse@8")
         counts = [(drive.depth(kind, 0) > 0).sum() for kind in ("sparse", "sparse@32", "sparse@8")]
         assert counts[0] > counts[1] > counts[2] > 0
+
+
+def test_the_rerun_after_a_killed_run_removes_every_temporary_it_left(tmp_path):
+    import subprocess
+    import sys
+
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()                                   # a process id that no longer runs: the killed run's
+    root, out = tmp_path / "kitti", tmp_path / "out"
+    name = "2011_09_26_drive_0002_sync"
+    fx.write_tiny_drive(root, name, n_frames=11)
+    out.mkdir()
+    for left in (f".{name}.h5.set-{child.pid}", f"..{name}.h5.set-{child.pid}.tmp-{child.pid}",
+                 f".splits.json.tmp-{child.pid}"):
+        (out / left).write_text("left by a run killed with SIGKILL")
+    splits = tmp_path / "s.json"
+    splits.write_text(json.dumps({"train": [], "val": [], "test": [name]}))
+    result = run("--kitti", root, "--out", out, "--splits", splits)
+    assert result.exit_code == 0, result.output
+    assert _files(out) == [f"{name}.h5", "prepare-kitti.json", "splits.json"]
