@@ -25,7 +25,7 @@ _MISSING = dataclasses.MISSING
 
 def option(default=_MISSING, *, help: str, default_factory=_MISSING, **meta):
     """A configuration field with its help text (and ``choices``, ``min``, ``max``, ``flags``, ``show_default``,
-    ``metavar``, ``validate``)."""
+    ``metavar``, ``validate``, ``aliases``: other spellings of the option, accepted but not shown in ``--help``)."""
     metadata = {"help": help, **meta}
     if default_factory is not _MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=metadata)

@@ -26,8 +26,9 @@ class PredictConfig:
                                help=f"A completer that needs no run folder: {', '.join([*ALIASES, *CLASSICAL])}.")
     split: str = option("test", choices=SPLITS, help="Split whose drives to predict (train, val, test).")
     drive: list[Path] = option(default_factory=list, help="Drive file(s) to predict instead of a split.")
-    output: Path | None = option(None, help="Output folder (default predictions/<run>/, or predictions/<run>-"
-                                            "sparse16/ for --input sparse@16).")
+    output: Path | None = option(None, flags=("--out",), aliases=("--output",),
+                                 help="Output folder (default predictions/<run>/, or predictions/<run>-"
+                                      "sparse16/ for --input sparse@16).")
     device: str = option("auto", help="auto, cpu or cuda.")
     input: str | None = option(None, validate=lambda kind: check_input_kind(kind), metavar="KIND",
                                show_default="the run's training input, else sparse",
@@ -133,7 +134,7 @@ def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> Predict
     kind = config.input or chosen.config.get("train_settings", {}).get("input", "sparse")
     trained_on = chosen.config.get("train_settings", {}).get("input", "sparse")
     suffix = "" if kind == trained_on else "-" + kind.replace("@", "")
-    out_dir = output_folder(config.output or ws.predictions / f"{chosen.made_by}{suffix}", "--output")
+    out_dir = output_folder(config.output or ws.predictions / f"{chosen.made_by}{suffix}", "--out")
     outputs = [out_dir / Path(p).name for p in paths]
     existing = [p for p in outputs if p.exists()]
     if existing and not force:
