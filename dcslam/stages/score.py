@@ -179,6 +179,6 @@ def run_tables(ws: Workspace, config: ScoreTablesConfig, *, force: bool = False)
     report = build_report(ws, select_drives(ws, config.drive), out_dir=config.out_dir, force=force,
                           devkit_exact=config.devkit_exact, max_time_diff=config.max_time_diff,
                           failure_threshold=config.failure_threshold)
-    write_json_atomic(report.written[0].parent / "score-tables.json", stage_config("score-tables", to_dict(config)),
-                      force=True)
+    report.written.append(write_json_atomic(report.written[0].parent / "score-tables.json",
+                                            stage_config("score-tables", to_dict(config)), force=True))
     return report
