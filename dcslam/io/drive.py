@@ -124,6 +124,9 @@ def _check_frame(frame: DriveFrame, height: int, width: int, extra: tuple[str, .
             raise DcslamError(f"frame {frame.frame_id}: {name} has dtype {value.dtype}, expected {np.dtype(dtype)}")
     for name in DEPTH_KINDS:
         _check_depth(name, frame.frame_id, np.asarray(getattr(frame, name)), height, width)
+    from dcslam.io.validate import check_poses
+
+    check_poses(np.asarray(frame.T_world_cam, np.float64)[None], f"frame {frame.frame_id}: T_world_cam")
     if set(frame.extra) != set(extra):
         raise DcslamError(f"frame {frame.frame_id}: holds depth {sorted(frame.extra)}, the drive file expects "
                           f"{sorted(extra)}")
@@ -144,9 +147,9 @@ class DriveWriter:
     def __init__(self, path: Path | str, K: np.ndarray, height: int, width: int, *, source: str, date: str,
                  drive: str, split: str = "", force: bool = False, attrs: dict | None = None,
                  extra: tuple[str, ...] = ()):
-        K = np.asarray(K, dtype=np.float64)
-        if K.shape != (3, 3):
-            raise DcslamError(f"K has shape {K.shape}, expected (3, 3)")
+        from dcslam.io.validate import check_intrinsics
+
+        K = check_intrinsics(K, f"{path}")
         self.path, self.K, self.height, self.width = Path(path), K, int(height), int(width)
         self.attrs = dict(schema=DRIVE_SCHEMA, source=source, date=date, drive=drive, split=split, **(attrs or {}))
         self.force = force
@@ -312,6 +315,14 @@ class DriveFile:
                                                                        else "")
                 raise DcslamError(f"{self.path}: {name} is not finite{where}; remake the drive file with "
                                   "`dcslam prepare-kitti --force`")
+        from dcslam.io.validate import check_intrinsics, check_poses
+
+        fix = "; remake the drive file with `dcslam prepare-kitti --force`"
+        for check, name in ((check_intrinsics, "K"), (check_poses, "T_world_cam")):
+            try:
+                check(h5[name][()], f"{self.path}: {name}")
+            except DcslamError as error:
+                raise DcslamError(f"{error}{fix}") from None
         declared = sorted(int(b) for b in np.atleast_1d(h5.attrs.get("sparse_beams", [])))
         for kind in self._extra_kinds():
             dataset = h5[depth_dataset(kind)]
