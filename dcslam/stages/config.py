@@ -80,6 +80,10 @@ def from_mapping(cls, values: dict, source: str = "configuration"):
         raise DcslamError(f"{source}: unknown key {unknown[0]!r}; expected one of {', '.join(known)}")
     kwargs = {}
     for key, value in values.items():
+        choices = known[key].metadata.get("choices")
+        for item in (value if isinstance(value, list) else [value]) if choices is not None else []:
+            if item is not None and item not in choices:
+                raise DcslamError(f"{source}: {key} = {item!r} is not one of {', '.join(map(str, choices))}")
         base, optional, is_list = split_type(field_type(cls, key))
         if value is None:
             if not optional:
