@@ -30,7 +30,8 @@ def test_intrinsics_that_are_no_camera(bad, match):
 
 @pytest.mark.parametrize("change, match", [
     (lambda T: T.__setitem__((1, 0, 0), np.inf), "pose 1 is not finite"),
-    (lambda T: T.__setitem__((2, slice(0, 3), slice(0, 3)), 2 * np.eye(3)), "the rotation of pose 2 is not orthonormal"),
+    (lambda T: T.__setitem__((2, slice(0, 3), slice(0, 3)), 2 * np.eye(3)),
+     "the rotation of pose 2 is not orthonormal"),
     (lambda T: T.__setitem__((0, 3, 0), 1.0), r"pose 0 has bottom row \[1.0, 0.0, 0.0, 1.0\]"),
 ])
 def test_poses_that_are_no_pose(change, match):
