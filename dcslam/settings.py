@@ -13,7 +13,8 @@ _MISSING = dataclasses.MISSING
 
 def option(default=_MISSING, *, help: str, default_factory=_MISSING, **meta):
     """A configuration field with its help text (and ``choices``, ``min``, ``max``, ``flags``, ``show_default``,
-    ``metavar``, ``validate``, ``internal``; ``argument=True``: a positional argument on the command line)."""
+    ``metavar``, ``validate``, ``internal``, ``aliases``: other spellings of the option, accepted but not shown in
+    ``--help``; ``argument=True``: a positional argument on the command line)."""
     metadata = {"help": help, **meta}
     if default_factory is not _MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=metadata)

@@ -17,6 +17,7 @@ renamed when complete, so an interrupted stage leaves no half-written file.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from collections.abc import Iterable
@@ -173,6 +174,28 @@ def output_folder(path: Path, option: str) -> Path:
     if path.exists() and not path.is_dir():
         raise DcslamError(f"{option} {path} is a file, not a folder; pass a folder (it is made if missing)")
     return path
+
+
+@contextlib.contextmanager
+def new_folder(path: Path):
+    """Make ``path`` (and missing parents) for the block; when the block fails, the folders made here that are
+    still empty are removed again, so that a failed command leaves nothing behind for its rerun to trip over."""
+    path = Path(path)
+    made = []
+    folder = path
+    while not folder.exists():
+        made.append(folder)
+        folder = folder.parent
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        yield path
+    except BaseException:
+        for folder in made:  # the deepest first; one that holds something stays, with its parents
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        raise
 
 
 def plain_name(name: str, what: str = "name") -> str:

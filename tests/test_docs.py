@@ -4,9 +4,7 @@ import re
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
 
-from dcslam.cli import app
 from dcslam.report.provenance import PROVENANCE_PREFIX
 
 ROOT = Path(__file__).parents[1]
@@ -58,8 +56,8 @@ def test_the_patterns_catch_what_they_should():
 
 
 @pytest.mark.parametrize("page", SPLICED, ids=lambda p: p.name)
-def test_spliced_tables_match_the_committed_results(page):
+def test_spliced_tables_match_the_committed_results(cli, page):
     if not any(p.is_file() for p in (ROOT / "results").rglob("*")):
         pytest.skip("results/ holds no result files yet: nothing to splice")
-    result = CliRunner().invoke(app, ["score", "page", str(page), "--check"])
+    result = cli("score", "page", str(page), "--check")
     assert result.exit_code == 0, result.output

@@ -9,9 +9,7 @@ import tomllib
 from pathlib import Path
 
 import pytest
-from typer.testing import CliRunner
 
-from dcslam.cli import app
 from dcslam.errors import DcslamError
 from dcslam.executor import (DEFAULT_RESOURCES, LocalExecutor, Outcome, Resources, SlurmExecutor, SlurmSettings,
                              Task)
@@ -22,7 +20,6 @@ from dcslam.stages.reproduce import Pipeline, ReproduceConfig, Stage
 from dcslam.stages.slam import SlamStageConfig
 from dcslam.workspace import Workspace
 
-runner = CliRunner()
 
 
 def test_slurm_table_is_read_with_each_kinds_resources():
@@ -55,29 +52,29 @@ def test_slurm_table_mistakes_name_the_key(table, message):
         SlurmSettings.from_table(table)
 
 
-def test_a_mistake_in_the_slurm_table_of_the_config_file_is_one_line_before_anything_runs(tmp_path):
+def test_a_mistake_in_the_slurm_table_of_the_config_file_is_one_line_before_anything_runs(cli, tmp_path):
     config = tmp_path / "reproduce.toml"
     config.write_text('executor = "slurm"\n[slurm]\nqueue = "gpu"\n')
-    result = runner.invoke(app, ["reproduce", "--config", str(config), "--workspace", str(tmp_path / "ws")])
+    result = cli("reproduce", "--config", str(config), "--workspace", str(tmp_path / "ws"))
     assert result.exit_code == 1
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error: [slurm]: unknown key 'queue'; expected one of partition")
     assert not (tmp_path / "ws").exists()
 
 
-def test_the_slurm_table_is_printed_back_as_toml(tmp_path):
+def test_the_slurm_table_is_printed_back_as_toml(cli, tmp_path):
     table = {"partition": "gpu", "sbatch": {"constraint": "a100"}, "train": {"cpus": 8, "gpus": 1}}
     config = ReproduceConfig(executor="slurm", slurm=table)
     assert tomllib.loads(to_toml(config))["slurm"] == table
     path = tmp_path / "reproduce.toml"
     path.write_text(to_toml(config))
-    result = runner.invoke(app, ["reproduce", "--config", str(path), "--print-config", "-w", str(tmp_path / "ws")])
+    result = cli("reproduce", "--config", str(path), "--print-config", "-w", str(tmp_path / "ws"))
     assert result.exit_code == 0, result.output
     assert tomllib.loads(result.stdout)["slurm"] == table and tomllib.loads(result.stdout)["executor"] == "slurm"
 
 
-def test_slurm_is_not_a_command_line_option():
-    result = runner.invoke(app, ["reproduce", "--slurm", "x"])
+def test_slurm_is_not_a_command_line_option(cli):
+    result = cli("reproduce", "--slurm", "x")
     assert result.exit_code == 2
 
 
@@ -104,11 +101,11 @@ def test_gpus_follow_the_device_and_the_processes_of_a_training(tmp_path):
     assert Resources(gpus=3).gpus_for(Task("s", slam.run, SlamStageConfig(), ws)) == 3
 
 
-def test_slurm_executor_without_submitit_is_one_line(tmp_path, monkeypatch):
+def test_slurm_executor_without_submitit_is_one_line(cli, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "submitit", None)  # import submitit now raises ImportError
     with pytest.raises(DcslamError, match=r"--executor slurm needs submitit: pip install 'dcslam\[slurm\]'"):
         SlurmExecutor(tmp_path)
-    result = runner.invoke(app, ["reproduce", "--executor", "slurm", "--profile", "smoke", "-w", str(tmp_path / "w")])
+    result = cli("reproduce", "--executor", "slurm", "--profile", "smoke", "-w", str(tmp_path / "w"))
     assert result.exit_code == 1
     assert len(result.stderr.strip().splitlines()) == 1 and "needs submitit" in result.stderr
     assert not (tmp_path / "w" / ".reproduce").exists()  # nothing ran

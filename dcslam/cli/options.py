@@ -54,6 +54,20 @@ def _parameter(cls, field) -> inspect.Parameter:
                              annotation=Annotated[annotation, typer.Option(*flags, help=meta.get("help"), **extra)])
 
 
+ALIAS_SUFFIX = "__alias"
+
+
+def _alias_parameter(cls, field) -> inspect.Parameter:
+    """A hidden option under a field's other spellings (``metadata["aliases"]``, e.g. ``--output`` for ``--out``):
+    they still work, and ``--help`` shows the one name."""
+    from dcslam.stages.config import field_type, split_type
+
+    base, _, _ = split_type(field_type(cls, field.name))
+    return inspect.Parameter(field.name + ALIAS_SUFFIX, inspect.Parameter.KEYWORD_ONLY, default=None,
+                             annotation=Annotated[Optional[base], typer.Option(*field.metadata["aliases"],
+                                                                                hidden=True)])
+
+
 def _usage_check(validate: Callable, hint: str) -> Callable:
     """A Typer callback that runs ``validate`` on each value and turns its DcslamError into a usage error (exit 2)."""
     def callback(value):
@@ -110,6 +124,12 @@ def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, rep
             given = ctx.get_parameter_source(field.name)
             if given is not None and given.name != "DEFAULT":
                 values[config_key(field)] = _plain(kwargs[field.name])
+            if kwargs.get(field.name + ALIAS_SUFFIX) is not None:
+                flag = field.metadata.get("flags", (f"--{field.name.replace('_', '-')}",))[0]
+                if given is not None and given.name != "DEFAULT":
+                    raise typer.BadParameter(f"give {flag} once (also spelt {', '.join(field.metadata['aliases'])})",
+                                             param_hint=flag)
+                values[config_key(field)] = _plain(kwargs[field.name + ALIAS_SUFFIX])
         config = from_mapping(config_cls, values, source)
         ws = Workspace.resolve(kwargs.get("workspace"))
         if prepare is not None:
@@ -124,6 +144,7 @@ def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, rep
 
     parameters = [inspect.Parameter("ctx", inspect.Parameter.POSITIONAL_OR_KEYWORD, annotation=typer.Context)]
     parameters += [_parameter(config_cls, f) for f in fields]
+    parameters += [_alias_parameter(config_cls, f) for f in fields if f.metadata.get("aliases")]
     parameters += [inspect.Parameter("workspace", inspect.Parameter.KEYWORD_ONLY, default=None,
                                      annotation=WorkspaceOption),
                    inspect.Parameter("config_file", inspect.Parameter.KEYWORD_ONLY, default=None,

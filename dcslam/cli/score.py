@@ -12,17 +12,39 @@ score_app = typer.Typer(help="Score depth layers, trajectories and maps; build T
 app.add_typer(score_app, name="score")
 
 
+#: The width tables are printed to: a terminal's, not the Markdown file's (which keeps every column).
+WIDTH = 100
+
+#: The columns printed of each table of ``score tables`` (by key; the files hold them all).
+COMPACT = {
+    "table_5_1": ("recipe", "run", "epoch", "chamfer", "mse", "mae_mm", "rmse_mm"),
+    "table_5_2": ("method", "drives", "failures", "localisation_text", "vs_sparse", "mae_mm_text", "ate_rmse_m_text"),
+    "table_5_2_long": ("method", "drives", "frames_text", "failures", "localisation_text", "vs_sparse",
+                       "ate_rmse_m_text"),
+}
+
+
+def compact(table, keys: tuple[str, ...], full: str):
+    """``table`` with only the columns of ``keys`` (those it has) and a note naming ``full``, the file with all."""
+    from dcslam.report.tables import Table
+
+    columns = [c for key in keys for c in table.columns if c.key == key]
+    shown = Table(table.title, columns, table.rows, list(table.notes))
+    shown.notes.insert(0, f"every column: {full}")
+    return shown
+
+
 def print_table(table) -> None:
-    """A :class:`dcslam.report.tables.Table` as a rich table on stdout."""
+    """A :class:`dcslam.report.tables.Table` as a rich table on stdout, at most :data:`WIDTH` characters wide."""
     from rich.console import Console
     from rich.table import Table as RichTable
 
     shown = RichTable(title=table.title)
     for column in table.columns:
-        shown.add_column(column.header)
+        shown.add_column(column.header, overflow="fold")
     for row in table.rows:
         shown.add_row(*(table.cell(row, c) for c in table.columns))
-    console = Console(width=200)
+    console = Console(width=WIDTH)
     console.print(shown)
     for note in table.notes:
         console.print(f"  {note}", highlight=False)
@@ -34,13 +56,16 @@ def report(result) -> None:
 
 
 def report_tables(report) -> None:
-    print_table(report.table_5_1)
-    print_table(report.table_5_2)
-    if report.table_5_2_long is not None:
-        print_table(report.table_5_2_long)
-    if report.table_5_3 is not None:
-        print_table(report.table_5_3)
-    summary(f"wrote {len(report.written)} file(s) in {report.written[0].parent}")
+    written = {p.stem: p for p in report.written if p.suffix == ".md"}
+    for name in ("table_5_1", "table_5_2", "table_5_2_long", "table_5_3"):
+        table = getattr(report, name, None)
+        if table is None:
+            continue
+        full = written.get(name, name + ".md")
+        print_table(compact(table, COMPACT[name], str(full)) if name in COMPACT else table)
+    summary(f"wrote {len(report.written)} file(s):")
+    for path in report.written:
+        summary(f"  {path}")
 
 
 stage_command(score_app, "depth", score.ScoreDepthConfig, score.run_depth, report,

@@ -95,7 +95,8 @@ def filter_drives(jobs: Sequence[tuple[Path, str | Path, Path]], chain: FilterCh
                           **settings}
                 kept = None if confidence is None else np.where(filtered > 0, confidence, 0).astype(np.float32)
                 out_path.parent.mkdir(parents=True, exist_ok=True)
-                write_layer(files.stage(out_path), Layer(depth=filtered, drive=drive.name, made_by=made_by,
+                write_layer(files.stage(out_path), Layer(depth=filtered, drive=drive.name, frame_ids=drive.frame_ids,
+                                                         made_by=made_by,
                                                          config=config, confidence=kept), force=True)
             written.append(out_path)
     return written

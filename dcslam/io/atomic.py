@@ -17,6 +17,34 @@ def _temporary_name(path: Path) -> Path:
     return path.with_name(f".{path.name}.tmp-{os.getpid()}")
 
 
+def _alive(pid: str) -> bool:
+    """Whether a process of this id runs on this machine (a temporary name of a live writer is not removed)."""
+    try:
+        os.kill(int(pid), 0)
+    except (ValueError, ProcessLookupError):
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_temporaries(path: Path | str, sets: bool = False) -> None:
+    """Remove the temporary files a killed writer of ``path`` left beside it: ``.<name>.tmp-<pid>``
+    (:func:`atomic_output`) unless its process still runs here; with ``sets`` also, whatever their process,
+    ``.<name>.set-<pid>`` (:class:`AtomicSet`, one writer of a set at a time) and ``..<name>.set-<pid>.tmp-<pid>``
+    (a set member written through :func:`atomic_output`)."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        return
+    for leftover in path.parent.glob(f".{path.name}.tmp-*"):
+        pid = leftover.name.rpartition(".tmp-")[2]
+        if pid == str(os.getpid()) or not _alive(pid):
+            leftover.unlink(missing_ok=True)
+    for pattern in (f".{path.name}.set-*", f"..{path.name}.set-*.tmp-*") if sets else ():
+        for leftover in path.parent.glob(pattern):
+            leftover.unlink(missing_ok=True)
+
+
 @contextlib.contextmanager
 def atomic_output(path: Path | str, force: bool = False) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it to ``path`` only if the block completes.
@@ -28,6 +56,7 @@ def atomic_output(path: Path | str, force: bool = False) -> Iterator[Path]:
     if path.exists() and not force:
         raise DcslamError(f"{path} exists; pass --force to overwrite it")
     path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(path)
     tmp = _temporary_name(path)
     try:
         yield tmp
@@ -52,10 +81,10 @@ class AtomicSet:
         self._staged: list[tuple[Path, Path]] = []
 
     def stage(self, path: Path | str) -> Path:
-        """The temporary name to write ``path`` under (``.<name>.set-<pid>``, left over ones removed first)."""
+        """The temporary name to write ``path`` under (``.<name>.set-<pid>``; those a killed run left, of every kind,
+        removed first: :func:`remove_stale_temporaries`)."""
         path = Path(path)
-        for leftover in path.parent.glob(f".{path.name}.set-*") if path.parent.is_dir() else ():
-            leftover.unlink(missing_ok=True)
+        remove_stale_temporaries(path, sets=True)
         tmp = path.with_name(f".{path.name}.set-{os.getpid()}")
         self._staged.append((tmp, path))
         return tmp

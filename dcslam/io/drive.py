@@ -124,6 +124,9 @@ def _check_frame(frame: DriveFrame, height: int, width: int, extra: tuple[str, .
             raise DcslamError(f"frame {frame.frame_id}: {name} has dtype {value.dtype}, expected {np.dtype(dtype)}")
     for name in DEPTH_KINDS:
         _check_depth(name, frame.frame_id, np.asarray(getattr(frame, name)), height, width)
+    from dcslam.io.validate import check_poses
+
+    check_poses(np.asarray(frame.T_world_cam, np.float64)[None], f"frame {frame.frame_id}: T_world_cam")
     if set(frame.extra) != set(extra):
         raise DcslamError(f"frame {frame.frame_id}: holds depth {sorted(frame.extra)}, the drive file expects "
                           f"{sorted(extra)}")
@@ -144,9 +147,9 @@ class DriveWriter:
     def __init__(self, path: Path | str, K: np.ndarray, height: int, width: int, *, source: str, date: str,
                  drive: str, split: str = "", force: bool = False, attrs: dict | None = None,
                  extra: tuple[str, ...] = ()):
-        K = np.asarray(K, dtype=np.float64)
-        if K.shape != (3, 3):
-            raise DcslamError(f"K has shape {K.shape}, expected (3, 3)")
+        from dcslam.io.validate import check_intrinsics
+
+        K = check_intrinsics(K, f"{path}")
         self.path, self.K, self.height, self.width = Path(path), K, int(height), int(width)
         self.attrs = dict(schema=DRIVE_SCHEMA, source=source, date=date, drive=drive, split=split, **(attrs or {}))
         self.force = force
@@ -312,6 +315,14 @@ class DriveFile:
                                                                        else "")
                 raise DcslamError(f"{self.path}: {name} is not finite{where}; remake the drive file with "
                                   "`dcslam prepare-kitti --force`")
+        from dcslam.io.validate import check_intrinsics, check_poses
+
+        fix = "; remake the drive file with `dcslam prepare-kitti --force`"
+        for check, name in ((check_intrinsics, "K"), (check_poses, "T_world_cam")):
+            try:
+                check(h5[name][()], f"{self.path}: {name}")
+            except DcslamError as error:
+                raise DcslamError(f"{error}{fix}") from None
         declared = sorted(int(b) for b in np.atleast_1d(h5.attrs.get("sparse_beams", [])))
         for kind in self._extra_kinds():
             dataset = h5[depth_dataset(kind)]
@@ -390,14 +401,16 @@ class DriveFile:
 
 @dataclass
 class Layer:
-    """A depth layer: ``depth`` (N, H, W) float32 metres (0 = none) with its provenance, and optionally the
-    completer's ``confidence`` (N, H, W) float32 in [0, 1]."""
+    """A depth layer: ``depth`` (N, H, W) float32 metres (0 = none) with its provenance, optionally the
+    completer's ``confidence`` (N, H, W) float32 in [0, 1], and the ``frame_ids`` (N,) of the drive frames it was
+    made from (layers written before they were recorded have none)."""
 
     depth: np.ndarray
     drive: str
     made_by: str
     config: dict = field(default_factory=dict)
     confidence: np.ndarray | None = None
+    frame_ids: np.ndarray | None = None
 
 
 def _check_confidence(confidence: np.ndarray, shape: tuple, where: str) -> None:
@@ -420,10 +433,15 @@ def write_layer(path: Path | str, layer: Layer, force: bool = False) -> Path:
     confidence = None if layer.confidence is None else np.asarray(layer.confidence)
     if confidence is not None:
         _check_confidence(confidence, depth.shape, "layer ")
+    frame_ids = None if layer.frame_ids is None else np.asarray(layer.frame_ids, np.int64)
+    if frame_ids is not None and frame_ids.shape != (n,):
+        raise DcslamError(f"layer frame_ids have shape {frame_ids.shape}, expected ({n},) like its depth")
     with atomic_output(path, force=force) as tmp, h5py.File(tmp, "w") as h5:
         h5.create_dataset("depth", data=depth.astype(np.float32), chunks=(1, h, w), **_COMPRESSION)
         if confidence is not None:
             h5.create_dataset("confidence", data=confidence.astype(np.float32), chunks=(1, h, w), **_COMPRESSION)
+        if frame_ids is not None:
+            h5.create_dataset("frame_ids", data=frame_ids)
         h5.attrs["schema"] = LAYER_SCHEMA
         h5.attrs["drive"] = layer.drive
         h5.attrs["made_by"] = layer.made_by
@@ -444,8 +462,10 @@ def read_layer(path: Path | str, expect_frames: int | None = None) -> Layer:
                 raise DcslamError(f"{path}: not a dcslam depth layer (schema {h5.attrs.get('schema')!r})")
             depth = h5["depth"][()]
             confidence = h5["confidence"][()] if "confidence" in h5 else None
+            frame_ids = h5["frame_ids"][()] if "frame_ids" in h5 else None
             layer = Layer(depth=depth, drive=str(h5.attrs.get("drive", "")), made_by=str(h5.attrs.get("made_by", "")),
-                          config=json.loads(h5.attrs.get("config", "{}")), confidence=confidence)
+                          config=json.loads(h5.attrs.get("config", "{}")), confidence=confidence,
+                          frame_ids=frame_ids)
     except OSError as exc:
         raise DcslamError(f"{path} is not a readable HDF5 layer file ({exc})") from None
     if depth.ndim != 3:
@@ -453,8 +473,32 @@ def read_layer(path: Path | str, expect_frames: int | None = None) -> Layer:
     check_depth(depth, str(path))
     if confidence is not None:
         _check_confidence(confidence, depth.shape, f"{path}: ")
+    if frame_ids is not None and np.shape(frame_ids) != (depth.shape[0],):
+        raise DcslamError(f"{path}: frame_ids of shape {np.shape(frame_ids)}, expected ({depth.shape[0]},)")
     if expect_frames is not None and depth.shape[0] != expect_frames:
         raise DcslamError(f"{path}: layer has {depth.shape[0]} frames but its drive has {expect_frames}")
+    return layer
+
+
+def read_layer_for(drive: "DriveFile", path: Path | str) -> Layer:
+    """Read the layer file ``path`` for ``drive``, refused (:class:`DcslamError`) when it was made for another
+    drive: its ``drive`` attribute names another drive, or its frame count, image size or frame ids differ from the
+    drive's (a layer of another drive saved under this drive's name would otherwise be scored or mapped)."""
+    layer = read_layer(path)
+    names = {drive.name, drive.path.name, drive.path.stem}
+    fix = "run `dcslam predict` or `dcslam filter` for this drive (--force)"
+    if layer.drive and layer.drive not in names:
+        raise DcslamError(f"{path}: a layer of drive {layer.drive!r}, not of {drive.name!r} ({drive.path}); {fix}")
+    if layer.depth.shape[0] != len(drive):
+        raise DcslamError(f"{path}: layer has {layer.depth.shape[0]} frames but its drive has {len(drive)} "
+                          f"({drive.path}); {fix}")
+    if layer.depth.shape[1:] != drive.shape[1:]:
+        raise DcslamError(f"{path}: layer frames are {layer.depth.shape[1:]}, drive frames are {drive.shape[1:]} "
+                          f"({drive.path}); {fix}")
+    if layer.frame_ids is not None and not np.array_equal(layer.frame_ids, drive.frame_ids):
+        i = int(np.flatnonzero(np.asarray(layer.frame_ids) != drive.frame_ids)[0])
+        raise DcslamError(f"{path}: layer frame {i} is KITTI frame {int(layer.frame_ids[i])}, its drive's "
+                          f"{int(drive.frame_ids[i])} ({drive.path}); {fix}")
     return layer
 
 
@@ -469,9 +513,7 @@ def load_depth_and_confidence(drive: DriveFile, source: str | Path) -> tuple[np.
     kinds have none): the layer file is read once."""
     if not isinstance(source, Path) and is_depth_kind(str(source)):
         return np.stack([drive.depth(str(source), i) for i in range(len(drive))]), None
-    layer = read_layer(source, expect_frames=len(drive))
-    if layer.depth.shape[1:] != drive.shape[1:]:
-        raise DcslamError(f"{source}: layer frames are {layer.depth.shape[1:]}, drive frames are {drive.shape[1:]}")
+    layer = read_layer_for(drive, source)
     return layer.depth, layer.confidence
 
 

@@ -142,8 +142,19 @@ def read_calibration(date_dir: Path | str) -> Calibration:
         R = R.reshape(3, 3)
         if np.abs(R @ R.T - np.eye(3)).max() > 1e-4 or np.linalg.det(R) < 0:
             raise DcslamError(f"{path}: R is not a rotation matrix")
+    for values, path in zip((cam, velo, imu), paths):
+        for key, value in values.items():
+            if isinstance(value, np.ndarray) and not np.isfinite(value).all():
+                raise DcslamError(f"{path}: {key} holds non-finite values; restore the calibration file")
+    R_rect = R_rect_00[:3, :3]
+    if np.abs(R_rect @ R_rect.T - np.eye(3)).max() > 1e-4 or np.linalg.det(R_rect) < 0:
+        raise DcslamError(f"{paths[0]}: R_rect_00 is not a rotation matrix")
+    P_rect_02 = _entry(cam, "P_rect_02", 12, paths[0]).reshape(3, 4)
+    from dcslam.io.validate import check_intrinsics
+
+    check_intrinsics(P_rect_02[:, :3], f"{paths[0]}: P_rect_02")
     return Calibration(
-        P_rect_02=_entry(cam, "P_rect_02", 12, paths[0]).reshape(3, 4),
+        P_rect_02=P_rect_02,
         R_rect_00=R_rect_00,
         T_cam0_velo=transform(velo["R"], _entry(velo, "T", 3, paths[1])),
         T_velo_imu=transform(imu["R"], _entry(imu, "T", 3, paths[2])),

@@ -21,7 +21,8 @@ FORMAT = "12 numbers per line, the 3x4 matrix [R | t] row-major"
 ROTATION_TOLERANCE = 1e-4
 
 
-def _check_rotations(T: np.ndarray, where: str) -> None:
+def check_rotations(T: np.ndarray, where: str) -> None:
+    """A :class:`DcslamError` naming ``where`` and the first pose of ``T`` (N, 4, 4) whose rotation is not one."""
     R = T[:, :3, :3]
     orthogonality = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2))
     determinant = np.abs(np.linalg.det(R) - 1.0)
@@ -45,7 +46,7 @@ def write_kitti_poses(path: Path | str, T_world_cam: np.ndarray, force: bool = F
         raise DcslamError(f"{path}: refusing to write non-finite poses")
     if np.abs(T[:, 3] - np.array([0.0, 0.0, 0.0, 1.0])).max() > 0:
         raise DcslamError(f"{path}: the bottom row of every pose must be (0, 0, 0, 1)")
-    _check_rotations(T, str(path))
+    check_rotations(T, str(path))
     rows = T[:, :3, :].reshape(len(T), 12)
     text = "\n".join(" ".join(f"{v:.12e}" for v in row) for row in rows) + "\n"
     with atomic_output(path, force=force) as tmp:
@@ -63,5 +64,5 @@ def read_kitti_poses(path: Path | str) -> np.ndarray:
     data = read_number_rows(path, 12, FORMAT)
     T = np.tile(np.eye(4), (len(data), 1, 1))
     T[:, :3, :] = data.reshape(-1, 3, 4)
-    _check_rotations(T, str(path))
+    check_rotations(T, str(path))
     return T

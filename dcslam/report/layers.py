@@ -90,6 +90,14 @@ class TrajectoryPair:
             return f"{len(self.T_est)} poses paired by index"
         return self.association.summary()
 
+    def left_out(self) -> str | None:
+        """One line naming the poses of either side left out of the pairs, or ``None`` when every pose paired."""
+        a = self.association
+        if a is None or (a.pairs == a.est_poses and a.pairs == a.gt_poses):
+            return None
+        return (f"{a.est_poses - a.pairs} of {a.est_poses} estimated and {a.gt_poses - a.pairs} of {a.gt_poses} "
+                f"reference poses left out (no pose within {1000 * a.max_time_diff_s:g} ms on the other side)")
+
 
 def _is_kitti_poses(path: Path) -> bool:
     """A KITTI pose file has 12 numbers a line (a TUM file 8); the first non-empty line decides."""
@@ -121,7 +129,8 @@ def load_pair(est_path: Path | str, gt_path: Path | str,
     The estimate is a TUM file or a KITTI pose file (12 numbers a line, no timestamps); the reference a drive file,
     a TUM file or a KITTI pose file. Poses with timestamps on both sides are associated as evo does (nearest
     timestamp within ``max_time_diff`` seconds; only the paired poses are scored); a KITTI pose file without
-    timestamps is paired by index with the reference's first poses (it takes the drive's timestamps).
+    timestamps is paired by index with a reference of as many poses (it takes the reference's timestamps), and
+    refused (:class:`DcslamError`) against one of another length.
     """
     from dcslam.io.kitti_poses import read_kitti_poses
     from dcslam.io.tum import read_tum
@@ -138,12 +147,15 @@ def load_pair(est_path: Path | str, gt_path: Path | str,
         t_est, T_est = read_tum(est_path)
     t_gt, T_gt = _read_reference(gt_path)
     if t_est is None or t_gt is None:
-        if len(T_est) > len(T_gt):
-            raise DcslamError(f"{est_path} has {len(T_est)} poses, its reference {gt_path} only {len(T_gt)}; "
-                              "without timestamps poses are paired by index")
-        n = len(T_est)
-        timestamps = t_gt[:n] if t_gt is not None else (t_est if t_est is not None else np.arange(n, dtype=float))
-        return TrajectoryPair(timestamps=timestamps, T_gt=T_gt[:n], T_est=T_est)
+        # by index only when both sides hold the same frames: a shorter or longer side would score other poses
+        if len(T_est) != len(T_gt):
+            raise DcslamError(
+                f"{est_path} has {len(T_est)} poses, its reference {gt_path} {len(T_gt)}: without timestamps on "
+                "both sides poses are paired by index, which needs as many on each side; pass a TUM trajectory "
+                "(timestamps) and a reference with timestamps (a drive file or TUM), or files of the same frames")
+        timestamps = t_gt if t_gt is not None else (t_est if t_est is not None else
+                                                    np.arange(len(T_est), dtype=float))
+        return TrajectoryPair(timestamps=timestamps, T_gt=T_gt, T_est=T_est)
     try:
         assoc = associate_timestamps(t_est, t_gt, max_time_diff)
     except DcslamError as error:
@@ -163,24 +175,21 @@ def slam_trajectory(ws: Workspace, layer: str, drive: str, root: Path | None = N
 def slam_settings(ws: Workspace, layer: str, drive: str, root: Path | None = None) -> dict:
     """The settings of the SLAM run behind ``slam/<layer>/<drive>.txt`` (:data:`RUN_SETTINGS`, from the summary
     ``<drive>.json`` beside it; ``frames`` is the number asked for, 0 = all: a drive shorter than that runs fewer,
-    which its pose count shows), plus ``suspect``: whether the run rejected steps or its health verdicts flagged it
-    as suspect. Empty when the summary is missing (a trajectory made elsewhere). ``root``: the folder of the layers'
-    SLAM outputs (default ``slam/``)."""
-    import json
+    which its pose count shows), plus ``suspect``: the run's verdict (:func:`dcslam.io.slam_summary.run_verdict`:
+    it rejected steps, or its health flagged it for degraded steps or its drift bound). Empty when the summary is
+    missing (a trajectory made elsewhere). ``root``: the folder of the layers' SLAM outputs (default ``slam/``)."""
+    from dcslam.io.slam_summary import read_summary, run_verdict
 
     path = (ws.slam if root is None else root) / layer / f"{drive}.json"
     if not path.exists():
         return {}
-    try:
-        record = json.loads(path.read_text())
-    except json.JSONDecodeError:
-        raise DcslamError(f"{path}: not valid JSON; rerun `dcslam slam --depth {layer} --force`") from None
+    record = read_summary(path, f"rerun `dcslam slam --depth {layer} --force`")
     settings = {**record.get("settings", {}), **({"beams": record["beams"]} if "beams" in record else {})}
     used = record.get("confidence")
     if isinstance(used, dict) and "mode" in used:    # what was done, not what was asked (a layer may have none)
         settings.update(confidence=used["mode"], min_confidence=used.get("min_confidence", 0.0))
     out = {k: settings[k] for k in RUN_SETTINGS if k in settings}
-    out["suspect"] = bool(record.get("rejected_steps")) or bool(record.get("suspect"))
+    out["suspect"] = run_verdict(record, str(path)).suspect
     return out
 
 

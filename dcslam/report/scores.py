@@ -82,6 +82,7 @@ def trajectory_table(pairs: dict[str, TrajectoryPair], title: str) -> Table:
     rows = [{"trajectory": name, **pair.score().flat()} for name, pair in pairs.items()]
     keys = [k for k in rows[0] if k != "trajectory"] if rows else list(TRAJECTORY_SHOWN)
     table = Table(title, [Column("trajectory", "trajectory")] + [Column(k, k) for k in keys], rows)
+    table.notes.extend(f"{name}: {pair.left_out()}" for name, pair in pairs.items() if pair.left_out())
     table.notes.append("localisation: thesis accuracy (m + rad, ‖t_X‖ + acos((tr R_X − 1)/2), the angle computed "
                        "as atan2(|sin|, cos), exact near 0 and π); localisation_thesis_clamp: acos argument "
                        "clamped to [0, 1] as the thesis's code did (errors above 90° count as π/2)")
@@ -138,20 +139,19 @@ def _seed_layer(result, seed) -> str:
 
 def _depth_example_rows(ws: Workspace, results: list[LayerResult], drive: str):
     """(rgb, rows) for the middle frame of ``drive``: one row per model layer that has depth."""
-    from dcslam.io.drive import DriveFile, read_layer
+    from dcslam.io.drive import DriveFile, read_layer_for
 
     models = [r for r in results if r.depth and r.layer not in ("sparse", "dense")]
     if not models:
         return None, []
+    rows = []
     with DriveFile(drive_file(ws, drive)) as d:
         i = len(d) // 2
         rgb, sparse, dense = d.rgb(i), d.depth("sparse", i), d.depth("dense", i)
-        n = len(d)
-    rows = []
-    for result in models:
-        layer = resolve_layer(ws, result.layer)
-        pred = read_layer(layer.source(drive), expect_frames=n).depth[i]
-        rows.append((f"{result.label} ({result.layer})", sparse, pred, dense))
+        for result in models:
+            layer = resolve_layer(ws, result.layer)
+            pred = read_layer_for(d, layer.source(drive)).depth[i]
+            rows.append((f"{result.label} ({result.layer})", sparse, pred, dense))
     return rgb, rows
 
 

@@ -82,6 +82,10 @@ def from_mapping(cls, values: dict, source: str = "configuration"):
     kwargs = {}
     for key, value in values.items():
         name = known[key]
+        choices = next(f for f in options_of(cls) if f.name == name).metadata.get("choices")
+        for item in (value if isinstance(value, list) else [value]) if choices is not None else []:
+            if item is not None and item not in choices:
+                raise DcslamError(f"{source}: {key} = {item!r} is not one of {', '.join(map(str, choices))}")
         base, optional, is_list = split_type(field_type(cls, name))
         if value is None:
             if not optional:

@@ -27,7 +27,8 @@ class FilterConfig:
     run: str | None = option(None, help="Run name (or folder of layer files) for --depth predicted or filtered.")
     name: str | None = option(None, help="Output name (default: <input>+<filters>, e.g. mse-dense+range).")
     drive: list[str] = option(default_factory=list, help="Drive name (repeatable); default: the test split.")
-    out_dir: Path | None = option(None, help="Output folder (default: <workspace>/filtered/<name>).")
+    out_dir: Path | None = option(None, flags=("--out",), aliases=("--out-dir",),
+                                  help="Output folder (default: <workspace>/filtered/<name>).")
 
     def __post_init__(self) -> None:
         if not self.filters:

@@ -26,8 +26,9 @@ class PredictConfig:
                                help=f"A completer that needs no run folder: {', '.join([*ALIASES, *CLASSICAL])}.")
     split: str = option("test", choices=SPLITS, help="Split whose drives to predict (train, val, test).")
     drive: list[Path] = option(default_factory=list, help="Drive file(s) to predict instead of a split.")
-    output: Path | None = option(None, help="Output folder (default predictions/<run>/, or predictions/<run>-"
-                                            "sparse16/ for --input sparse@16).")
+    output: Path | None = option(None, flags=("--out",), aliases=("--output",),
+                                 help="Output folder (default predictions/<run>/, or predictions/<run>-"
+                                      "sparse16/ for --input sparse@16).")
     device: str = option("auto", help="auto, cpu or cuda.")
     input: str | None = option(None, validate=lambda kind: check_input_kind(kind), metavar="KIND",
                                show_default="the run's training input, else sparse",
@@ -96,7 +97,8 @@ def predict_drive(predictor, drive_path: Path | str, out_path: Path | str, force
                 depth[i], confidence[i] = predictor.completer.complete(drive.depth(input, i), rgb)
             else:
                 depth[i] = predictor.completer(drive.depth(input, i))
-        layer = Layer(depth=depth, confidence=confidence, drive=drive.path.name, made_by=predictor.made_by,
+        layer = Layer(depth=depth, confidence=confidence, drive=drive.path.name, frame_ids=drive.frame_ids,
+                      made_by=predictor.made_by,
                       config={**predictor.config, "drive_file": str(drive.path), "input": input,
                               "input_beams": input_beams(input)})
     return write_layer(out_path, layer, force=force)
@@ -132,15 +134,20 @@ def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> Predict
     kind = config.input or chosen.config.get("train_settings", {}).get("input", "sparse")
     trained_on = chosen.config.get("train_settings", {}).get("input", "sparse")
     suffix = "" if kind == trained_on else "-" + kind.replace("@", "")
-    out_dir = output_folder(config.output or ws.predictions / f"{chosen.made_by}{suffix}", "--output")
+    out_dir = output_folder(config.output or ws.predictions / f"{chosen.made_by}{suffix}", "--out")
     outputs = [out_dir / Path(p).name for p in paths]
     existing = [p for p in outputs if p.exists()]
     if existing and not force:
         raise DcslamError(f"{existing[0]} exists; pass --force to overwrite it")
     from dcslam.io.atomic import AtomicSet
+    from dcslam.io.drive import DriveFile
+    from dcslam.workspace import new_folder
 
-    out_dir.mkdir(parents=True, exist_ok=True)
-    with AtomicSet() as files:  # the layers appear together: Ctrl-C or a bad drive leaves none of them
+    for path in paths:  # every input checked before the output folder is made
+        with DriveFile(path) as drive:
+            if len(drive):
+                drive.depth(kind, 0)  # a kind the drive lacks: one line naming it and how to write it
+    with new_folder(out_dir), AtomicSet() as files:  # the layers appear together: Ctrl-C or a bad drive leaves none
         for path, out in zip(paths, outputs):
             predict_drive(chosen, path, files.stage(out), force=True, input=kind)
     from dcslam.stages.config import to_dict

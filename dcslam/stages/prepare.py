@@ -180,6 +180,13 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
     chosen = _assign(found, splits, label, include_unsplit, notes)
     if not chosen:
         raise DcslamError(f"none of the {len(found)} drive(s) under {kitti_root} is in {label}; nothing to convert")
+    wanted = list(splits.get("test", [])) if splits_file is not None else []
+    if wanted and not any(split == "test" for _, split in chosen):
+        # a split file that names test drives none of which is here (a typo) would make an empty test split,
+        # and every later stage (slam, score) runs on the test drives
+        raise DcslamError(f"--splits {splits_file}: none of its test drive(s) ({_listing(wanted)}) is under "
+                          f"{kitti_root}, so the test split would be empty; fix the names (drives found: "
+                          f"{_listing(sorted(d.name for d in found))})")
 
     splits_path = out_dir / "splits.json"
     targets = [out_dir / f"{drive.name}.h5" for drive, _ in chosen]

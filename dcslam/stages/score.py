@@ -161,7 +161,8 @@ class ScoreTablesConfig:
     """Options of ``dcslam score tables``."""
 
     drive: list[str] = option(default_factory=list, help=DRIVE_HELP)
-    out_dir: Path | None = option(None, help="Output folder (default: <workspace>/results).")
+    out_dir: Path | None = option(None, flags=("--out",), aliases=("--out-dir",),
+                                  help="Output folder (default: <workspace>/results).")
     devkit_exact: bool = option(False, flags=("--devkit-exact",), help=DEPARTURES_TEXT)
     max_time_diff: float = option(EVO_MAX_TIME_DIFF_S, min=0.0, help=MAX_TIME_DIFF_HELP)
     failure_threshold: float = option(1.0, min=0.0, help=FAILURE_HELP)
@@ -178,8 +179,8 @@ def run_tables(ws: Workspace, config: ScoreTablesConfig, *, force: bool = False)
     report = build_report(ws, select_drives(ws, config.drive), out_dir=config.out_dir, force=force,
                           devkit_exact=config.devkit_exact, max_time_diff=config.max_time_diff,
                           failure_threshold=config.failure_threshold)
-    write_json_atomic(report.written[0].parent / "score-tables.json", stage_config("score-tables", to_dict(config)),
-                      force=True)
+    report.written.append(write_json_atomic(report.written[0].parent / "score-tables.json",
+                                            stage_config("score-tables", to_dict(config)), force=True))
     return report
 
 

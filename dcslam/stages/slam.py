@@ -111,12 +111,11 @@ class SlamDriveResult:
 def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[SlamDriveResult]:
     """SLAM over every selected drive; all outputs are checked not to exist (without ``force``) before any work."""
     from dcslam.allocator import fix_mmap_threshold
-    from dcslam.io.drive import read_splits
     from dcslam.slam.config import build_slam
     from dcslam.stages.config import to_dict
-    from dcslam.workspace import drive_file, layer_reference, output_folder, resolve_layer
+    from dcslam.workspace import drive_file, layer_reference, output_folder, resolve_layer, select_drives
 
-    names = config.drive or read_splits(ws.splits)["test"]
+    names = select_drives(ws, config.drive)  # an empty test split is an error, not a run over nothing
     paths = [drive_file(ws, name) for name in names]
     layer = resolve_layer(ws, layer_reference(config.depth, config.run))
     out_dir = config.out if config.out is not None else ws.slam / layer.name
@@ -197,6 +196,7 @@ class DriveRun:
     settings: dict = field(default_factory=dict)
     confidence: dict = field(default_factory=dict)  # ConfidenceUse.record() plus the fraction of pixels kept
     effective_settings: dict = field(default_factory=dict)  # SLAM.effective_settings(): after the scene scale
+    health_rules: object = None  # the HealthRules the steps were judged by (None: the defaults); the run is too
 
     def __post_init__(self) -> None:
         from dcslam.geometry.rotations import nearest_rotation
@@ -219,7 +219,7 @@ class DriveRun:
             "seconds": round(self.seconds, 3), "seconds_per_frame": round(self.seconds / max(n, 1), 4),
             "map_megabytes": round(self.map.nbytes() / 2 ** 20, 2),
             "rejected_steps": [{"frame": r.index, "reason": r.reason} for r in self.reports if not r.accepted],
-            "health": summarise(self.reports),
+            "health": summarise(self.reports, *([self.health_rules] if self.health_rules is not None else [])),
             "translation_error_m": {"final": float(dt[-1]), "max": float(dt.max()), "mean": float(dt.mean())},
             "rotation_error_deg": {"final": float(dr[-1]) * 180 / np.pi, "max": float(dr.max()) * 180 / np.pi},
             "confidence": self.confidence,
@@ -285,7 +285,8 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
         used = {**confidence.record(confidence_all is not None),
                 "kept_fraction": round(kept / measured, 4) if measured else 0.0}
         return DriveRun(drive.name, poses, drive.timestamps[:n].copy(), T_gt.copy(), global_map,
-                        list(slam.reports), seconds, dict(settings or {}), used, slam.effective_settings())
+                        list(slam.reports), seconds, dict(settings or {}), used, slam.effective_settings(),
+                        slam.health)
 
 
 @contextlib.contextmanager

@@ -6,6 +6,7 @@ each of which runs this module's :func:`main` on the same configuration file.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from dataclasses import asdict, dataclass, fields, replace
@@ -102,6 +103,15 @@ def _prepare_run_dir(run_dir: Path, force: bool, resume: bool) -> None:
     for name in existing:
         (run_dir / name).unlink()
     run_dir.mkdir(parents=True, exist_ok=True)
+
+
+def _discard_unstarted(run_dir: Path, made: bool) -> None:
+    """Remove the files of a run that failed before its first epoch (and its folder, if this run ``made`` it)."""
+    for name in RUN_FILES:
+        (run_dir / name).unlink(missing_ok=True)
+    if made:
+        with contextlib.suppress(OSError):
+            run_dir.rmdir()
 
 
 RESUMABLE = ("epochs", "device")  # what a resumed run may change: more epochs, another device
@@ -212,6 +222,8 @@ def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resu
 
     run_dir = Path(run_dir)
     rank, world = rank_and_world()
+    device = resolve_device(config.device)  # before the run's folder is made: a missing GPU leaves nothing behind
+    made = not run_dir.exists()
     if rank == 0:
         _prepare_run_dir(run_dir, force, resume)
     barrier()
@@ -219,7 +231,6 @@ def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resu
         config = _saved_config(run_dir, config)
     if not config.train_drives:
         raise DcslamError("no training drives; run `dcslam prepare-kitti` (or `dcslam synth`) first")
-    device = resolve_device(config.device)
     if world > 1 and device.type == "cuda":
         device = torch.device("cuda", rank % torch.cuda.device_count())
     seed_all(config.seed)
@@ -246,6 +257,10 @@ def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resu
         if resume and rank == 0:  # only once the epochs are trained
             _record_resume(run_dir, config)
         return result
+    except BaseException:
+        if rank == 0 and not resume and not (run_dir / "last.pt").exists():
+            _discard_unstarted(run_dir, made)  # failed before its first epoch: its rerun must not find "run exists"
+        raise
     finally:
         for frames in open_drives:
             frames.close()

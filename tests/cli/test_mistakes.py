@@ -50,7 +50,7 @@ def test_outputs_that_are_the_wrong_kind_of_path(cli, ws, tmp_path):
     a_file = tmp_path / "a_file"
     a_file.write_text("mine")
     for args, option in [(("slam", "-w", ws, "--depth", "dense", "--out", a_file), "--out"),
-                         (("predict", "-w", ws, "--model", "ip-basic-fast", "--output", a_file), "--output"),
+                         (("predict", "-w", ws, "--model", "ip-basic-fast", "--output", a_file), "--out"),
                          (("synth", "-w", a_file, "--drives", "1", "--frames", "11"), "workspace (-w)"),
                          (("prepare-kitti", "-w", ws, "--kitti", ws, "--out", a_file), "--out")]:
         line = one_line(cli(*args))

@@ -92,6 +92,19 @@ def test_splits_file_and_notes(cli, tmp_path):
     assert len([p for p in _files(tmp_path / "all") if p.endswith(".h5")]) == 2
 
 
+def test_a_split_file_whose_only_test_drive_is_misspelt_is_refused(cli, tmp_path):
+    root = tmp_path / "kitti"
+    fx.write_tiny_drive(root, "2011_09_26_drive_0002_sync", n_frames=11)
+    fx.write_tiny_drive(root, "2011_09_26_drive_0003_sync", n_frames=11)
+    splits = tmp_path / "s.json"
+    splits.write_text(json.dumps({"train": ["2011_09_26_drive_0002_sync"], "val": [],
+                                  "test": ["2011_09_26_drive_003_sync"]}))
+    result = cli("prepare-kitti", "--kitti", root, "--out", tmp_path / "out", "--splits", splits)
+    assert result.exit_code == 1
+    assert f"--splits {splits}: none of its test drive(s) (2011_09_26_drive_003_sync) is under" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and not (tmp_path / "out").exists()
+
+
 def _break(drive: kitti.RawDrive, what: str) -> str:
     """Damage a tiny drive; returns the file name the error must name."""
     if what == "calib":
@@ -154,3 +167,23 @@ def test_beams_option(cli, workspace):
         assert drive.kinds == ("sparse", "dense", "sparse@32", "sparse@8")
         counts = [(drive.depth(kind, 0) > 0).sum() for kind in ("sparse", "sparse@32", "sparse@8")]
         assert counts[0] > counts[1] > counts[2] > 0
+
+
+def test_the_rerun_after_a_killed_run_removes_every_temporary_it_left(cli, tmp_path):
+    import subprocess
+    import sys
+
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()                                   # a process id that no longer runs: the killed run's
+    root, out = tmp_path / "kitti", tmp_path / "out"
+    name = "2011_09_26_drive_0002_sync"
+    fx.write_tiny_drive(root, name, n_frames=11)
+    out.mkdir()
+    for left in (f".{name}.h5.set-{child.pid}", f"..{name}.h5.set-{child.pid}.tmp-{child.pid}",
+                 f".splits.json.tmp-{child.pid}"):
+        (out / left).write_text("left by a run killed with SIGKILL")
+    splits = tmp_path / "s.json"
+    splits.write_text(json.dumps({"train": [], "val": [], "test": [name]}))
+    result = cli("prepare-kitti", "--kitti", root, "--out", out, "--splits", splits)
+    assert result.exit_code == 0, result.output
+    assert _files(out) == [f"{name}.h5", "prepare-kitti.json", "splits.json"]

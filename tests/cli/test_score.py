@@ -195,7 +195,8 @@ def test_score_trajectory_associates_within_the_time_tolerance(cli, ws, tmp_path
 
 
 def test_score_trajectory_reads_kitti_pose_files(cli, ws, tmp_path):
-    """A KITTI pose file (no timestamps) is paired by index with the reference's first poses."""
+    """A KITTI pose file (no timestamps) is paired by index with a reference of as many poses; any other length is
+    refused."""
     est = tmp_path / "est.kitti.txt"
     _, T_sparse = read_tum(ws / "slam" / "sparse" / "d0.txt")
     write_kitti_poses(est, T_sparse)
@@ -319,3 +320,22 @@ def test_tables_refuse_a_layer_with_wrong_frame_count(cli, ws):
     result = cli("score", "tables", "-w", ws)
     assert result.exit_code == 1 and "frames but its drive has" in result.output
     assert not (ws / "results").exists()
+
+
+def test_tables_print_compactly_and_name_every_file_written(cli, ws):
+    """The printed Table 5.2 holds its key columns within 100 characters a line; the Markdown file holds them all,
+    and every file written is named."""
+    result = cli("score", "tables", "-w", ws)
+    assert result.exit_code == 0, result.output
+    lines = result.stdout.splitlines()
+    assert max(len(line) for line in lines) <= 100, max(lines, key=len)
+    start = next(i for i, line in enumerate(lines) if "Table 5.2" in line)
+    header = " ".join(lines[start:start + 6])
+    for name in ("method", "drives", "failed", "localisation", "vs sparse", "MAE", "ATE"):
+        assert name in header, name
+    assert "iRMSE" not in header and "SLAM settings" not in header
+    assert "every column:" in result.stdout
+    markdown = (ws / "results" / "table_5_2.md").read_text()
+    assert "iRMSE (1/km)" in markdown and "SLAM settings" in markdown
+    written = sorted(p for p in (ws / "results").iterdir())
+    assert written and all(f"  {p}" in lines for p in written)

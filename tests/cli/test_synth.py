@@ -20,7 +20,7 @@ def test_synth_writes_drives_into_the_workspace(cli, tmp_path):
 
     again = cli("synth", "--out", kitti, "--drives", 1, "--frames", 12)
     assert again.exit_code == 1
-    assert "--force" in again.stderr
+    assert "exists; pass --force to replace it" in again.stderr   # its own drives: no foreign data found
 
 
 def test_synth_rejects_bad_options(cli, tmp_path):
@@ -35,3 +35,25 @@ def test_synth_refuses_drives_too_short_for_depth_before_any_work(cli, tmp_path)
     assert result.stderr.strip().splitlines() == [
         "error: --frames 5 gives no frame a depth map (KITTI skips 5 frames at each end); pass --frames 11 or more"]
     assert not (tmp_path / "k").exists()
+
+
+def test_synth_never_writes_beside_data_it_did_not_generate(cli, tmp_path):
+    """Real KITTI in kitti/: generated drives beside it would make prepare-kitti read both as one synthetic root."""
+    from tests.fixtures.kitti import link_real_drive
+
+    kitti = link_real_drive(tmp_path / "kitti")
+    before = sorted(str(p.relative_to(kitti)) for p in kitti.rglob("*"))
+    result = cli("synth", "--workspace", str(tmp_path), "--drives", "1", "--frames", "11")
+    assert result.exit_code == 1
+    assert f"{kitti} holds data dcslam synth did not write" in result.stderr
+    assert "2011_09_26_drive_0001_sync" in result.stderr and "--force" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert sorted(str(p.relative_to(kitti)) for p in kitti.rglob("*")) == before
+
+
+def test_synth_indoor_never_writes_beside_data_it_did_not_generate(cli, tmp_path):
+    (tmp_path / "tum" / "rgbd_dataset_freiburg1_xyz").mkdir(parents=True)
+    result = cli("synth", "--indoor", "--workspace", str(tmp_path), "--drives", "1", "--frames",
+                                 "2", "--scale", "0.1")
+    assert result.exit_code == 1 and "rgbd_dataset_freiburg1_xyz" in result.stderr and "--force" in result.stderr
+    assert [p.name for p in (tmp_path / "tum").iterdir()] == ["rgbd_dataset_freiburg1_xyz"]

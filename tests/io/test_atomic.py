@@ -1,5 +1,6 @@
 """Atomic writes: the file appears whole or not at all, and is not replaced without force."""
 import json
+import os
 
 import pytest
 
@@ -62,3 +63,32 @@ def test_atomic_set_appears_together_or_not_at_all(tmp_path):
         files.stage(tmp_path / "b.txt").write_text("b")
         assert not (tmp_path / "a.txt").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt"]
+
+
+def _dead_pid() -> int:
+    """The id of a process that has exited."""
+    import subprocess
+    import sys
+
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()
+    return child.pid
+
+
+def test_every_kind_of_temporary_a_killed_writer_left_is_removed_by_the_next_write(tmp_path):
+    """A SIGKILL runs no cleanup: the next write of the same files removes what the killed process left."""
+    from dcslam.io.atomic import AtomicSet, atomic_output
+
+    dead = _dead_pid()
+    left = [tmp_path / f".d.h5.tmp-{dead}", tmp_path / f".d.h5.set-{dead}", tmp_path / f"..d.h5.set-{dead}.tmp-{dead}"]
+    for path in left:
+        path.write_text("left by a killed run")
+    with AtomicSet() as files, atomic_output(files.stage(tmp_path / "d.h5"), force=True) as tmp:
+        tmp.write_text("new")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.h5"]
+    (tmp_path / f".e.txt.tmp-{dead}").write_text("left by a killed run")
+    live = tmp_path / f".e.txt.tmp-{os.getppid()}"  # a writer that still runs keeps its temporary file
+    live.write_text("being written")
+    with atomic_output(tmp_path / "e.txt") as tmp:
+        tmp.write_text("e")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["d.h5", "e.txt", live.name])

@@ -7,6 +7,7 @@ import pytest
 
 from dcslam.errors import DcslamError
 from dcslam.io.drive import (DRIVE_SCHEMA, DriveFile, DriveFrame, DriveWriter, Layer, list_drives, load_depth,
+                             read_layer_for,
                              read_layer, read_splits, write_layer)
 
 H, W = 6, 10
@@ -315,6 +316,41 @@ class TestLayers:
         with pytest.raises(DcslamError, match="not a dcslam depth layer"):
             read_layer(tmp_path / "drive.h5")
 
+
+
+class TestLayerOfItsDrive:
+    """A layer is read for one drive and refused, in one line naming the file, when it was made for another."""
+
+    def test_frame_ids_round_trip_and_a_layer_of_this_drive_is_read(self, tmp_path):
+        drive_path = write(tmp_path / "d1.h5", make_frames(3))
+        depth = np.ones((3, H, W), np.float32)
+        write_layer(tmp_path / "l.h5", Layer(depth, drive="d1", made_by="x", frame_ids=np.array([5, 6, 7])))
+        with DriveFile(drive_path) as drive:
+            layer = read_layer_for(drive, tmp_path / "l.h5")
+            assert layer.frame_ids.tolist() == [5, 6, 7] and np.array_equal(load_depth(drive, tmp_path / "l.h5"),
+                                                                             depth)
+
+    @pytest.mark.parametrize("name, frame_ids, match", [
+        ("d2", [5, 6, 7], r"l\.h5: a layer of drive 'd2', not of 'd1' \(.*d1\.h5\); run `dcslam predict`"),
+        ("d1.h5", [5, 6, 9], r"l\.h5: layer frame 2 is KITTI frame 9, its drive's 7 \(.*d1\.h5\)"),
+    ])
+    def test_a_layer_of_another_drive_under_this_drives_name(self, tmp_path, name, frame_ids, match):
+        drive_path = write(tmp_path / "d1.h5", make_frames(3))
+        write_layer(tmp_path / "l.h5", Layer(np.ones((3, H, W), np.float32), drive=name, made_by="x",
+                                             frame_ids=np.array(frame_ids)))
+        with DriveFile(drive_path) as drive, pytest.raises(DcslamError, match=match) as error:
+            load_depth(drive, tmp_path / "l.h5")
+        assert "\n" not in str(error.value)
+
+    def test_malformed_frame_ids(self, tmp_path):
+        with pytest.raises(DcslamError, match=r"frame_ids have shape \(2,\), expected \(3,\)"):
+            write_layer(tmp_path / "l.h5", Layer(np.ones((3, H, W), np.float32), drive="d1", made_by="x",
+                                                 frame_ids=np.array([5, 6])))
+        write_layer(tmp_path / "l.h5", Layer(np.ones((3, H, W), np.float32), drive="d1", made_by="x"))
+        with h5py.File(tmp_path / "l.h5", "a") as h5:
+            h5["frame_ids"] = np.array([5, 6])
+        with pytest.raises(DcslamError, match=r"l\.h5: frame_ids of shape \(2,\), expected \(3,\)"):
+            read_layer(tmp_path / "l.h5")
 
 
 class TestLayerConfidence:

@@ -15,6 +15,10 @@ def test_alias_writes_the_registered_name(ws):
     assert result.made_by == "ip-basic-fast" and result.out_dir == ws.predictions / "ip-basic-fast"
     assert [p.name for p in result.layers] == ["drive_d.h5"]
     assert read_layer(result.layers[0]).made_by == "ip-basic-fast"
+    from dcslam.io.drive import DriveFile
+
+    with DriveFile(ws.drives / "drive_d.h5") as drive:
+        assert read_layer(result.layers[0]).frame_ids.tolist() == drive.frame_ids.tolist()
     record = json.loads((result.out_dir / "config.json").read_text())
     assert record["stage"] == "predict" and record["settings"]["model"] == "ip-basic"
     with pytest.raises(DcslamError, match="--force"):
@@ -51,6 +55,7 @@ def test_input_of_fewer_beams(tmp_path):
 def test_missing_beams_name_the_command(ws):
     with pytest.raises(DcslamError, match=r"holds no sparse@8 depth.*--beams 8"):
         run(ws, PredictConfig(model="ip-basic", input="sparse@8"))
+    assert not ws.predictions.exists()  # refused before any folder is made: nothing for the rerun to trip over
 
 
 def test_confidence_aware_run_writes_confidence(ws):

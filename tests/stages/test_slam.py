@@ -38,6 +38,25 @@ def test_layer_references_resolve_through_the_one_resolver(ws):
     assert not ws.slam.exists()
 
 
+def test_a_layer_of_another_drive_under_this_drives_name_is_refused(ws):
+    from dcslam.io.drive import DriveFile, Layer, write_layer
+
+    with DriveFile(ws.drives / "drive_c.h5") as other:
+        depth = np.stack([other.depth("dense", i) for i in range(len(other))])
+        write_layer(ws.predictions / "copied" / "drive_d.h5", Layer(depth, drive=other.name, made_by="copied",
+                                                                    frame_ids=other.frame_ids))
+    with pytest.raises(DcslamError, match=r"drive_d\.h5: a layer of drive 'drive_c', not of 'drive_d'"):
+        run(ws, SlamStageConfig(depth="predicted", run="copied", odometry="gt", frames=2))
+    assert not (ws.slam / "copied").exists()
+
+
+def test_an_empty_test_split_is_an_error(ws):
+    ws.splits.write_text(json.dumps({"train": ["drive_a"], "val": ["drive_c"], "test": []}))
+    with pytest.raises(DcslamError, match=r"splits\.json: no test drives; pass --drive"):
+        run(ws, SlamStageConfig(odometry="gt", frames=2))
+    assert not ws.slam.exists()
+
+
 def test_sparse_of_fewer_beams_and_exact_depth(tmp_path):
     import json
 

@@ -94,11 +94,23 @@ def save_model(path: Path | str, model, meta: dict | None = None, force: bool = 
 def model_from_record(record: dict, source: str = "model record"):
     if not isinstance(record, dict) or record.get("format") != MODEL_FORMAT:
         raise DcslamError(f"{source}: not a dcslam model file (expected format {MODEL_FORMAT})")
-    model = build_model(record["arch"], **record["hparams"])
+    missing = [k for k in ("arch", "hparams", "state_dict") if k not in record]
+    if missing or not isinstance(record["hparams"], dict):
+        raise DcslamError(f"{source}: model file without {', '.join(missing) or 'a table of hparams'}; retrain the "
+                          "run (`dcslam train --force`)")
+    try:
+        model = build_model(record["arch"], **record["hparams"])
+    except TypeError as exc:  # hyperparameters the architecture does not take
+        raise DcslamError(f"{source}: hparams {record['hparams']} do not fit {record['arch']} ({exc})") from None
     try:
         model.load_state_dict(record["state_dict"])
-    except RuntimeError as exc:
-        raise DcslamError(f"{source}: weights do not fit {record['arch']} {record['hparams']}: {exc}") from None
+    except (RuntimeError, TypeError, AttributeError) as exc:
+        # torch lists every mismatch on its own line: the first one says enough, on the one line of an error
+        details = [line.strip() for line in str(exc).splitlines() if line.strip()]
+        first = details[1] if len(details) > 1 else (details[0] if details else type(exc).__name__)
+        more = f" (and {len(details) - 2} more)" if len(details) > 2 else ""
+        raise DcslamError(f"{source}: weights do not fit {record['arch']} {record['hparams']}: {first}{more}; "
+                          "retrain the run (`dcslam train --force`) or pass the model it was trained as") from None
     return model
 
 

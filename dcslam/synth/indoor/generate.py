@@ -117,6 +117,13 @@ def generate_indoor(out_root: Path | str, sequences: int = 1, frames: int = 60, 
     out_root = Path(out_root)
     names = [sequence_name(i) for i in range(sequences)]
     if not force:
+        foreign = [p for p in sorted(out_root.iterdir()) if not p.name.startswith(".")
+                   and p.name != "synth_indoor.json" and not p.match("living_room_traj*_frei_png")] \
+            if out_root.is_dir() else []
+        if foreign:  # the sequences of a real dataset beside generated ones would be read as one dataset
+            raise DcslamError(f"{out_root} holds data dcslam synth did not write ({', '.join(map(str, foreign[:3]))}"
+                              f"{f' and {len(foreign) - 3} more' if len(foreign) > 3 else ''}); choose another "
+                              "--out, or pass --force to write the sequences beside it")
         taken = [out_root / name for name in names if _occupied(out_root / name)]
         if taken:
             raise DcslamError(f"{taken[0]} exists; pass --force to replace it")

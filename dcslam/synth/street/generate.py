@@ -184,6 +184,43 @@ def _generated_drives(out_root: Path, date_dir: Path) -> set[str]:
     return {p.name for f in folders if f.is_dir() for p in f.glob(f"{DATE}_drive_1[0-9][0-9][0-9]_sync")}
 
 
+def foreign_entries(out_root: Path) -> list[Path]:
+    """What ``out_root`` holds that ``dcslam synth`` does not write (real KITTI drives, other dates, any other
+    file): the generated drives, the calibration of :data:`DATE`, the marker, the settings and hidden temporary
+    names are its own. Empty when ``out_root`` does not exist."""
+    from dcslam.io.kitti_calib import CALIB_FILES
+
+    if not out_root.is_dir():
+        return []
+    generated = f"{DATE}_drive_1[0-9][0-9][0-9]_sync"
+    own = {"raw": {DATE: {*CALIB_FILES, generated}}, "depth_completion": {"train": {generated}, "val": {generated}},
+           "SYNTHETIC": None, "synth_config.json": None}
+
+    def walk(folder: Path, allowed) -> list[Path]:
+        found = []
+        for entry in sorted(folder.iterdir()):
+            if entry.name.startswith("."):
+                continue
+            if isinstance(allowed, dict) and entry.name in allowed:
+                rule = allowed[entry.name]  # a folder's own rules (dict or set of names), or None for a file
+                if rule is not None and entry.is_dir():
+                    found += walk(entry, rule)
+                elif (rule is None) == entry.is_dir():
+                    found.append(entry)
+            elif isinstance(allowed, set) and (entry.name in allowed or entry.match(generated)):
+                continue
+            else:
+                found.append(entry)
+        return found
+
+    return walk(out_root, own)
+
+
+def _listing(paths: list[Path], limit: int = 3) -> str:
+    shown = ", ".join(str(p) for p in paths[:limit])
+    return shown + (f" and {len(paths) - limit} more" if len(paths) > limit else "")
+
+
 def _occupied(path: Path) -> bool:
     return path.exists() and (not path.is_dir() or any(path.iterdir()))
 
@@ -236,6 +273,10 @@ def generate(out_root: Path | str, drives: int = 6, frames: int = 60, seed: int 
     _remove_leftovers(date_dir, depth_root)
     stale = _generated_drives(out_root, date_dir) - set(names)
     if not force:
+        foreign = foreign_entries(out_root)
+        if foreign:  # e.g. real KITTI: generated drives beside it would be read as one dataset
+            raise DcslamError(f"{out_root} holds data dcslam synth did not write ({_listing(foreign)}); choose "
+                              "another --out, or pass --force to write the generated drives beside it")
         taken = [p for name in names for p in (date_dir / name, depth_root / name) if _occupied(p)]
         if taken:
             raise DcslamError(f"{taken[0]} exists; pass --force to replace it")

@@ -1,0 +1,64 @@
+"""The verdict of a SLAM run, read from the summary ``<drive>.json`` that ``dcslam slam`` writes beside its
+trajectory: the one reader that every table uses to decide whether a run failed.
+
+The summary holds ``rejected_steps`` (a list, one entry per step the odometry refused) and ``health``
+(:func:`dcslam.slam.health.summarise`: ``suspect``, ``reasons``, counts of accepted / degraded / rejected steps).
+A run is flagged when its health says suspect (rejected or degraded steps, the drift bound) or when it rejected a
+step. A summary without ``health`` (written before the verdicts existed) is judged by its rejected steps alone.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from dcslam.errors import DcslamError
+
+
+@dataclass(frozen=True)
+class RunVerdict:
+    """Whether a SLAM run is flagged (``suspect``), why (``reasons``, the health's own words), and its counts of
+    ``rejected`` and ``degraded`` steps."""
+
+    suspect: bool
+    reasons: tuple[str, ...] = ()
+    rejected: int = 0
+    degraded: int = 0
+
+
+def read_summary(path: Path | str, fix: str = "rerun `dcslam slam --force`") -> dict:
+    """The JSON object of a SLAM summary; a :class:`DcslamError` naming the file (and ``fix``) when it is not one."""
+    path = Path(path)
+    try:
+        record = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise DcslamError(f"{path}: not valid JSON; {fix}") from None
+    except OSError as exc:
+        raise DcslamError(f"{path}: cannot be read ({exc.strerror or exc}); {fix}") from None
+    if not isinstance(record, dict):
+        raise DcslamError(f"{path}: not a SLAM summary (a JSON object); {fix}")
+    return record
+
+
+def run_verdict(record: dict, where: str = "SLAM summary") -> RunVerdict:
+    """The verdict of the run a summary ``record`` describes (``where``: its file, for the error message)."""
+    rejected_steps = record.get("rejected_steps", [])
+    if not isinstance(rejected_steps, list):
+        raise DcslamError(f"{where}: 'rejected_steps' is not a list; rerun `dcslam slam --force`")
+    health = record.get("health")
+    if health is None:
+        n = len(rejected_steps)
+        return RunVerdict(suspect=n > 0, reasons=(f"{n} steps rejected",) if n else (), rejected=n)
+    if not isinstance(health, dict) or not isinstance(health.get("suspect"), bool):
+        raise DcslamError(f"{where}: 'health' has no true/false 'suspect'; rerun `dcslam slam --force`")
+    reasons = tuple(str(r) for r in health.get("reasons", []))
+    rejected = max(int(health.get("rejected", 0)), len(rejected_steps))
+    if rejected and not health["suspect"]:
+        reasons += (f"{rejected} steps rejected",)
+    return RunVerdict(suspect=health["suspect"] or rejected > 0, reasons=reasons, rejected=rejected,
+                      degraded=int(health.get("degraded", 0)))
+
+
+def read_verdict(path: Path | str) -> RunVerdict:
+    """:func:`run_verdict` of the summary file at ``path``."""
+    return run_verdict(read_summary(path), str(path))
