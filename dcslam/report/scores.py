@@ -46,10 +46,10 @@ def depth_table(ws: Workspace, layer_name: str, drives: list[str], interpolate: 
     columns = [Column("drive", "drive"), Column("frames", "frames"), Column("mae_mm", "MAE (mm)", "{:.1f}"),
                Column("rmse_mm", "RMSE (mm)", "{:.1f}"), Column("imae_per_km", "iMAE (1/km)", "{:.2f}"),
                Column("irmse_per_km", "iRMSE (1/km)", "{:.2f}"), Column("coverage", "coverage", "{:.3f}"),
-               Column("normal_mean_deg", "normal error mean (°)", "{:.1f}"),
-               Column("normal_median_deg", "normal error median (°)", "{:.1f}"),
-               Column("p2p_mean_m", "point-to-plane mean (m)", "{:.3f}"),
-               Column("p2p_rmse_m", "point-to-plane RMSE (m)", "{:.3f}"),
+               Column("normal_mean_deg", "normal mean (°)", "{:.1f}"),
+               Column("normal_median_deg", "normal median (°)", "{:.1f}"),
+               Column("p2p_mean_m", "p2p mean (m)", "{:.3f}"),
+               Column("p2p_rmse_m", "p2p RMSE (m)", "{:.3f}"),
                Column("flying_share", "flying share", "{:.3f}")]
     table = Table(f"depth errors of {layer.name}" + (f" against {target} depth" if target != "dense" else ""),
                   columns)

@@ -397,10 +397,11 @@ def run(ws: Workspace, config: ReproduceConfig, *, log: Callable[[str], None] = 
 
     if config.kitti is not None and not config.dry_run:
         check_kitti_root(config.kitti)  # before the plan: a wrong root is one line, not a plan and then an error
+    executor = None if config.dry_run else make_executor(ws, config, log)  # a missing submitit/sbatch: one line too
     log(plan_text(ws, config))
     if config.dry_run:
         return None
-    seeds, executor = seeds_of(config), make_executor(ws, config, log)
+    seeds = seeds_of(config)
     if config.table == "beams":
         from dcslam.stages import reproduce_beams
 

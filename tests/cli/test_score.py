@@ -142,7 +142,7 @@ def test_score_depth_reports_the_surface_against_exact_depth(cli, step_ws):
         result = cli("score", "depth", "-w", step_ws, "--layer", layer, "--target", "exact")
         assert result.exit_code == 0, result.output
         assert all((results / f"depth_{layer}_vs_exact.{ext}").exists() for ext in ("csv", "json"))
-        assert "flying share" in result.output and "normal error mean" in result.output
+        assert "flying share" in result.output and "normal median" in result.output and "p2p mean" in result.output
     rows = {layer: read_csv(results / f"depth_{layer}_vs_exact.csv") for layer in ("exact", "mixed", "far")}
     assert all(c in rows["exact"][0] for c in SURFACE_COLUMNS)
     assert [r["drive"] for r in rows["mixed"]] == ["s0", "all"] and rows["mixed"][-1]["frames"] == "3"
