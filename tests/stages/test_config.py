@@ -31,7 +31,8 @@ def test_toml_round_trip(config, tmp_path):
 
 @pytest.mark.parametrize("text, message", [
     ("frames = ", "not valid TOML"), ("frame = 3", "unknown key 'frame'"), ("frames = 'x'", "must be int"),
-    ("drive = 'd'", "must be a list"), ("odometry = 'ekf'", "odometry = 'ekf' is not one of gt, icp, gradicp"), ("frames = -1", "frames"),
+    ("drive = 'd'", "must be a list"), ("odometry = 'ekf'", "odometry = 'ekf' is not one of gt, icp, gradicp"),
+    ("frames = -1", "frames"),
     ("out = 3", "must be a path"), ("[table]\nfoo = 1", "unknown key 'table'")])
 def test_malformed_config_files_fail_with_one_line(text, message, tmp_path):
     path = tmp_path / "c.toml"
