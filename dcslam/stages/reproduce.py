@@ -188,7 +188,7 @@ class ReproduceConfig:
     dry_run: bool = option(False, flags=("--dry-run",), help="Print the stages it would run and their estimated "
                            "cost, then exit without running or writing anything.")
     costs_from: Path | None = option(None, help="Workspace of a finished reproduction whose stage timings give the "
-                                     "estimate's unit costs (default: this workspace's, else the smoke profile's "
+                                     "estimate's unit costs (default: this workspace's, else a quick run's "
                                      "measured here, shipped with dcslam).")
 
     def __post_init__(self) -> None:

@@ -5,7 +5,7 @@ resolution × epochs, predicted or filtered frames, SLAM frames, SLAM runs score
 cost in seconds. Unit costs are measured, never assumed: every finished stage's stamp in ``<workspace>/.reproduce/``
 records its seconds and its configuration, from which :func:`measure` recomputes its work, so the seconds per unit
 of each kind are those of a finished reproduction: ``--costs-from DIR``, else the workspace's own finished stages,
-else the smoke profile's as measured on the machine named in ``reproduce_costs.json`` (shipped with dcslam).
+else a quick-profile run's as measured on the machine named in ``reproduce_costs.json`` (shipped with dcslam).
 Each stage's seconds are the wall time of the one process that ran it, so their sum is CPU time for one-thread
 stages and a bound on the wall time at ``--jobs 1``.
 """
