@@ -517,6 +517,38 @@ def load_depth_and_confidence(drive: DriveFile, source: str | Path) -> tuple[np.
     return layer.depth, layer.confidence
 
 
+def measured_kind(source: str | Path) -> str | None:
+    """The drive's depth kind that holds the pixels a LiDAR measured behind a depth source: a sparse kind is its
+    own; ``dense`` and ``exact`` (not measured by the LiDAR frame by frame) have the drive's own ``sparse``; a
+    layer file the input it was predicted from (``dcslam predict`` records it), followed through the layers a
+    filter was made from; None when a layer does not say (a layer written by another tool).
+
+    Used wherever SLAM needs evidence that does not come from a completion (its ICP sources or an independent
+    odometry): the measured pixels of a completed frame are those of this kind.
+    """
+    seen = set()
+    while True:
+        if not isinstance(source, Path) and is_depth_kind(str(source)):
+            kind = str(source)
+            return "sparse" if kind in ("dense", EXACT) else kind
+        path = Path(source)
+        if path in seen or not path.is_file():
+            return None
+        seen.add(path)
+        config = read_layer(path).config
+        if config.get("input") and is_depth_kind(str(config["input"])):
+            source = str(config["input"])
+            continue
+        parent = config.get("source")
+        if not parent:
+            return None
+        parent = Path(parent)
+        if not parent.is_file() and config.get("source_layer"):
+            # a moved workspace: the filtered layer's source by its name, beside this layer's folder
+            parent = path.parent.parent.parent / "predictions" / str(config["source_layer"]) / path.name
+        source = parent
+
+
 def list_drives(drives_dir: Path | str) -> list[Path]:
     """Drive files in a folder, sorted by name."""
     return sorted(p for p in Path(drives_dir).glob("*.h5") if not p.name.startswith("."))
