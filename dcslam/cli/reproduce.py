@@ -36,6 +36,9 @@ def report(result) -> None:
         return
     markdown, seconds = result
     summary(markdown.read_text())
+    ranks = markdown.with_name(f"{markdown.stem}_correlation.md")  # written with the table (Table 5.2, beams)
+    if ranks.exists():
+        summary(ranks.read_text())
     _log(f"done in {seconds / 60:.1f} min; tables, CSV and PNGs in {markdown.parent}")
 
 

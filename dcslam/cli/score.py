@@ -61,7 +61,7 @@ def report(result) -> None:
 
 def report_tables(report) -> None:
     written = {p.stem: p for p in report.written if p.suffix == ".md"}
-    for name in ("table_5_1", "table_5_2", "table_5_2_long", "table_5_3"):
+    for name in ("table_5_1", "table_5_2", "table_5_2_long", "table_5_2_correlation", "table_5_3"):
         table = getattr(report, name, None)
         if table is None:
             continue

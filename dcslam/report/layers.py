@@ -19,7 +19,7 @@ from dcslam.workspace import LayerRef, Workspace, drive_file, find_layer, resolv
 
 __all__ = ["LayerRef", "TrajectoryPair", "drive_file", "find_layer", "load_pair", "resolve_layer",
            "score_layer_depth", "score_layer_surface", "score_layer_trajectories", "select_drives", "slam_settings",
-           "slam_surface_settings", "slam_trajectory"]
+           "slam_surface_settings", "slam_trajectory", "surface_frames", "surface_target"]
 
 #: The SLAM settings that make two trajectories comparable (``beams``: the sparse input's beam count, when known;
 #: ``confidence`` and ``min_confidence``: how a layer's confidence was used, ``none`` for a layer without one).
@@ -55,11 +55,42 @@ def slam_surface_settings(depth_m: np.ndarray, reference_m: np.ndarray):
                            max_depth=frame.max_depth)
 
 
-def score_layer_surface(ws: Workspace, layer: LayerRef, drives: list[str],
-                        target: str = "dense") -> dict[str, list[SurfaceErrors | None]]:
+#: Frames of each drive whose surface errors a table scores (:func:`surface_frames`): they cost about 1.5 s of CPU
+#: per full-size frame, so a table of many rows scores a fixed sample of each drive rather than every frame.
+SURFACE_FRAMES = 5
+
+
+def surface_frames(n: int, count: int = SURFACE_FRAMES) -> list[int]:
+    """The frame indices of a drive of ``n`` frames that a table scores the surface of: ``count`` evenly spaced
+    ones, the first and the last included (index ``round(k (n - 1) / (count - 1))``, halves up, for k = 0 …
+    count - 1); every frame when ``n <= count``. Depends on ``n`` alone, so every row scores the same frames."""
+    if count < 1:
+        raise DcslamError(f"surface frames must be >= 1, got {count}")
+    if n <= count:
+        return list(range(n))
+    if count == 1:
+        return [(n - 1) // 2]
+    return [int(np.floor(k * (n - 1) / (count - 1) + 0.5)) for k in range(count)]
+
+
+def surface_target(ws: Workspace, drives: list[str]) -> str:
+    """The reference of a table's surface errors: ``exact`` (the generator's depth) when every one of ``drives``
+    holds it, else ``dense`` (the annotated depth)."""
+    from dcslam.io.drive import EXACT, DriveFile
+
+    for drive in drives:
+        with DriveFile(drive_file(ws, drive)) as d:
+            if EXACT not in d.kinds:
+                return "dense"
+    return EXACT
+
+
+def score_layer_surface(ws: Workspace, layer: LayerRef, drives: list[str], target: str = "dense",
+                        frames: int | None = None) -> dict[str, list[SurfaceErrors | None]]:
     """Per-frame surface errors (:mod:`dcslam.eval.surface`) of a layer against each drive's depth of kind
     ``target`` (``dense`` or ``exact``), with the normals SLAM would take (:func:`slam_surface_settings`):
-    ``{drive: [errors per frame]}``."""
+    ``{drive: [errors per frame]}``, over every frame or, with ``frames``, the :func:`surface_frames` of that
+    many."""
     from dcslam.eval.surface import surface_errors
     from dcslam.io.drive import DriveFile, load_depth
     from dcslam.progress import track
@@ -67,8 +98,11 @@ def score_layer_surface(ws: Workspace, layer: LayerRef, drives: list[str],
     scores = {}
     for drive in track(drives, f"surface {layer.name}"):
         with DriveFile(drive_file(ws, drive)) as d:
-            pred, reference, K = load_depth(d, layer.source(drive)), load_depth(d, target), d.K
-        scores[drive] = [surface_errors(p, r, K, slam_surface_settings(p, r)) for p, r in zip(pred, reference)]
+            pred, K = load_depth(d, layer.source(drive)), d.K
+            chosen = range(len(pred)) if frames is None else surface_frames(len(pred), frames)
+            reference = [d.depth(target, i) for i in chosen]
+        scores[drive] = [surface_errors(pred[i], r, K, slam_surface_settings(pred[i], r))
+                         for i, r in zip(chosen, reference)]
     return scores
 
 

@@ -114,10 +114,12 @@ class Report:
     table_5_3: Table | None = None
     per_drive: Table | None = None
     table_5_2_long: Table | None = None  # SLAM over whole drives (slam-long/), when there is any
+    table_5_2_correlation: Table | None = None  # which depth metric of Table 5.2's rows predicts localisation
 
 
 PER_DRIVE_KEYS = ("poses", "failed", "localisation", "ate_rmse_m", "rpe_rmse_m", "rpe_rmse_deg", "kitti_t_rel_percent",
                   "kitti_r_rel_deg_per_100m", "path_m", "mae_mm", "rmse_mm", "imae_per_km", "irmse_per_km",
+                  "normal_mean_deg", "normal_median_deg", "p2p_mean_m", "p2p_rmse_m", "flying_share", "surface_frames",
                   "frames", "odometry", "mapper", "solver", "association", "voxel_size", "beams", "pairing")
 
 
@@ -155,6 +157,19 @@ def _depth_example_rows(ws: Workspace, results: list[LayerResult], drive: str):
     return rgb, rows
 
 
+def table_5_2_correlation(results: list, drives: list[str], failure_threshold: float = FAILURE_THRESHOLD) -> Table:
+    """The rank correlation of each depth metric with localisation over every (row, drive) pair of Table 5.2
+    (:func:`dcslam.report.correlation_table.correlation_table`)."""
+    from dcslam.report.correlation_table import correlation_table
+    from dcslam.report.table_5_2 import surface_note
+
+    return correlation_table(
+        [(f"{r.label} ({r.layer})", r) for r in results],
+        f"Table 5.2: depth metrics against localisation over rows × {len(drives)} test drive(s)", failure_threshold,
+        depth_note="MAE / RMSE: against the annotated depth over every frame; " + (
+            surface_note(results) or "no surface errors scored"))
+
+
 def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, force: bool = False,
                  devkit_exact: bool = False, max_time_diff: float = EVO_MAX_TIME_DIFF_S,
                  failure_threshold: float = FAILURE_THRESHOLD) -> Report:
@@ -171,8 +186,10 @@ def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, 
     results = table_5_2_results(ws, runs, drives, devkit_exact, max_time_diff, failure_threshold)
     t52 = table_5_2(results, thesis, drives, devkit_exact)
     t53, per_drive = table_5_3(thesis), per_drive_table(results)
+    ranks = table_5_2_correlation(results, drives, failure_threshold)
     rgb, examples = _depth_example_rows(ws, results, drives[0])
-    tables = {"table_5_1": t51, "table_5_2": t52, "table_5_2_per_drive": per_drive, "table_5_3": t53}
+    tables = {"table_5_1": t51, "table_5_2": t52, "table_5_2_per_drive": per_drive, "table_5_2_correlation": ranks,
+              "table_5_3": t53}
     long_results = table_5_2_long_results(ws, runs, drives, max_time_diff)
     t52_long = table_5_2_long(long_results, drives) if long_results else None
     if t52_long is not None:  # printed after Table 5.2 in its Markdown file; CSVs of its own
@@ -197,5 +214,5 @@ def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, 
     if examples:
         written.append(plot_depth_examples(examples_path, examples, rgb=rgb, force=True))
     return Report(table_5_1=t51, table_5_2=t52, written=written, table_5_3=t53, per_drive=per_drive,
-                  table_5_2_long=t52_long)
+                  table_5_2_long=t52_long, table_5_2_correlation=ranks)
 

@@ -18,9 +18,10 @@ from pathlib import Path
 
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import DepthErrors, mean_errors
+from dcslam.eval.surface import SURFACE_METRICS, SurfaceErrors
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
-from dcslam.report.layers import (TrajectoryPair, find_layer, score_layer_depth, score_layer_trajectories,
-                                  slam_settings)
+from dcslam.report.layers import (SURFACE_FRAMES, TrajectoryPair, find_layer, score_layer_depth,
+                                  score_layer_surface, score_layer_trajectories, slam_settings, surface_target)
 from dcslam.report.seeds import paired, seed_groups
 from dcslam.report.spread import TWO_LEVEL_METHOD, seed_spread, spread
 from dcslam.report.tables import IP_BASIC, RECIPES, Column, RunSummary, Table
@@ -35,7 +36,12 @@ SPREAD_COLUMNS = [Column("localisation", "localisation", "{:.4f}"), Column("mae_
                   Column("irmse_per_km", "iRMSE (1/km)", "{:.2f}"), Column("ate_rmse_m", "ATE (m)", "{:.3f}"),
                   Column("rpe_rmse_m", "RPE (m)", "{:.3f}"), Column("rpe_rmse_deg", "RPE (°)", "{:.3f}"),
                   Column("kitti_t_rel_percent", "t_rel (%)", "{:.2f}"),
-                  Column("kitti_r_rel_deg_per_100m", "r_rel (°/100 m)", "{:.3f}")]
+                  Column("kitti_r_rel_deg_per_100m", "r_rel (°/100 m)", "{:.3f}"),
+                  # the surface errors (dcslam.eval.surface) of a sample of each drive's frames (score_layer)
+                  Column("normal_mean_deg", "normal mean (°)", "{:.1f}"),
+                  Column("normal_median_deg", "normal median (°)", "{:.1f}"),
+                  Column("p2p_mean_m", "p2p mean (m)", "{:.3f}"), Column("p2p_rmse_m", "p2p RMSE (m)", "{:.3f}"),
+                  Column("flying_share", "flying share", "{:.3f}")]
 SPREAD_KEYS = tuple(c.key for c in SPREAD_COLUMNS)
 TABLE_5_2_COLUMNS = [
     Column("method", "method"), Column("layer", "layer"), Column("drives", "drives"), Column("failures", "failed"),
@@ -53,14 +59,18 @@ TABLE_5_2_COLUMNS = [
 @dataclass
 class LayerResult:
     """Scores of one depth layer over the test drives (empty where its inputs are missing): ``depth`` maps each
-    drive to its mean depth errors, ``pairs`` to its trajectory, ``settings`` to the settings of its SLAM run
-    (:func:`dcslam.report.layers.slam_settings`)."""
+    drive to its mean depth errors, ``surface`` to the mean surface errors of its sampled frames against the
+    ``surface_target`` depth (``surface_frames``: how many of them had a reference), ``pairs`` to its trajectory,
+    ``settings`` to the settings of its SLAM run (:func:`dcslam.report.layers.slam_settings`)."""
 
     label: str
     layer: str
     depth: dict[str, DepthErrors] = field(default_factory=dict)
     pairs: dict[str, TrajectoryPair] = field(default_factory=dict)
     settings: dict[str, dict] = field(default_factory=dict)
+    surface: dict[str, SurfaceErrors] = field(default_factory=dict)
+    surface_frames: dict[str, int] = field(default_factory=dict)
+    surface_target: str | None = None
     missing: list[str] = field(default_factory=list)
     failure_threshold: float = FAILURE_THRESHOLD
     seed: int | None = None     # training seed of the run behind the layer (None: no trained model)
@@ -117,6 +127,10 @@ class LayerResult:
             row = {}
             if drive in self.depth:
                 row.update({m: getattr(self.depth[drive], m) for m in DEPTH_KEYS})
+            if drive in self.surface:  # a metric no sampled frame defines (NaN) is left out
+                row.update({m: v for m in SURFACE_METRICS
+                            if not math.isnan(v := getattr(self.surface[drive], m))},
+                           surface_frames=self.surface_frames.get(drive))
             if drive in self.pairs:
                 score = self.scores[drive]
                 drift = score.drift.overall if score.drift is not None else None
@@ -191,6 +205,7 @@ class SeedResults:
     layers = property(lambda self: [m.layer for m in self.members])
     seeds = property(lambda self: [m.seed for m in self.members])
     failure_threshold = property(lambda self: self.members[0].failure_threshold)
+    surface_target = property(lambda self: self.members[0].surface_target)
     missing = property(lambda self: [f"{m.layer}: {text}" for m in self.members for text in m.missing])
 
     @property
@@ -290,6 +305,20 @@ class SeedResults:
         return row
 
 
+def surface_note(results: list) -> str:
+    """The note on the surface columns of a table of ``results`` (the reference and frames they were scored on);
+    empty when no row has surface errors."""
+    members = [m for r in results for m in getattr(r, "members", [r])]
+    targets = sorted({m.surface_target for m in members if m.surface})
+    counts = sorted({n for m in members for n in m.surface_frames.values()})
+    if not targets:
+        return ""
+    reference = " / ".join("exact (the generator's)" if t == "exact" else "annotated dense" for t in targets)
+    return (f"normal mean / median (°), p2p mean / RMSE (m), flying share (CSV, per-drive CSV): surface errors of "
+            f"the layer as SLAM takes it against the {reference} depth, on {'/'.join(map(str, counts))} evenly "
+            "spaced frame(s) of each drive, first and last included (docs/metrics.md)")
+
+
 def seeded(results: list) -> bool:
     """Whether any row of ``results`` is over several training seeds."""
     return any(isinstance(r, SeedResults) for r in results)
@@ -329,9 +358,13 @@ def _depth_per_drive(per_frame: dict[str, list]) -> dict[str, DepthErrors]:
 
 def score_layer(ws: Workspace, label: str, layer_name: str, drives: list[str], devkit_exact: bool = False,
                 max_time_diff: float = EVO_MAX_TIME_DIFF_S, failure_threshold: float = FAILURE_THRESHOLD,
-                slam_root: Path | None = None, depth: bool = True) -> LayerResult:
+                slam_root: Path | None = None, depth: bool = True,
+                surface_frames: int = SURFACE_FRAMES) -> LayerResult:
     """Depth (unless not ``depth``) and trajectory scores of a layer over ``drives``, its SLAM outputs under
-    ``slam_root`` (default ``slam/``); missing inputs are recorded, bad ones fail."""
+    ``slam_root`` (default ``slam/``); missing inputs are recorded, bad ones fail. With the depth errors come the
+    surface errors of ``surface_frames`` evenly spaced frames of each drive
+    (:func:`dcslam.report.layers.surface_frames`; 0: none) against the exact depth when every drive has it, else
+    the annotated one (:func:`dcslam.report.layers.surface_target`)."""
     result = LayerResult(label=label, layer=layer_name, failure_threshold=failure_threshold)
     layer = find_layer(ws, layer_name) if depth else None
     if layer is None and depth:
@@ -342,6 +375,8 @@ def score_layer(ws: Workspace, label: str, layer_name: str, drives: list[str], d
             result.missing.append(f"depth of {len(absent)} test drive(s) in {layer.folder}")
         else:
             result.depth = _depth_per_drive(score_layer_depth(ws, layer, drives, devkit_exact=devkit_exact))
+            if surface_frames:
+                _score_surface(ws, result, layer, drives, surface_frames)
     root = ws.slam if slam_root is None else slam_root
     absent = [d for d in drives if not (root / layer_name / f"{d}.txt").exists()]
     if absent:
@@ -350,6 +385,19 @@ def score_layer(ws: Workspace, label: str, layer_name: str, drives: list[str], d
         result.pairs = score_layer_trajectories(ws, layer_name, drives, max_time_diff, root)
         result.settings = {d: slam_settings(ws, layer_name, d, root) for d in drives}
     return result
+
+
+def _score_surface(ws: Workspace, result: LayerResult, layer, drives: list[str], frames: int) -> None:
+    """Fill ``result.surface`` with the mean surface errors of each drive's sampled frames (a drive none of whose
+    sampled frames has a reference is left out)."""
+    from dcslam.eval.surface import mean_surface_errors
+
+    result.surface_target = surface_target(ws, drives)
+    for drive, errors in score_layer_surface(ws, layer, drives, result.surface_target, frames).items():
+        scored = [e for e in errors if e is not None]
+        if scored:
+            result.surface[drive] = mean_surface_errors(scored)
+            result.surface_frames[drive] = len(scored)
 
 
 def filters_of(ws: Workspace, source_layer: str) -> list[str]:
@@ -495,7 +543,9 @@ def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str], devki
          else "trained rows: each training run of a recipe is its own row"),
         "thesis columns: the thesis's figures (dcslam/report/thesis_tables.json); x: not computed there; —: no "
         "such row",
+        surface_note(results),
         "how each column is computed, and where dcslam departs from the thesis and the devkits: docs/metrics.md",
         f"SLAM settings of the rows (those of most rows; a row made otherwise says how in SLAM settings): "
         f"{settings_text(common) or 'none recorded'}"]
+    table.notes = [n for n in table.notes if n]
     return table

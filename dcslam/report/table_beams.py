@@ -191,7 +191,8 @@ COLUMNS = [Column("beams", "beams"), Column("input", "input"), Column("layer", "
            Column("rmse_mm_text", "RMSE (mm)"), Column("ate_rmse_m_text", "ATE RMSE (m)"),
            Column("rpe_rmse_m_text", "RPE RMSE (m)"), Column("rpe_rmse_deg_text", "RPE RMSE (°)"),
            Column("notes", "why —")]
-FIGURES = ("localisation", "mae_mm", "rmse_mm", "ate_rmse_m", "rpe_rmse_m", "rpe_rmse_deg")
+FIGURES = ("localisation", "mae_mm", "rmse_mm", "ate_rmse_m", "rpe_rmse_m", "rpe_rmse_deg", "normal_mean_deg",
+           "normal_median_deg", "p2p_mean_m", "p2p_rmse_m", "flying_share")
 
 
 def _verdict(result, reference) -> str | None:
@@ -218,7 +219,7 @@ def _gap_closed(result: LayerResult, sparse: LayerResult | None, exact: LayerRes
 def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[int], drives: list[str]) -> Table:
     """The beams table: one row per (beam count, input), then the beam-independent rows (compared with the 64-beam
     sparse input, or the largest beam count's). Refuses rows made with different SLAM settings."""
-    from dcslam.report.table_5_2 import csv_suffixes, seeded, with_seed_columns
+    from dcslam.report.table_5_2 import csv_suffixes, seeded, surface_note, with_seed_columns
 
     settings = common_settings(results)
     frames = {p.T_est.shape[0] for r in results.values() for p in r.pairs.values()}
@@ -252,6 +253,8 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
         GAP_NOTE,
         "MAE / RMSE: against the annotated depth, KITTI devkit with dcslam's two departures (predictions below 0.1 m "
         "are holes; pixels the devkit cannot interpolate are left out)",
+        surface_note(list(results.values())),
+        "which depth metric predicts localisation: table_beams_correlation.md",
         f"failed: drives whose SLAM run was flagged suspect (rejected or degraded steps, drift bound) or whose "
         f"localisation exceeds "
         f"{next(iter(results.values())).failure_threshold:g} m + rad (kept in the means)" if results else "",
@@ -296,6 +299,20 @@ def findings(results: dict[tuple[int | None, str], LayerResult], beams: list[int
                 text += f"; {item.label} vs {item.tuned_from}: {_verdict(tuned, base)}"
         lines.append(text)
     return lines
+
+
+def correlation(results: dict[tuple[int | None, str], LayerResult], drives: list[str]) -> Table:
+    """The rank correlation of each depth metric with localisation over every (row, drive) pair of the beams table
+    (:func:`dcslam.report.correlation_table.correlation_table`)."""
+    from dcslam.report.correlation_table import correlation_table
+    from dcslam.report.table_5_2 import surface_note
+
+    threshold = next(iter(results.values())).failure_threshold if results else FAILURE_THRESHOLD
+    return correlation_table(
+        [(_row_name(key), result) for key, result in results.items()],
+        f"The beams experiment: depth metrics against localisation over rows × {len(drives)} test drive(s)",
+        threshold, depth_note="MAE / RMSE: against the annotated depth over every frame; " + (
+            surface_note(list(results.values())) or "no surface errors scored"))
 
 
 def per_drive_table(results: dict[tuple[int | None, str], LayerResult]) -> Table:
@@ -362,20 +379,22 @@ def plot_localisation_vs_beams(path: Path | str, results: dict[tuple[int | None,
 
 @dataclass
 class BeamsReport:
-    """The beams table, its per-drive table and the files written."""
+    """The beams table, its per-drive table, the rank correlation of its depth metrics with localisation and the
+    files written."""
 
     table: Table
     per_drive: Table
     written: list[Path]
+    correlation: Table | None = None
 
 
 def build_beams_report(ws: Workspace, beams: list[int], drives: list[str], out_dir: Path | None = None,
                        force: bool = False, max_time_diff: float = EVO_MAX_TIME_DIFF_S,
                        failure_threshold: float = FAILURE_THRESHOLD, jobs: int = 1) -> BeamsReport:
-    """Score every row and write ``table_beams.{md,csv}``, ``table_beams_per_drive.{md,csv}`` and
-    ``beams_localisation.png`` under ``out_dir`` (default ``results/``); nothing is written when an output exists
-    without ``force``, or when rows were made with different SLAM settings (``jobs``: worker processes that score
-    the rows)."""
+    """Score every row and write ``table_beams.{md,csv}``, ``table_beams_per_drive.{md,csv}``,
+    ``table_beams_correlation.{md,csv}`` and ``beams_localisation.png`` under ``out_dir`` (default ``results/``);
+    nothing is written when an output exists without ``force``, or when rows were made with different SLAM settings
+    (``jobs``: worker processes that score the rows)."""
     from dcslam.io.atomic import write_text_atomic
     from dcslam.report.scores import check_outputs
 
@@ -384,7 +403,8 @@ def build_beams_report(ws: Workspace, beams: list[int], drives: list[str], out_d
     out_dir = Path(out_dir) if out_dir else ws.results
     results = beams_results(ws, beams, drives, max_time_diff, failure_threshold, jobs)
     table, per_drive = table_beams(results, beams, drives), per_drive_table(results)
-    tables = {"table_beams": table, "table_beams_per_drive": per_drive}
+    ranks = correlation(results, drives)
+    tables = {"table_beams": table, "table_beams_per_drive": per_drive, "table_beams_correlation": ranks}
     outputs = [out_dir / f"{name}.{ext}" for name in tables for ext in ("md", "csv")]
     plot = out_dir / "beams_localisation.png"
     check_outputs([*outputs, plot], force)
@@ -394,4 +414,4 @@ def build_beams_report(ws: Workspace, beams: list[int], drives: list[str], out_d
         written.append(write_text_atomic(out_dir / f"{name}.csv", t.to_csv(), force=True))
     if any(r.pairs for r in results.values()):
         written.append(plot_localisation_vs_beams(plot, results, beams, force=True))
-    return BeamsReport(table, per_drive, written)
+    return BeamsReport(table, per_drive, written, ranks)

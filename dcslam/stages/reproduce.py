@@ -586,6 +586,7 @@ def _slam_stage(ws: Workspace, profile: Profile, layer: str, reference: str, dri
 
 def _tables(pipe: Pipeline, ws: Workspace, table: str, inputs: list[Path]) -> Path:
     name = f"table_{table.replace('.', '_')}.md"
-    pipe.run(Stage("score-tables", score.run_tables, score.ScoreTablesConfig(), outputs=lambda: [ws.results / name],
+    made = [ws.results / name] + ([ws.results / "table_5_2_correlation.md"] if table == "5.2" else [])
+    pipe.run(Stage("score-tables", score.run_tables, score.ScoreTablesConfig(), outputs=lambda: made,
                    inputs=lambda: inputs))
     return ws.results / name

@@ -8,7 +8,8 @@ finished stages, same ``jobs``)::
     → train SparseConvNet, nconv, nconv-guided, then nconv-pose (nconv fine-tuned through the pose loss, its
       confidence as ICP weights) → predict each (and IP-Basic) at every beam count
     → filter nconv's predictions by confidence ("masked") → slam over every (input, beam count, test drive)
-    → score: the beams table, its per-drive CSV and a plot of localisation against beam count
+    → score: the beams table, its per-drive CSV, the rank correlation of its depth metrics with localisation
+      and a plot of localisation against beam count
 
 The trainings (those fine-tuned from another run after the others), the predictions and the SLAM runs are each
 independent of one another, so ``jobs`` > 1 runs each group in that many worker processes (one torch thread each). A
@@ -270,6 +271,7 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
                                              seed=seed + k if trained else None))
     pipe.run_all(slam_stages, jobs)
     table = BeamsTableConfig(beams=list(profile.beams), drive=[p.stem for p in test], jobs=jobs)
-    pipe.run(Stage("score-beams", run_table, table, outputs=lambda: [ws.results / "table_beams.md"],
+    pipe.run(Stage("score-beams", run_table, table, outputs=lambda: [ws.results / "table_beams.md",
+                                                                      ws.results / "table_beams_correlation.md"],
                    inputs=lambda: slam_outputs))
     return ws.results / "table_beams.md"

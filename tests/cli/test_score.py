@@ -279,6 +279,11 @@ def test_score_tables(cli, ws):
     assert "3 of 3 estimated poses paired" in sparse_d0["pairing"]
     assert "| testing | 540 | 1810 |" in (results / "table_5_3.md").read_text()   # the authors' figures
     assert "Table 5.3" in result.output
+    # which depth metric predicts localisation: every row with SLAM runs on both drives is a pair per drive
+    ranks = {r["key"]: r for r in read_csv(results / "table_5_2_correlation.csv")}
+    assert ranks["mae_mm"]["pairs"] == str(2 * sum(1 for r in t52.values() if r["drives"] == "2"))
+    assert -1 <= float(ranks["mae_mm"]["rho"]) <= 1 and ranks["mae_mm"]["ci_low"] <= ranks["mae_mm"]["ci_high"]
+    assert "Table 5.2: depth metrics against localisation" in result.output
     again = cli("score", "tables", "-w", ws)
     assert again.exit_code == 1 and "--force" in again.output
     assert cli("score", "tables", "-w", ws, "--force").exit_code == 0

@@ -125,7 +125,7 @@ def test_smoke_profile_runs_every_stage_and_writes_the_tables(cli, tmp_path):
     assert result.exit_code == 0, result.output
     results = tmp_path / "results"
     for name in ("table_5_1.md", "table_5_1.csv", "table_5_2.md", "table_5_2.csv", "table_5_2_per_drive.csv",
-                 "table_5_3.md", "depth_examples.png"):
+                 "table_5_2_correlation.md", "table_5_2_correlation.csv", "table_5_3.md", "depth_examples.png"):
         assert (results / name).stat().st_size > 0, name
     assert list(results.glob("trajectories_*.png"))
     table = (results / "table_5_2.md").read_text()

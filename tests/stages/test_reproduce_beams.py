@@ -35,9 +35,10 @@ def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(cli, tmp_
     result = cli(*ARGS, "--workspace", tmp_path)
     assert result.exit_code == 0, result.output
     results = tmp_path / "results"
-    for name in ("table_beams.md", "table_beams.csv", "table_beams_per_drive.csv", "beams_localisation.png"):
+    for name in ("table_beams.md", "table_beams.csv", "table_beams_per_drive.csv", "table_beams_correlation.csv",
+                 "beams_localisation.png"):
         assert (results / name).stat().st_size > 0, name
-    assert "The beams experiment" in result.stdout
+    assert "The beams experiment" in result.stdout and "depth metrics against localisation" in result.stdout
     with open(results / "table_beams.csv") as f:
         rows = list(csv.DictReader(f))
     assert [(r["beams"], r["input"]) for r in rows][:7] == [("64", label) for label in (

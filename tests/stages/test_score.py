@@ -25,6 +25,7 @@ def test_depth_trajectory_and_tables(ws):
     assert record["stage"] == "score-tables" and record["settings"] == {
         "drive": [], "out_dir": None, "devkit_exact": False, "max_time_diff": 0.01, "failure_threshold": 1.0}
     assert any(row["layer"] == "dense" for row in report.table_5_2.rows)
+    assert (ws.results / "table_5_2_correlation.csv").exists() and report.table_5_2_correlation.rows
 
 
 def test_usage(ws):
