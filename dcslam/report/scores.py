@@ -1,5 +1,6 @@
 """What ``dcslam score`` computes and writes: per-layer depth / trajectory / map tables, and the full report
-(Tables 5.1 and 5.2 as Markdown and CSV, a trajectory plot per test drive, a figure of depth examples).
+(Tables 5.1 and 5.2 as Markdown and CSV, the rank correlation of Table 5.2's depth metrics with localisation, a
+trajectory plot per test drive, a figure of depth examples).
 
 Every output is checked before anything is written: an existing file without ``force`` fails the whole call with
 nothing overwritten, and so does bad input (a layer whose frame count does not match its drive, trajectories of
@@ -174,8 +175,9 @@ def build_report(ws: Workspace, drives: list[str], out_dir: Path | None = None, 
                  devkit_exact: bool = False, max_time_diff: float = EVO_MAX_TIME_DIFF_S,
                  failure_threshold: float = FAILURE_THRESHOLD) -> Report:
     """Compute Tables 5.1, 5.2 (with its per-drive table), 5.2 over whole drives (when ``slam-long/`` holds SLAM runs;
-    its Markdown follows Table 5.2's in ``table_5_2.md``) and 5.3 over ``drives`` and write them (Markdown + CSV)
-    with the figures."""
+    its Markdown follows Table 5.2's in ``table_5_2.md``), the rank correlation of Table 5.2's depth metrics with
+    localisation (``table_5_2_correlation``) and 5.3 over ``drives`` and write them (Markdown + CSV) with the
+    figures."""
     from dcslam.report.plots import plot_depth_examples, plot_trajectories
     from dcslam.io.drive import DriveFile
 
