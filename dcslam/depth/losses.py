@@ -185,3 +185,44 @@ def edge_mixing_loss(pred: torch.Tensor, reference: torch.Tensor, K: torch.Tenso
     if not bool(band.any()):
         return (pred * 0).sum()
     return nearest_surface_sq(surface.points, ref, band, radius_px).mean()
+
+
+class GeometryTerms:
+    """The geometry terms that a training loss adds (docs/training.md, "Geometry losses"): ``terms(pred, reference,
+    K)`` → ``{term: value}`` of each term with a weight > 0 (:data:`dcslam.depth.recipes.GEOMETRY_TERMS`):
+    ``normal`` (:func:`normal_loss`), ``plane`` (:func:`point_to_plane_loss`), ``edge`` (:func:`edge_mixing_loss`),
+    each over the pixels where the reference (the training target) has a value; :meth:`weighted` sums them with
+    their weights. The reference's normals are taken the way SLAM takes them (the neighbour search chosen from the
+    batch's fraction of reference pixels, :func:`dcslam.slam.frame.normal_search_for`), so that a semi-dense target
+    has normals across its holes."""
+
+    def __init__(self, normal: float = 0.0, plane: float = 0.0, edge: float = 0.0):
+        from dcslam.depth.recipes import GEOMETRY_TERMS
+
+        self.weights = {}
+        for term, weight in zip(GEOMETRY_TERMS, (normal, plane, edge)):
+            if not 0 <= weight < float("inf"):
+                raise DcslamError(f"--{term}-weight must be a non-negative number, got {weight}")
+            if weight > 0:
+                self.weights[term] = float(weight)
+
+    def __bool__(self) -> bool:
+        return bool(self.weights)
+
+    def __call__(self, pred: torch.Tensor, reference: torch.Tensor, K: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Shape: pred, reference (B, 1, H, W) metres, 0 = none; K (3, 3) or (B, 3, 3) → {term: scalar}."""
+        from dcslam.slam.frame import FrameSettings, normal_search_for
+
+        if not self.weights:
+            return {}
+        _check_same(pred, reference)
+        frame = FrameSettings()
+        in_range = (reference >= frame.min_depth) & (reference <= frame.max_depth)
+        search = normal_search_for(float(in_range.float().mean()))
+        options = {"reference_search": search, "max_relative_gap": frame.max_relative_gap}
+        losses = {"normal": normal_loss, "plane": point_to_plane_loss, "edge": edge_mixing_loss}
+        return {term: losses[term](pred, reference, K, **options) for term in self.weights}
+
+    def weighted(self, terms: dict[str, torch.Tensor]) -> torch.Tensor | float:
+        """The sum of the ``terms`` (as :meth:`__call__` gives them) times their weights (0 for none)."""
+        return sum((self.weights[t] * v for t, v in terms.items()), 0.0)

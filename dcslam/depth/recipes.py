@@ -1,14 +1,23 @@
 """The training recipes' names, decoded in this one place (no torch: the command line imports it).
 
 A recipe is a loss (``mse`` with a ``sparse`` or ``dense`` mask, ``chamfer`` over maps of ``map_frames`` frames, or
-``pose``: the relative-pose error of dcslam's differentiable ICP over windows of frames), and for ``pose``
-the run it was fine-tuned from (``init``), if any.
+``pose``: the relative-pose error of dcslam's differentiable ICP over windows of frames), for ``pose``
+the run it was fine-tuned from (``init``), if any, and the geometry terms added to its loss (``normal_weight``,
+``plane_weight``, ``edge_weight`` > 0).
 """
 from __future__ import annotations
 
 LOSSES = ("mse", "chamfer", "pose")
 MASKS = ("sparse", "dense")
 POSE_WEIGHTS = ("confidence", "none")  # per-pixel ICP weights of the pose loss: the network's confidence, or none
+#: The geometry terms a training loss may add (docs/training.md, "Geometry losses"), each weighted by the setting
+#: ``<term>_weight``: surface-normal angle, point-to-plane distance, mixed depths at depth edges.
+GEOMETRY_TERMS = ("normal", "plane", "edge")
+
+
+def geometry_terms(settings: dict) -> tuple[str, ...]:
+    """The geometry terms a run's settings weigh in (weight > 0), in :data:`GEOMETRY_TERMS` order."""
+    return tuple(t for t in GEOMETRY_TERMS if float(settings.get(f"{t}_weight", 0) or 0) > 0)
 
 
 def check_pose_options(config) -> None:
@@ -58,7 +67,13 @@ def init_run(settings: dict) -> str:
 
 
 def recipe_label(settings: dict) -> str:
-    """The thesis's name of a training recipe from a run's settings (``loss``, ``mask``, ``map_frames``)."""
+    """The thesis's name of a training recipe from a run's settings (``loss``, ``mask``, ``map_frames``), followed
+    by the geometry terms it adds, if any: ``MSE dense mask + normal/plane``."""
+    terms = geometry_terms(settings)
+    return _loss_label(settings) + (" + " + "/".join(terms) if terms else "")
+
+
+def _loss_label(settings: dict) -> str:
     loss = settings.get("loss")
     if loss == "chamfer":
         return "chamfer single-frame" if int(settings.get("map_frames", 1)) <= 1 else "chamfer multi-frame"
