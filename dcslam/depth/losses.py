@@ -140,7 +140,10 @@ def normal_loss(pred: torch.Tensor, reference: torch.Tensor, K: torch.Tensor, ma
     Shape:
         pred, reference: (B, 1, H, W) metres, 0 = none; K: (3, 3) or (B, 3, 3); mask: (B, 1, H, W) bool → scalar
     """
-    surface, ref, mask = _surfaces(pred, reference, K, mask, reference_search, max_relative_gap)
+    return _normal_term(pred, *_surfaces(pred, reference, K, mask, reference_search, max_relative_gap))
+
+
+def _normal_term(pred, surface, ref, mask) -> torch.Tensor:
     cos = (surface.normals * ref.normals).sum(1, keepdim=True)
     return _mean_over(1 - cos, surface.has_normal & ref.has_normal & mask, pred)
 
@@ -156,7 +159,10 @@ def point_to_plane_loss(pred: torch.Tensor, reference: torch.Tensor, K: torch.Te
     Shape:
         pred, reference: (B, 1, H, W) metres, 0 = none; K: (3, 3) or (B, 3, 3); mask: (B, 1, H, W) bool → scalar
     """
-    surface, ref, mask = _surfaces(pred, reference, K, mask, reference_search, max_relative_gap)
+    return _plane_term(pred, *_surfaces(pred, reference, K, mask, reference_search, max_relative_gap))
+
+
+def _plane_term(pred, surface, ref, mask) -> torch.Tensor:
     distance = (ref.normals * (surface.points - ref.points)).sum(1, keepdim=True)
     return _mean_over(distance * distance, surface.has_point & ref.has_point & ref.has_normal & mask, pred)
 
@@ -175,11 +181,16 @@ def edge_mixing_loss(pred: torch.Tensor, reference: torch.Tensor, K: torch.Tenso
     Shape:
         pred, reference: (B, 1, H, W) metres, 0 = none; K: (3, 3) or (B, 3, 3); mask: (B, 1, H, W) bool → scalar
     """
+    surfaces = _surfaces(pred, reference, K, mask, reference_search, max_relative_gap)
+    return _edge_term(pred, reference, *surfaces, edge_jump, radius_px)
+
+
+def _edge_term(pred, reference, surface, ref, mask, edge_jump: float | None = None,
+               radius_px: int | None = None) -> torch.Tensor:
     from dcslam.eval.surface import EDGE_RADIUS_PX, EDGE_RELATIVE_JUMP, depth_edges, near, nearest_surface_sq
 
     edge_jump = EDGE_RELATIVE_JUMP if edge_jump is None else edge_jump
     radius_px = EDGE_RADIUS_PX if radius_px is None else radius_px
-    surface, ref, mask = _surfaces(pred, reference, K, mask, reference_search, max_relative_gap)
     band = (near(depth_edges(reference, ref.has_point, edge_jump), radius_px) & surface.has_point & ref.has_point
             & mask)
     if not bool(band.any()):
@@ -219,9 +230,11 @@ class GeometryTerms:
         frame = FrameSettings()
         in_range = (reference >= frame.min_depth) & (reference <= frame.max_depth)
         search = normal_search_for(float(in_range.float().mean()))
-        options = {"reference_search": search, "max_relative_gap": frame.max_relative_gap}
-        losses = {"normal": normal_loss, "plane": point_to_plane_loss, "edge": edge_mixing_loss}
-        return {term: losses[term](pred, reference, K, **options) for term in self.weights}
+        # both surfaces once, for all the terms
+        surfaces = _surfaces(pred, reference, K, None, search, frame.max_relative_gap)
+        terms = {"normal": lambda: _normal_term(pred, *surfaces), "plane": lambda: _plane_term(pred, *surfaces),
+                 "edge": lambda: _edge_term(pred, reference, *surfaces)}
+        return {term: terms[term]() for term in self.weights}
 
     def weighted(self, terms: dict[str, torch.Tensor]) -> torch.Tensor | float:
         """The sum of the ``terms`` (as :meth:`__call__` gives them) times their weights (0 for none)."""
