@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dcslam.depth.models import ARCHITECTURES
-from dcslam.depth.recipes import (GEOMETRY_TERMS, LOSSES, LR_SCHEDULES, MASKS, POSE_WEIGHTS, check_pose_options,
-                                  map_frames_of)
+from dcslam.depth.recipes import (CHAMFER_DISTANCES, GEOMETRY_TERMS, LOSSES, LR_SCHEDULES, MASKS, POSE_WEIGHTS,
+                                  check_pose_options, map_frames_of)
 from dcslam.errors import DcslamError
 from dcslam.settings import option
 
@@ -68,6 +68,10 @@ class TrainSettings:
                                                     "with sparse input and ground truth).")
     map_frames: int = option(1, help="Frames per chamfer map: 1, or windows of up to N frames (the thesis: 8; its "
                                      "code: 7).")
+    chamfer_distance: str = option("point", choices=CHAMFER_DISTANCES,
+                                   help="Chamfer distance (the chamfer loss and the pose loss's chamfer term): point "
+                                        "(squared point-to-point, the thesis's) or plane (squared point-to-plane "
+                                        "along the ground-truth map's normals).")
     model: str = option("sparse-conv", choices=MODELS, help=f"Network: {' or '.join(MODELS)}.")
     epochs: int = option(1, help="Passes over the training drives.")
     lr: float = option(1e-3, help="AdamW learning rate.")
@@ -116,7 +120,8 @@ class TrainSettings:
                                "confidence (the network's, for nconv models; others have none) or none.")
 
     def __post_init__(self) -> None:
-        for name, choices in (("loss", LOSSES), ("mask", MASKS), ("model", MODELS), ("lr_schedule", LR_SCHEDULES)):
+        for name, choices in (("loss", LOSSES), ("mask", MASKS), ("model", MODELS), ("lr_schedule", LR_SCHEDULES),
+                              ("chamfer_distance", CHAMFER_DISTANCES)):
             check_choice(self, name, choices)
         check_at_least_one(self, "map_frames", "epochs", "max_frames", "stride", "batch_size")
         if not 0 < self.lr < float("inf"):

@@ -13,6 +13,8 @@ POSE_WEIGHTS = ("confidence", "none")  # per-pixel ICP weights of the pose loss:
 #: The geometry terms a training loss may add (docs/training.md, "Geometry losses"), each weighted by the setting
 #: ``<term>_weight``: surface-normal angle, point-to-plane distance, mixed depths at depth edges.
 GEOMETRY_TERMS = ("normal", "plane", "edge")
+#: Distances of the chamfer loss: point to point (the thesis's), or point to plane along the ground-truth map's normals.
+CHAMFER_DISTANCES = ("point", "plane")
 
 
 def geometry_terms(settings: dict) -> tuple[str, ...]:
@@ -50,12 +52,14 @@ def selection_key(loss: str) -> str:
     return loss if loss in ("chamfer", "pose") else "mse"
 
 
-def run_name(loss: str, mask: str, map_frames: int, init: str | None = None) -> str:
-    """The default run name of a recipe: ``mse-<mask>``, ``chamfer-<map frames>``, ``pose`` or
-    ``pose-from-<init run>``."""
+def run_name(loss: str, mask: str, map_frames: int, init: str | None = None, chamfer_distance: str = "point") -> str:
+    """The default run name of a recipe: ``mse-<mask>``, ``chamfer-<map frames>`` (``chamfer-p2plane-<map frames>``
+    with the point-to-plane distance), ``pose`` or ``pose-from-<init run>``."""
     if loss == "pose":
         return f"pose-from-{init}" if init else "pose"
-    return f"{loss}-{mask}" if loss == "mse" else f"{loss}-{map_frames}"
+    if loss == "chamfer":
+        return f"chamfer-p2plane-{map_frames}" if chamfer_distance == "plane" else f"chamfer-{map_frames}"
+    return f"{loss}-{mask}"
 
 
 def init_run(settings: dict) -> str:
@@ -76,7 +80,8 @@ def recipe_label(settings: dict) -> str:
 def _loss_label(settings: dict) -> str:
     loss = settings.get("loss")
     if loss == "chamfer":
-        return "chamfer single-frame" if int(settings.get("map_frames", 1)) <= 1 else "chamfer multi-frame"
+        label = "chamfer single-frame" if int(settings.get("map_frames", 1)) <= 1 else "chamfer multi-frame"
+        return label + (", point-to-plane" if settings.get("chamfer_distance", "point") == "plane" else "")
     if loss == "mse":
         return f"MSE {settings.get('mask', 'dense')} mask"
     if loss == "pose":

@@ -117,7 +117,7 @@ class Objective:
     def __init__(self, config: TrainConfig, map_builder=None):
         self.loss = config.loss
         self.mse = MaskedMSE(config.mask, config.l1_weight)
-        self.chamfer = MapChamfer(config.map_frames, map_builder)
+        self.chamfer = MapChamfer(config.map_frames, map_builder, config.chamfer_distance)
         self.pose = pose_loss_of(config) if config.loss == "pose" else None
         self.geometry = GeometryTerms(config.normal_weight, config.plane_weight, config.edge_weight)
         self.weights = {"pose": config.pose_weight, "mse": config.mse_weight, "chamfer": config.chamfer_weight}

@@ -61,7 +61,7 @@ class TrainStageConfig(TrainSettings):
     def run_name(self) -> str:
         if self.name:
             return self.name
-        name = run_name(self.loss, self.mask, self.map_frames, self.init)
+        name = run_name(self.loss, self.mask, self.map_frames, self.init, self.chamfer_distance)
         if self.input_mix:
             name += "-mix"
         elif self.input != "sparse":

@@ -109,7 +109,8 @@ def test_bad_numbers_give_one_line(cli, ws, args, line):
 
 # every option of `dcslam train` with a value other than its default, and the configuration key it sets
 GIVEN = [("--loss", "pose", "loss", "pose"), ("--mask", "sparse", "mask", "sparse"),
-         ("--map-frames", "3", "map_frames", 3), ("--model", "nconv", "model", "nconv"), ("--epochs", "4", "epochs", 4),
+         ("--map-frames", "3", "map_frames", 3), ("--chamfer-distance", "plane", "chamfer_distance", "plane"),
+         ("--model", "nconv", "model", "nconv"), ("--epochs", "4", "epochs", 4),
          ("--lr", "0.02", "lr", 0.02), ("--weight-decay", "0.5", "weight_decay", 0.5),
          ("--max-frames", "9", "max_frames", 9), ("--stride", "2", "stride", 2), ("--scale", "0.5", "scale", 0.5),
          ("--crop", "8", "crop", 8), ("--batch-size", "3", "batch_size", 3), ("--seed", "7", "seed", 7),

@@ -1,6 +1,7 @@
 """Geometry terms in training (``normal_weight``, ``plane_weight``, ``edge_weight``): each is added to the loss with
 its weight and changes its gradient, is logged in metrics.jsonl (training and validation), combines with the MSE,
-chamfer and pose losses, names its run and recipe, and refuses a bad weight naming the option."""
+chamfer and pose losses, names its run and recipe, and refuses a bad weight naming the option; and the chamfer loss
+with the point-to-plane distance (``chamfer_distance``)."""
 import json
 import math
 
@@ -9,6 +10,7 @@ import torch
 
 from dcslam.depth.data import DriveFrames
 from dcslam.depth.losses import GeometryTerms
+from dcslam.depth.maps import stacked_points_map
 from dcslam.depth.recipes import GEOMETRY_TERMS, recipe_label
 from dcslam.depth.train import Objective, TrainConfig, initial_model, run_model
 from dcslam.errors import DcslamError
@@ -62,15 +64,25 @@ def test_mse_with_every_term(ws):
     assert (ws / "runs" / "mse-geometry" / "curves.png").stat().st_size > 0
 
 
-def test_chamfer_with_a_term(ws, no_curves):
-    first, _ = _checked_run(ws, "chamfer-edge", {"edge": 2.0}, loss="chamfer")
-    assert first["loss"] == pytest.approx(first["chamfer"] + 2.0 * first["edge"], rel=1e-5)
 
 
 def test_pose_with_a_term(ws, no_curves):
     first, val = _checked_run(ws, "pose-plane", {"plane": 0.5}, loss="pose", pose_frames=2, pose_iterations=2)
     assert first["loss"] == pytest.approx(first["pose"] + 0.5 * first["plane"], rel=1e-5)
     assert {"pose", "plane"} <= set(val[0])
+
+
+def test_chamfer_with_a_term_and_either_distance(ws, no_curves):
+    point, _ = _checked_run(ws, "chamfer-edge", {"edge": 2.0}, loss="chamfer")
+    assert point["loss"] == pytest.approx(point["chamfer"] + 2.0 * point["edge"], rel=1e-5)
+    plane, _ = _checked_run(ws, "chamfer-p2plane", {"edge": 2.0}, loss="chamfer", chamfer_distance="plane")
+    assert 0 < plane["chamfer"] < point["chamfer"]  # the same maps: a distance along the normal is the shorter
+    assert plane["edge"] == pytest.approx(point["edge"], rel=1e-6)
+    with pytest.raises(DcslamError, match="maps have normals"):
+        train(ws / "runs" / "no-normals", _config(ws, loss="chamfer", chamfer_distance="plane"),
+              map_builder=stacked_points_map, force=True)
+    with pytest.raises(DcslamError, match="--chamfer-distance"):
+        _config(ws, chamfer_distance="line")
 
 
 @pytest.mark.parametrize("term", GEOMETRY_TERMS)
@@ -125,3 +137,6 @@ def test_run_names_and_recipe_labels():
         == "MSE dense mask + normal/plane/edge"
     assert recipe_label({"loss": "pose", "edge_weight": 1.0}) == "pose from scratch + edge"
     assert recipe_label({"loss": "chamfer", "map_frames": 8, "normal_weight": 0.0}) == "chamfer multi-frame"
+    assert TrainStageConfig(loss="chamfer", map_frames=8, chamfer_distance="plane").run_name == "chamfer-p2plane-8"
+    assert recipe_label({"loss": "chamfer", "map_frames": 1, "chamfer_distance": "plane"}) == \
+        "chamfer single-frame, point-to-plane"
