@@ -52,7 +52,7 @@ def test_a_layer_that_does_not_say_its_input_errors_in_one_line_and_writes_nothi
     assert ok.summary["sources"] == {"mode": "measured", "kind": "sparse"}
 
 
-def _street_drive(path, frames=5, H=48, W=160):
+def _street_drive(path, frames=4, H=48, W=160):
     """An analytic street (dcslam.slam.scene) whose sparse depth ICP aligns with accepted steps."""
     from dcslam.io.drive import DriveFrame, DriveWriter
     from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
