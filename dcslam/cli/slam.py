@@ -14,8 +14,10 @@ def report(results: list[slam.SlamDriveResult]) -> None:
     for r in results:
         s, h = r.summary, r.summary["health"]
         verdict = f"SUSPECT ({'; '.join(h['reasons'])})" if h["suspect"] else "ok"
+        used = s.get("sources", {})
+        sources = f", ICP sources {used['kind']}" if used.get("mode") == "measured" else ""
         summary(f"{r.drive}: {s['frames']} frames, {s['points']} points, {s['seconds_per_frame']:.2f} s/frame, "
-                f"final drift {s['translation_error_m']['final']:.3f} m, steps {h['accepted']} accepted / "
+                f"final drift {s['translation_error_m']['final']:.3f} m{sources}, steps {h['accepted']} accepted / "
                 f"{h['degraded']} degraded / {h['rejected']} rejected, {verdict} -> {r.written['trajectory'].parent}")
 
 

@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dcslam.depth.models import ARCHITECTURES
-from dcslam.depth.recipes import LOSSES, LR_SCHEDULES, MASKS, POSE_WEIGHTS, check_pose_options, map_frames_of
+from dcslam.depth.recipes import (CHAMFER_DISTANCES, GEOMETRY_TERMS, LOSSES, LR_SCHEDULES, MASKS, POSE_WEIGHTS,
+                                  check_pose_options, map_frames_of)
 from dcslam.errors import DcslamError
 from dcslam.settings import option
 
@@ -67,6 +68,10 @@ class TrainSettings:
                                                     "with sparse input and ground truth).")
     map_frames: int = option(1, help="Frames per chamfer map: 1, or windows of up to N frames (the thesis: 8; its "
                                      "code: 7).")
+    chamfer_distance: str = option("point", choices=CHAMFER_DISTANCES,
+                                   help="Chamfer distance (the chamfer loss and the pose loss's chamfer term): point "
+                                        "(squared point-to-point, the thesis's) or plane (squared point-to-plane "
+                                        "along the ground-truth map's normals).")
     model: str = option("sparse-conv", choices=MODELS, help=f"Network: {' or '.join(MODELS)}.")
     epochs: int = option(1, help="Passes over the training drives.")
     lr: float = option(1e-3, help="AdamW learning rate.")
@@ -90,6 +95,12 @@ class TrainSettings:
                          help="Depth the loss compares with: dense (annotated) or exact (generated drives only).")
     l1_weight: float = option(0.0, help="MSE loss plus this weight times the mean absolute error (metres) over the "
                                         "same pixels (0 = MSE alone, the thesis's).")
+    normal_weight: float = option(0.0, help="Add this weight times the mean of 1 - cos(angle) between the "
+                                            "predicted and the --target surface normals (0 = off).")
+    plane_weight: float = option(0.0, help="Add this weight times the mean squared distance (m²) of the predicted "
+                                           "points from the --target surface, point-to-plane (0 = off).")
+    edge_weight: float = option(0.0, help="Add this weight times the mean squared distance (m²) of the predicted "
+                                          "points near --target depth edges from the nearer side (0 = off).")
     lr_schedule: str = option("constant", choices=LR_SCHEDULES, help="constant, or cosine: from --lr down to 0 over "
                                                                      "all the run's steps.")
     pose_frames: int = option(4, help="Pose loss: frames per window (the first at its true pose, the others "
@@ -109,12 +120,13 @@ class TrainSettings:
                                "confidence (the network's, for nconv models; others have none) or none.")
 
     def __post_init__(self) -> None:
-        for name, choices in (("loss", LOSSES), ("mask", MASKS), ("model", MODELS), ("lr_schedule", LR_SCHEDULES)):
+        for name, choices in (("loss", LOSSES), ("mask", MASKS), ("model", MODELS), ("lr_schedule", LR_SCHEDULES),
+                              ("chamfer_distance", CHAMFER_DISTANCES)):
             check_choice(self, name, choices)
         check_at_least_one(self, "map_frames", "epochs", "max_frames", "stride", "batch_size")
         if not 0 < self.lr < float("inf"):
             raise DcslamError(f"--lr must be a positive number, got {self.lr}")
-        for name in ("weight_decay", "l1_weight"):
+        for name in ("weight_decay", "l1_weight", *(f"{term}_weight" for term in GEOMETRY_TERMS)):
             if not 0 <= getattr(self, name) < float("inf"):
                 raise DcslamError(f"{flag(name)} must be a non-negative number, got {getattr(self, name)}")
         check_view(self.scale, self.crop)

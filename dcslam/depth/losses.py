@@ -140,7 +140,10 @@ def normal_loss(pred: torch.Tensor, reference: torch.Tensor, K: torch.Tensor, ma
     Shape:
         pred, reference: (B, 1, H, W) metres, 0 = none; K: (3, 3) or (B, 3, 3); mask: (B, 1, H, W) bool → scalar
     """
-    surface, ref, mask = _surfaces(pred, reference, K, mask, reference_search, max_relative_gap)
+    return _normal_term(pred, *_surfaces(pred, reference, K, mask, reference_search, max_relative_gap))
+
+
+def _normal_term(pred, surface, ref, mask) -> torch.Tensor:
     cos = (surface.normals * ref.normals).sum(1, keepdim=True)
     return _mean_over(1 - cos, surface.has_normal & ref.has_normal & mask, pred)
 
@@ -156,7 +159,10 @@ def point_to_plane_loss(pred: torch.Tensor, reference: torch.Tensor, K: torch.Te
     Shape:
         pred, reference: (B, 1, H, W) metres, 0 = none; K: (3, 3) or (B, 3, 3); mask: (B, 1, H, W) bool → scalar
     """
-    surface, ref, mask = _surfaces(pred, reference, K, mask, reference_search, max_relative_gap)
+    return _plane_term(pred, *_surfaces(pred, reference, K, mask, reference_search, max_relative_gap))
+
+
+def _plane_term(pred, surface, ref, mask) -> torch.Tensor:
     distance = (ref.normals * (surface.points - ref.points)).sum(1, keepdim=True)
     return _mean_over(distance * distance, surface.has_point & ref.has_point & ref.has_normal & mask, pred)
 
@@ -175,13 +181,61 @@ def edge_mixing_loss(pred: torch.Tensor, reference: torch.Tensor, K: torch.Tenso
     Shape:
         pred, reference: (B, 1, H, W) metres, 0 = none; K: (3, 3) or (B, 3, 3); mask: (B, 1, H, W) bool → scalar
     """
+    surfaces = _surfaces(pred, reference, K, mask, reference_search, max_relative_gap)
+    return _edge_term(pred, reference, *surfaces, edge_jump, radius_px)
+
+
+def _edge_term(pred, reference, surface, ref, mask, edge_jump: float | None = None,
+               radius_px: int | None = None) -> torch.Tensor:
     from dcslam.eval.surface import EDGE_RADIUS_PX, EDGE_RELATIVE_JUMP, depth_edges, near, nearest_surface_sq
 
     edge_jump = EDGE_RELATIVE_JUMP if edge_jump is None else edge_jump
     radius_px = EDGE_RADIUS_PX if radius_px is None else radius_px
-    surface, ref, mask = _surfaces(pred, reference, K, mask, reference_search, max_relative_gap)
     band = (near(depth_edges(reference, ref.has_point, edge_jump), radius_px) & surface.has_point & ref.has_point
             & mask)
     if not bool(band.any()):
         return (pred * 0).sum()
     return nearest_surface_sq(surface.points, ref, band, radius_px).mean()
+
+
+class GeometryTerms:
+    """The geometry terms that a training loss adds (docs/training.md, "Geometry losses"): ``terms(pred, reference,
+    K)`` → ``{term: value}`` of each term with a weight > 0 (:data:`dcslam.depth.recipes.GEOMETRY_TERMS`):
+    ``normal`` (:func:`normal_loss`), ``plane`` (:func:`point_to_plane_loss`), ``edge`` (:func:`edge_mixing_loss`),
+    each over the pixels where the reference (the training target) has a value; :meth:`weighted` sums them with
+    their weights. The reference's normals are taken the way SLAM takes them (the neighbour search chosen from the
+    batch's fraction of reference pixels, :func:`dcslam.slam.frame.normal_search_for`), so that a semi-dense target
+    has normals across its holes."""
+
+    def __init__(self, normal: float = 0.0, plane: float = 0.0, edge: float = 0.0):
+        from dcslam.depth.recipes import GEOMETRY_TERMS
+
+        self.weights = {}
+        for term, weight in zip(GEOMETRY_TERMS, (normal, plane, edge)):
+            if not 0 <= weight < float("inf"):
+                raise DcslamError(f"--{term}-weight must be a non-negative number, got {weight}")
+            if weight > 0:
+                self.weights[term] = float(weight)
+
+    def __bool__(self) -> bool:
+        return bool(self.weights)
+
+    def __call__(self, pred: torch.Tensor, reference: torch.Tensor, K: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Shape: pred, reference (B, 1, H, W) metres, 0 = none; K (3, 3) or (B, 3, 3) → {term: scalar}."""
+        from dcslam.slam.frame import FrameSettings, normal_search_for
+
+        if not self.weights:
+            return {}
+        _check_same(pred, reference)
+        frame = FrameSettings()
+        in_range = (reference >= frame.min_depth) & (reference <= frame.max_depth)
+        search = normal_search_for(float(in_range.float().mean()))
+        # both surfaces once, for all the terms
+        surfaces = _surfaces(pred, reference, K, None, search, frame.max_relative_gap)
+        terms = {"normal": lambda: _normal_term(pred, *surfaces), "plane": lambda: _plane_term(pred, *surfaces),
+                 "edge": lambda: _edge_term(pred, reference, *surfaces)}
+        return {term: terms[term]() for term in self.weights}
+
+    def weighted(self, terms: dict[str, torch.Tensor]) -> torch.Tensor | float:
+        """The sum of the ``terms`` (as :meth:`__call__` gives them) times their weights (0 for none)."""
+        return sum((self.weights[t] * v for t, v in terms.items()), 0.0)

@@ -13,7 +13,7 @@ from types import SimpleNamespace
 
 import torch
 
-from dcslam.depth.chamfer import chamfer_distance
+from dcslam.depth.chamfer import chamfer_distance, plane_chamfer_distance
 from dcslam.depth.data import frame_windows
 from dcslam.errors import DcslamError
 
@@ -41,17 +41,25 @@ def stacked_points_map(depth: torch.Tensor, K: torch.Tensor, T_world_cam: torch.
 
 class MapChamfer:
     """``MapChamfer(map_frames)(pred, dense, K, T_world_cam)``: the mean over windows of the chamfer distance
-    between the map of the predicted depth and the map of the ground-truth depth.
+    between the map of the predicted depth and the map of the ground-truth depth; with ``distance="plane"``, its
+    point-to-plane form along the ground-truth map's normals (:func:`dcslam.depth.chamfer.plane_chamfer_distance`;
+    the map builder's maps must carry ``normals``, as PointFusion's do).
 
     Shape:
         pred, dense: (N, 1, H, W) metres; K: (3, 3); T_world_cam: (N, 4, 4) → scalar (m²)
     """
 
-    def __init__(self, map_frames: int = 1, map_builder: Callable | None = None):
+    def __init__(self, map_frames: int = 1, map_builder: Callable | None = None, distance: str = "point"):
+        from dcslam.depth.recipes import CHAMFER_DISTANCES
+
         if map_frames < 1:
             raise DcslamError(f"--map-frames must be >= 1, got {map_frames}")
+        if distance not in CHAMFER_DISTANCES:
+            raise DcslamError(f"unknown --chamfer-distance {distance!r}; expected one of "
+                              f"{', '.join(CHAMFER_DISTANCES)}")
         self.map_frames = map_frames
         self.map_builder = map_builder
+        self.distance = distance
 
     def _builder(self) -> Callable:
         if self.map_builder is None:
@@ -71,10 +79,17 @@ class MapChamfer:
             sl = slice(window.start, window.stop)
             pred_map = build(pred[sl], K, T_world_cam[sl]).points
             with torch.no_grad():
-                gt_map = build(dense[sl], K, T_world_cam[sl]).points
+                gt = build(dense[sl], K, T_world_cam[sl])
+            gt_map = gt.points
             if pred_map.shape[0] == 0 or gt_map.shape[0] == 0:
                 continue  # a window with no prediction or no ground truth has no map to compare
-            losses.append(chamfer_distance(pred_map, gt_map.detach()))
+            if self.distance == "plane":
+                if getattr(gt, "normals", None) is None:
+                    raise DcslamError("--chamfer-distance plane needs a map builder whose maps have normals "
+                                      "(dcslam's PointFusion mapping)")
+                losses.append(plane_chamfer_distance(pred_map, gt_map.detach(), gt.normals.detach()))
+            else:
+                losses.append(chamfer_distance(pred_map, gt_map.detach()))
         if not losses:
             return (pred * 0).sum()
         return torch.stack(losses).mean()

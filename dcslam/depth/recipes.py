@@ -1,14 +1,25 @@
 """The training recipes' names, decoded in this one place (no torch: the command line imports it).
 
 A recipe is a loss (``mse`` with a ``sparse`` or ``dense`` mask, ``chamfer`` over maps of ``map_frames`` frames, or
-``pose``: the relative-pose error of dcslam's differentiable ICP over windows of frames), and for ``pose``
-the run it was fine-tuned from (``init``), if any.
+``pose``: the relative-pose error of dcslam's differentiable ICP over windows of frames), for ``pose``
+the run it was fine-tuned from (``init``), if any, and the geometry terms added to its loss (``normal_weight``,
+``plane_weight``, ``edge_weight`` > 0).
 """
 from __future__ import annotations
 
 LOSSES = ("mse", "chamfer", "pose")
 MASKS = ("sparse", "dense")
 POSE_WEIGHTS = ("confidence", "none")  # per-pixel ICP weights of the pose loss: the network's confidence, or none
+#: The geometry terms a training loss may add (docs/training.md, "Geometry losses"), each weighted by the setting
+#: ``<term>_weight``: surface-normal angle, point-to-plane distance, mixed depths at depth edges.
+GEOMETRY_TERMS = ("normal", "plane", "edge")
+#: Distances of the chamfer loss: point to point (the thesis's), or point to plane along the ground-truth map's normals.
+CHAMFER_DISTANCES = ("point", "plane")
+
+
+def geometry_terms(settings: dict) -> tuple[str, ...]:
+    """The geometry terms a run's settings weigh in (weight > 0), in :data:`GEOMETRY_TERMS` order."""
+    return tuple(t for t in GEOMETRY_TERMS if float(settings.get(f"{t}_weight", 0) or 0) > 0)
 
 
 def check_pose_options(config) -> None:
@@ -41,12 +52,14 @@ def selection_key(loss: str) -> str:
     return loss if loss in ("chamfer", "pose") else "mse"
 
 
-def run_name(loss: str, mask: str, map_frames: int, init: str | None = None) -> str:
-    """The default run name of a recipe: ``mse-<mask>``, ``chamfer-<map frames>``, ``pose`` or
-    ``pose-from-<init run>``."""
+def run_name(loss: str, mask: str, map_frames: int, init: str | None = None, chamfer_distance: str = "point") -> str:
+    """The default run name of a recipe: ``mse-<mask>``, ``chamfer-<map frames>`` (``chamfer-p2plane-<map frames>``
+    with the point-to-plane distance), ``pose`` or ``pose-from-<init run>``."""
     if loss == "pose":
         return f"pose-from-{init}" if init else "pose"
-    return f"{loss}-{mask}" if loss == "mse" else f"{loss}-{map_frames}"
+    if loss == "chamfer":
+        return f"chamfer-p2plane-{map_frames}" if chamfer_distance == "plane" else f"chamfer-{map_frames}"
+    return f"{loss}-{mask}"
 
 
 def init_run(settings: dict) -> str:
@@ -58,10 +71,17 @@ def init_run(settings: dict) -> str:
 
 
 def recipe_label(settings: dict) -> str:
-    """The thesis's name of a training recipe from a run's settings (``loss``, ``mask``, ``map_frames``)."""
+    """The thesis's name of a training recipe from a run's settings (``loss``, ``mask``, ``map_frames``), followed
+    by the geometry terms it adds, if any: ``MSE dense mask + normal/plane``."""
+    terms = geometry_terms(settings)
+    return _loss_label(settings) + (" + " + "/".join(terms) if terms else "")
+
+
+def _loss_label(settings: dict) -> str:
     loss = settings.get("loss")
     if loss == "chamfer":
-        return "chamfer single-frame" if int(settings.get("map_frames", 1)) <= 1 else "chamfer multi-frame"
+        label = "chamfer single-frame" if int(settings.get("map_frames", 1)) <= 1 else "chamfer multi-frame"
+        return label + (", point-to-plane" if settings.get("chamfer_distance", "point") == "plane" else "")
     if loss == "mse":
         return f"MSE {settings.get('mask', 'dense')} mask"
     if loss == "pose":

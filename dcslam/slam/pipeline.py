@@ -169,32 +169,42 @@ class SLAM:
         start = time.perf_counter()
         return self.step_frame(prepare_frame(depth, K, rgb, self.frame_settings, weight), T_gt, start)
 
-    def precompute(self, frame: Frame) -> None:
-        """Do the odometry's and the mapper's work on ``frame`` that depends on the frame alone (kept in
-        :attr:`Frame.cache`): safe on another thread while :meth:`step_frame` processes the previous frame, and the
-        results are the ones step_frame would compute. The odometry's part waits until the first frame has fixed
-        the scene scale (until then step_frame computes it itself)."""
+    def precompute(self, frame: Frame, source_frame: Frame | None = None) -> None:
+        """Do the odometry's and the mapper's work on ``frame`` (and the odometry's on ``source_frame`` instead,
+        when given: see :meth:`step_frame`) that depends on the frame alone (kept in :attr:`Frame.cache`): safe on
+        another thread while :meth:`step_frame` processes the previous frame, and the results are the ones
+        step_frame would compute. The odometry's part waits until the first frame has fixed the scene scale (until
+        then step_frame computes it itself)."""
         self.mapper.precompute(frame)
         scale = self.scale
         if scale is not None:
-            self.odometry.precompute(frame, scale)
+            self.odometry.precompute(frame if source_frame is None else source_frame, scale)
 
-    def step_frame(self, frame: Frame, T_gt: torch.Tensor | None = None, start: float | None = None) -> StepReport:
+    def step_frame(self, frame: Frame, T_gt: torch.Tensor | None = None, start: float | None = None,
+                   source_frame: Frame | None = None) -> StepReport:
         """Process one frame already made by ``prepare_frame(depth, K, rgb, self.frame_settings, weight)``, which
         depends on the frame alone: a caller may prepare the next frame on another thread while this one is
         aligned and fused (:func:`dcslam.stages.slam.run_drive` does). ``start``: the ``time.perf_counter()`` the
-        report's seconds count from (default: now)."""
+        report's seconds count from (default: now).
+
+        ``source_frame``: another frame of the same camera and instant whose points the odometry aligns instead of
+        ``frame``'s (e.g. the measured LiDAR pixels behind a completed ``frame``), so that the pose rests on
+        measurements while the map fuses ``frame``; the report's sources and inliers are then its points. ``frame``
+        alone fixes the scene scale and is fused. None: ``frame`` serves both."""
         start = time.perf_counter() if start is None else start
         T_init = self._prediction(frame.vertex.dtype, frame.vertex.device)
         index = len(self.poses)
         scale = self._fix_scale(frame)
+        if source_frame is not None and source_frame.shape != frame.shape:
+            raise DcslamError(f"source frame of {source_frame.shape}, the frame of {frame.shape}: not the same camera")
         if index == 0:
             first_from_gt = T_gt is not None and self.odometry.first_pose_from_gt
             result = OdometryResult(T_gt.to(T_init.dtype) if first_from_gt else T_init)
         else:
             H, W = frame.shape
             model = self.mapper.model(T_init, frame.K, H, W)
-            result = self.odometry.estimate(frame, model, T_init, T_gt, T_last=self.poses[-1].detach(), scale=scale)
+            aligned = frame if source_frame is None else source_frame
+            result = self.odometry.estimate(aligned, model, T_init, T_gt, T_last=self.poses[-1].detach(), scale=scale)
         self.mapper.integrate(frame, result.T_world_cam, scale)
         self.poses.append(result.T_world_cam)
         gap_m, gap_deg = _distance(T_init, result.T_world_cam)

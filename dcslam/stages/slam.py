@@ -26,6 +26,8 @@ from dcslam.workspace import Workspace
 
 #: How SLAM uses a depth layer's per-pixel confidence (``--confidence``).
 CONFIDENCE_USES = ("weights", "mask", "ignore")
+#: Which points the odometry aligns (``--sources``): the depth input's own, or the measured LiDAR pixels behind it.
+SOURCES = ("depth", "measured")
 
 
 @dataclass(frozen=True)
@@ -75,6 +77,12 @@ class SlamStageConfig(SlamSettings):
     min_confidence: float = option(0.0, min=0.0, max=1.0, help=(
         "Pixels whose confidence is below this are dropped before SLAM (with --confidence weights or mask; needs a "
         "layer with a confidence)."))
+    sources: str = option("depth", choices=SOURCES, help=(
+        "ICP sources: depth (the --depth input's own points) or measured (only the measured LiDAR pixels behind "
+        "it, see --measured, with normals taken from them as sparse SLAM does; the map still fuses --depth)."))
+    measured: str | None = option(None, help=(
+        "With --sources measured: the drive depth kind whose pixels are the ICP sources, e.g. sparse@16. Default: "
+        "the input a layer was predicted from (sparse for dense and exact)."))
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -90,6 +98,16 @@ class SlamStageConfig(SlamSettings):
             raise DcslamError("--min-confidence needs --confidence weights or mask (ignore uses no confidence)")
         if self.confidence == "mask" and self.min_confidence <= 0:
             raise DcslamError("--confidence mask drops the pixels below --min-confidence; give one above 0")
+        if self.sources not in SOURCES:
+            raise DcslamError(f"unknown ICP sources {self.sources!r} (choose from {', '.join(SOURCES)})")
+        if self.measured is not None:
+            from dcslam.io.drive import is_depth_kind
+
+            if self.sources != "measured":
+                raise DcslamError(f"--measured {self.measured} needs --sources measured")
+            if not is_depth_kind(self.measured):
+                raise DcslamError(f"--measured {self.measured!r} is not a drive depth kind (e.g. sparse, "
+                                  "sparse@16)")
 
     def confidence_use(self) -> "ConfidenceUse":
         return ConfidenceUse(self.confidence, self.min_confidence)
@@ -131,17 +149,17 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
             raise DcslamError(f"--min-confidence {config.min_confidence}: {source} holds no confidence (only layers "
                               f"predicted by a confidence-aware model such as `dcslam train --model nconv` have one); "
                               f"drop --min-confidence")
-        jobs.append((path, source))
+        jobs.append((path, source, measured_sources(config, source, path)))
     results = []
     # a fixed mmap threshold keeps a long run's peak memory flat (glibc's own one lets the heap fragment: +16 % peak
     # from frame 200 to 1,000); MALLOC_MMAP_THRESHOLD_ in the environment overrides it (dcslam.allocator)
     fix_mmap_threshold()
     with torch_threads(config.threads):
-        for path, source in jobs:
+        for path, source, measured in jobs:
             slam = build_slam(config.settings())
             drive_run = run_drive(path, source, slam, config.frames or None, config.device,
                                   settings={**to_dict(config), "source": str(source)},
-                                  confidence=config.confidence_use())
+                                  confidence=config.confidence_use(), sources_kind=measured)
             drive_run.name = path.stem
             written = write_outputs(drive_run, out_dir, force)
             results.append(SlamDriveResult(path.stem, drive_run.summary(), written))
@@ -151,6 +169,23 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
             f"{r.drive}: {', '.join(r.summary['health']['reasons'])}" for r in suspect)
             + f"; outputs written under {out_dir}")
     return results
+
+
+def measured_sources(config: SlamStageConfig, source: str | Path, drive_path: Path) -> str | None:
+    """The drive depth kind whose pixels are a drive's ICP sources (None: the depth input's own, ``--sources
+    depth``), checked to be in the drive before any work."""
+    from dcslam.io.drive import DriveFile, measured_kind
+
+    if config.sources != "measured":
+        return None
+    kind = config.measured or measured_kind(source)
+    if kind is None:
+        raise DcslamError(f"--sources measured: {source} does not record the LiDAR input it was made from (a layer "
+                          "written by another tool); pass --measured KIND, e.g. --measured sparse@16")
+    with DriveFile(drive_path) as drive:
+        if kind not in drive.kinds:
+            drive.depth(kind, 0)  # its one-line error names the kinds the drive holds and how to add one
+    return kind
 
 
 def has_confidence(source: str | Path) -> bool:
@@ -197,6 +232,7 @@ class DriveRun:
     confidence: dict = field(default_factory=dict)  # ConfidenceUse.record() plus the fraction of pixels kept
     effective_settings: dict = field(default_factory=dict)  # SLAM.effective_settings(): after the scene scale
     health_rules: object = None  # the HealthRules the steps were judged by (None: the defaults); the run is too
+    sources: dict = field(default_factory=lambda: {"mode": "depth"})  # the ICP sources used: mode, measured kind
 
     def __post_init__(self) -> None:
         from dcslam.geometry.rotations import nearest_rotation
@@ -223,6 +259,7 @@ class DriveRun:
             "translation_error_m": {"final": float(dt[-1]), "max": float(dt.max()), "mean": float(dt.mean())},
             "rotation_error_deg": {"final": float(dr[-1]) * 180 / np.pi, "max": float(dr.max()) * 180 / np.pi},
             "confidence": self.confidence,
+            "sources": self.sources,
             "settings": self.settings,
             "effective_settings": self.effective_settings,
         }
@@ -230,10 +267,12 @@ class DriveRun:
 
 def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | None = None,
               device: str = "cpu", description: str | None = None, settings: dict | None = None,
-              confidence: ConfidenceUse = ConfidenceUse()) -> DriveRun:
+              confidence: ConfidenceUse = ConfidenceUse(), sources_kind: str | None = None) -> DriveRun:
     """SLAM (a :class:`dcslam.slam.pipeline.SLAM`) over the first ``frames`` frames (all if None) of a drive, with
     depth from ``sparse``, ``dense`` or a layer file, whose confidence (if it has one) is used as ``confidence``
-    says."""
+    says. ``sources_kind``: a drive depth kind (e.g. ``sparse@16``) whose pixels the odometry aligns instead of the
+    depth's own, against the map fused from the depth (:meth:`~dcslam.slam.pipeline.SLAM.step_frame`'s
+    ``source_frame``); None: the depth's own."""
     import torch
 
     from dcslam.io.drive import DriveFile, load_depth_and_confidence
@@ -250,6 +289,9 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
         depth_all = depth_all[:n]
         if confidence_all is not None:
             confidence_all = confidence_all[:n]
+        # the depth input already is the measured kind (sparse@16 with --measured sparse@16): its frames serve both
+        separate = sources_kind is not None and not (isinstance(depth_source, str) and depth_source == sources_kind)
+        sources_all = np.stack([drive.depth(sources_kind, i) for i in range(n)]) if separate else None
         measured = kept = 0
         K = torch.from_numpy(drive.K).float().to(device)
         T_gt = drive.poses[:n]
@@ -263,8 +305,13 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
             weight = None if weight_np is None else torch.from_numpy(weight_np).to(device)[None, None]
             rgb = torch.from_numpy(drive.rgb(i)).to(device).permute(2, 0, 1)[None].float() / 255
             frame = prepare_frame(depth, K, rgb, slam.frame_settings, weight)
-            slam.precompute(frame)
-            return frame, int((depth_all[i] > 0).sum()), int((depth_np > 0).sum())
+            source_frame = None
+            if sources_all is not None:
+                # no weights: the measured pixels are the evidence (a completer's confidence is about its fill)
+                sparse = torch.from_numpy(np.ascontiguousarray(sources_all[i])).to(device)[None, None]
+                source_frame = prepare_frame(sparse, K, None, slam.frame_settings)
+            slam.precompute(frame, source_frame)
+            return frame, source_frame, int((depth_all[i] > 0).sum()), int((depth_np > 0).sum())
 
         start = time.perf_counter()
         # the next frame is read and prepared (normals, colours, ICP sources, surfels) on a second thread while this
@@ -273,20 +320,22 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
         with Bar(description or drive.name, total=n) as bar, prefetcher(not cores_shared()) as submit:
             pending = submit(prepare, 0)
             for i in range(n):
-                frame, m, k = pending.result()
+                frame, source_frame, m, k = pending.result()
                 measured, kept = measured + m, kept + k
                 if i + 1 < n:
                     pending = submit(prepare, i + 1)
-                report = slam.step_frame(frame, torch.from_numpy(T_gt[i]).float().to(device))
+                report = slam.step_frame(frame, torch.from_numpy(T_gt[i]).float().to(device),
+                                         source_frame=source_frame)
                 bar.advance(status=f"{report.points} points" + ("" if report.accepted else " (step rejected)"))
         seconds = time.perf_counter() - start
         poses = slam.trajectory().detach().cpu().double().numpy()
         global_map = slam.mapper.global_map().detach().to("cpu")
         used = {**confidence.record(confidence_all is not None),
                 "kept_fraction": round(kept / measured, 4) if measured else 0.0}
+        sources = {"mode": "depth"} if sources_kind is None else {"mode": "measured", "kind": sources_kind}
         return DriveRun(drive.name, poses, drive.timestamps[:n].copy(), T_gt.copy(), global_map,
                         list(slam.reports), seconds, dict(settings or {}), used, slam.effective_settings(),
-                        slam.health)
+                        slam.health, sources)
 
 
 @contextlib.contextmanager

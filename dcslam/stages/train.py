@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 from dcslam.depth.config import TrainConfig, TrainSettings
-from dcslam.depth.recipes import run_name, selection_key
+from dcslam.depth.recipes import geometry_terms, run_name, selection_key
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
 from dcslam.io.atomic import write_json_atomic
@@ -36,7 +36,8 @@ class TrainStageConfig(TrainSettings):
                                      "fill of the input, learned from the network's own output (untrained: the "
                                      "fill); off: the network's own depth.")
     name: str | None = option(None, help="Run name (default: mse-dense, mse-sparse, chamfer-1, ...; with another "
-                                         "input or target, e.g. mse-dense-sparse16, mse-dense-to-exact).")
+                                         "input or target, e.g. mse-dense-sparse16, mse-dense-to-exact; with "
+                                         "geometry terms, e.g. mse-dense-normal-plane).")
     resume: bool = option(False, flags=("--resume",), help="Continue an interrupted run from last.pt.")
     nproc: int = option(1, help="Processes for distributed data-parallel training (launches torchrun).")
     init: str | None = option(None, help="Start from the best model of this run (runs/<INIT>/model.pt): "
@@ -60,11 +61,12 @@ class TrainStageConfig(TrainSettings):
     def run_name(self) -> str:
         if self.name:
             return self.name
-        name = run_name(self.loss, self.mask, self.map_frames, self.init)
+        name = run_name(self.loss, self.mask, self.map_frames, self.init, self.chamfer_distance)
         if self.input_mix:
             name += "-mix"
         elif self.input != "sparse":
             name += "-" + self.input.replace("@", "")
+        name += "".join(f"-{term}" for term in geometry_terms({f.name: getattr(self, f.name) for f in fields(self)}))
         return name + (f"-to-{self.target}" if self.target != "dense" else "")
 
     def model_hparams(self) -> dict:

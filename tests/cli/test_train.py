@@ -87,7 +87,16 @@ def test_train_errors(cli, ws, tmp_path):
     assert not (ws / "runs").exists()
 
 
+def test_help_lists_the_geometry_terms(cli):
+    result = cli("train", "--help")
+    assert result.exit_code == 0
+    assert all(flag in result.output for flag in ("--normal-weight", "--plane-weight", "--edge-weight"))
+    result = cli("train", "--edge-weight", "much")
+    assert result.exit_code == 2 and "--edge-weight" in result.output  # not a number: a usage error
+
+
 @pytest.mark.parametrize("args, line", [
+    (["--edge-weight", "-0.5"], "error: --edge-weight must be a non-negative number, got -0.5"),
     (["--lr", "-1"], "error: --lr must be a positive number, got -1.0"),
     (["--nproc", "0"], "error: --nproc must be >= 1, got 0"),
     (["--weight-decay", "nan"], "error: --weight-decay must be a non-negative number, got nan"),
@@ -100,13 +109,16 @@ def test_bad_numbers_give_one_line(cli, ws, args, line):
 
 # every option of `dcslam train` with a value other than its default, and the configuration key it sets
 GIVEN = [("--loss", "pose", "loss", "pose"), ("--mask", "sparse", "mask", "sparse"),
-         ("--map-frames", "3", "map_frames", 3), ("--model", "nconv", "model", "nconv"), ("--epochs", "4", "epochs", 4),
+         ("--map-frames", "3", "map_frames", 3), ("--chamfer-distance", "plane", "chamfer_distance", "plane"),
+         ("--model", "nconv", "model", "nconv"), ("--epochs", "4", "epochs", 4),
          ("--lr", "0.02", "lr", 0.02), ("--weight-decay", "0.5", "weight_decay", 0.5),
          ("--max-frames", "9", "max_frames", 9), ("--stride", "2", "stride", 2), ("--scale", "0.5", "scale", 0.5),
          ("--crop", "8", "crop", 8), ("--batch-size", "3", "batch_size", 3), ("--seed", "7", "seed", 7),
          ("--device", "cpu", "device", "cpu"), ("--input", "sparse@16", "input", "sparse@16"),
          ("--input-mix", "sparse@8", "input_mix", ["sparse@8"]), ("--target", "exact", "target", "exact"),
          ("--l1-weight", "2", "l1_weight", 2.0), ("--lr-schedule", "cosine", "lr_schedule", "cosine"),
+         ("--normal-weight", "0.5", "normal_weight", 0.5), ("--plane-weight", "3", "plane_weight", 3.0),
+         ("--edge-weight", "1.5", "edge_weight", 1.5),
          ("--pose-frames", "5", "pose_frames", 5), ("--pose-weight", "2", "pose_weight", 2.0),
          ("--mse-weight", "0.5", "mse_weight", 0.5), ("--chamfer-weight", "0.25", "chamfer_weight", 0.25),
          ("--pose-translation-weight", "3", "pose_translation_weight", 3.0),
@@ -143,6 +155,8 @@ def test_print_config_shows_every_option_under_its_key(cli, tmp_path):
     (["--mse-weight", "inf"], "mse_weight = inf"), (["--pose-iterations", "0"], "pose_iterations = 0"),
     (["--pose-max-sources", "-1"], "pose_max_sources = -1"),
     (["--pose-source-voxel", "nan"], "pose_source_voxel = nan"),
+    (["--normal-weight", "-1"], "normal_weight = -1"), (["--plane-weight", "nan"], "plane_weight = nan"),
+    (["--edge-weight", "inf"], "edge_weight = inf"),
     (["--name", "a/b"], 'name = "a/b"'), (["--init", ".."], 'init = ".."'),
     (["--fill-holes", "--model", "nconv"], 'fill_holes = true\nmodel = "nconv"')])
 def test_a_wrong_value_fails_with_one_line_naming_the_option(cli, ws, args, line, tmp_path):

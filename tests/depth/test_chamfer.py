@@ -1,7 +1,7 @@
 import pytest
 import torch
 
-from dcslam.depth.chamfer import chamfer_distance, nearest_neighbours
+from dcslam.depth.chamfer import chamfer_distance, nearest_neighbours, plane_chamfer_distance
 from dcslam.errors import DcslamError
 
 
@@ -65,3 +65,28 @@ class TestChamfer:
             chamfer_distance(torch.rand(5, 2), torch.rand(5, 3))
         with pytest.raises(DcslamError):
             chamfer_distance(torch.rand(0, 3), torch.rand(5, 3))
+
+
+class TestPlaneChamfer:
+    def test_known_answer_and_sliding_costs_nothing(self, dtype):
+        # a grid on the plane z = 0 (normals +z): moved along the plane it costs nothing, moved off it by 0.5 m it
+        # costs 0.25 m² each way (the point form charges both)
+        u, v = torch.meshgrid(torch.arange(5, dtype=dtype), torch.arange(4, dtype=dtype), indexing="ij")
+        b = torch.stack([u.flatten(), v.flatten(), torch.zeros(20, dtype=dtype)], 1)
+        n = torch.tensor([0.0, 0, 1], dtype=dtype).expand(20, 3)
+        slid = b + torch.tensor([0.3, 0.2, 0], dtype=dtype)
+        assert plane_chamfer_distance(slid, b, n).item() == pytest.approx(0, abs=1e-12)
+        assert chamfer_distance(slid, b).item() > 0.1
+        lifted = b + torch.tensor([0.0, 0, 0.5], dtype=dtype)
+        assert plane_chamfer_distance(lifted, b, n).item() == pytest.approx(0.5)
+
+    def test_gradcheck_float64(self):
+        g = torch.Generator().manual_seed(2)
+        a = torch.rand(30, 3, generator=g, dtype=torch.float64, requires_grad=True)
+        b = torch.rand(25, 3, generator=g, dtype=torch.float64, requires_grad=True)
+        n = torch.nn.functional.normalize(torch.randn(25, 3, generator=g, dtype=torch.float64), dim=1)
+        assert torch.autograd.gradcheck(plane_chamfer_distance, (a, b, n.requires_grad_()), eps=1e-7)
+
+    def test_bad_normals(self):
+        with pytest.raises(DcslamError, match="normals have shape"):
+            plane_chamfer_distance(torch.rand(5, 3), torch.rand(4, 3), torch.rand(3, 3))
