@@ -14,7 +14,7 @@ MAPPERS = ("pointfusion", "icpslam")
 SOLVERS = ("gn", "lm")
 ASSOCIATIONS = ("projective", "nn")
 KERNELS = ("none", "gm")
-FIRST_STEP_PRIORS = ("none", "drive-motion", "drive-speed")
+FIRST_STEP_PRIORS = ("none", "drive-motion")
 
 
 @dataclass(frozen=True)
@@ -64,9 +64,9 @@ class SlamSettings:
                 "so the whole map can be written; off: they are dropped."})
     first_step_prior: str = field(default="none", metadata={
         "help": "Motion prediction of the first ICP step, which has no velocity to predict from: none (no motion: a "
-                "car at 1 m per frame starts 1 m off), drive-motion (the drive poses' motion from frame 0 to 1) or "
-                "drive-speed (that motion's length, straight ahead). Both use the drive's poses (OXTS on KITTI), data "
-                "beyond the depth; a run with one is not depth-only odometry.", "choices": FIRST_STEP_PRIORS})
+                "car at 1 m per frame starts 1 m off) or drive-motion (the drive poses' motion from frame 0 to 1). "
+                "drive-motion uses the drive's poses (OXTS on KITTI), data beyond the depth: a run with it is not "
+                "depth-only odometry.", "choices": FIRST_STEP_PRIORS})
     normal_search: int = field(default=0, metadata={
         "help": "Pixels searched along rows and columns for normal neighbours; 0 = from the depth's density.",
         "min": 0})

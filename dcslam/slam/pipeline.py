@@ -92,10 +92,9 @@ class SLAM:
     constant-velocity prediction; a rejected odometry step keeps that prediction and is listed in
     :attr:`rejected`. With ``keep_graph`` (set on the mapper) poses and map stay connected to the inputs.
 
-    The first ICP step (frame 1) has no velocity: it starts from frame 0's pose unless ``first_step_prior`` takes its
-    motion from the ground-truth poses given to :meth:`step` (data beyond the depth): ``drive-motion`` the relative
-    motion of frames 0 and 1, ``drive-speed`` only its length, straight ahead along the camera's z axis (what a
-    speedometer or the OXTS forward velocity gives).
+    The first ICP step (frame 1) has no velocity: it starts from frame 0's pose unless ``first_step_prior`` is
+    ``drive-motion``, which predicts it by the motion from frame 0 to frame 1 of the ground-truth poses given to
+    :meth:`step` (data beyond the depth).
 
     Metric settings (voxel sizes, the ICP gate) are for scenes of median depth ``reference_depth_m`` (a street): the
     first frame of a sequence fixes the scene scale ``min(1, median depth / reference_depth_m)`` (1 when
@@ -172,18 +171,12 @@ class SLAM:
         return last @ torch.linalg.solve(prev, last)
 
     def _first_motion(self, T_gt: torch.Tensor | None, dtype, device) -> torch.Tensor:
-        """Frame 0 → frame 1 motion of the ground-truth poses (``drive-motion``), or its length straight ahead
-        (``drive-speed``). Shape: T_gt (4, 4) -> (4, 4)."""
+        """Frame 0 → frame 1 motion of the ground-truth poses. Shape: T_gt (4, 4) -> (4, 4)."""
         if T_gt is None or self._T_gt0 is None:
             raise DcslamError(f"first_step_prior {self.first_step_prior!r} needs the ground-truth poses of frames 0 "
                               "and 1 (T_gt)")
-        motion = torch.linalg.solve(self._T_gt0.to(dtype=dtype, device=device),
-                                    T_gt.detach().to(dtype=dtype, device=device))
-        if self.first_step_prior == "drive-speed":
-            ahead = torch.eye(4, dtype=dtype, device=device)
-            ahead[2, 3] = motion[:3, 3].norm()
-            motion = ahead
-        return motion
+        return torch.linalg.solve(self._T_gt0.to(dtype=dtype, device=device),
+                                  T_gt.detach().to(dtype=dtype, device=device))
 
     def step(self, depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None = None,
              T_gt: torch.Tensor | None = None, weight: torch.Tensor | None = None) -> StepReport:
