@@ -14,6 +14,7 @@ MAPPERS = ("pointfusion", "icpslam")
 SOLVERS = ("gn", "lm")
 ASSOCIATIONS = ("projective", "nn")
 KERNELS = ("none", "gm")
+FIRST_STEP_PRIORS = ("none", "drive-motion")
 
 
 @dataclass(frozen=True)
@@ -61,6 +62,11 @@ class SlamSettings:
     keep_global_map: bool = field(default=True, metadata={
         "help": "Keep the points that leave the local map (in a temporary file, read back when the map is written) "
                 "so the whole map can be written; off: they are dropped."})
+    first_step_prior: str = field(default="none", metadata={
+        "help": "Motion prediction of the first ICP step, which has no velocity to predict from: none (no motion: a "
+                "car at 1 m per frame starts 1 m off) or drive-motion (the drive poses' motion from frame 0 to 1). "
+                "drive-motion uses the drive's poses (OXTS on KITTI), data beyond the depth: a run with it is not "
+                "depth-only odometry.", "choices": FIRST_STEP_PRIORS})
     normal_search: int = field(default=0, metadata={
         "help": "Pixels searched along rows and columns for normal neighbours; 0 = from the depth's density.",
         "min": 0})
@@ -69,7 +75,8 @@ class SlamSettings:
         from dcslam.errors import DcslamError
 
         for name, choices in (("odometry", ODOMETRIES), ("mapper", MAPPERS), ("solver", SOLVERS),
-                              ("association", ASSOCIATIONS), ("kernel", KERNELS)):
+                              ("association", ASSOCIATIONS), ("kernel", KERNELS),
+                              ("first_step_prior", FIRST_STEP_PRIORS)):
             if getattr(self, name) not in choices:
                 raise DcslamError(f"unknown {name} {getattr(self, name)!r} (choose from {', '.join(choices)})")
         for name in ("max_distance", "max_normal_angle", "voxel_size", "source_voxel", "reference_depth",
@@ -122,4 +129,5 @@ def build_slam(settings: SlamSettings = SlamSettings()):
     mapper = (PointFusion if s.mapper == "pointfusion" else ICPSLAM)(voxel_size=s.voxel_size,
                                                                       window=s.local_map_frames,
                                                                       archive=s.keep_global_map)
-    return SLAM(odo, mapper, FrameSettings(normal_search=s.normal_search), reference_depth_m=s.reference_depth)
+    return SLAM(odo, mapper, FrameSettings(normal_search=s.normal_search), reference_depth_m=s.reference_depth,
+                first_step_prior=s.first_step_prior)

@@ -11,6 +11,7 @@ import torch
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_depth
 from dcslam.geometry.motion import relative_motion
+from dcslam.slam.config import FIRST_STEP_PRIORS
 from dcslam.slam.fusion import PointFusion
 from dcslam.slam.frame import Frame, FrameSettings, prepare_frame, valid_points
 from dcslam.slam.health import HealthRules, assess, summarise
@@ -91,6 +92,10 @@ class SLAM:
     constant-velocity prediction; a rejected odometry step keeps that prediction and is listed in
     :attr:`rejected`. With ``keep_graph`` (set on the mapper) poses and map stay connected to the inputs.
 
+    The first ICP step (frame 1) has no velocity: it starts from frame 0's pose unless ``first_step_prior`` is
+    ``drive-motion``, which predicts it by the motion from frame 0 to frame 1 of the ground-truth poses given to
+    :meth:`step` (data beyond the depth).
+
     Metric settings (voxel sizes, the ICP gate) are for scenes of median depth ``reference_depth_m`` (a street): the
     first frame of a sequence fixes the scene scale ``min(1, median depth / reference_depth_m)`` (1 when
     ``reference_depth_m`` is 0), which every call to the parts then carries, so that a room scales them down in
@@ -99,10 +104,13 @@ class SLAM:
 
     def __init__(self, odometry: Odometry, mapper: Mapper, frame_settings: FrameSettings = FrameSettings(),
                  T_world_cam0: torch.Tensor | None = None, health: HealthRules = HealthRules(),
-                 reference_depth_m: float = 0.0):
+                 reference_depth_m: float = 0.0, first_step_prior: str = "none"):
+        if first_step_prior not in FIRST_STEP_PRIORS:
+            raise DcslamError(f"unknown first-step prior {first_step_prior!r} (choose from "
+                              f"{', '.join(FIRST_STEP_PRIORS)})")
         self.odometry, self.mapper, self.frame_settings = odometry, mapper, frame_settings
         self.T_world_cam0, self.health = T_world_cam0, health
-        self.reference_depth_m = reference_depth_m
+        self.reference_depth_m, self.first_step_prior = reference_depth_m, first_step_prior
         self.reset()
 
     def reset(self) -> None:
@@ -113,6 +121,7 @@ class SLAM:
         self.odometry.reset()
         self.poses: list[torch.Tensor] = []
         self.reports: list[StepReport] = []
+        self._T_gt0: torch.Tensor | None = None  # frame 0's ground-truth pose, for the first-step prior
 
     def _fix_scale(self, frame: Frame) -> float:
         """The scene scale, fixed by the sequence's first frame (1 for a frame without valid depth)."""
@@ -151,15 +160,23 @@ class SLAM:
         """Estimated poses so far. Shape: (N, 4, 4)."""
         return torch.stack(self.poses)
 
-    def _prediction(self, dtype, device) -> torch.Tensor:
+    def _prediction(self, dtype, device, T_gt: torch.Tensor | None = None) -> torch.Tensor:
         if not self.poses:
             T0 = self.T_world_cam0 if self.T_world_cam0 is not None else torch.eye(4)
             return T0.to(dtype=dtype, device=device)
         last = self.poses[-1].detach()
         if len(self.poses) == 1:
-            return last
+            return last if self.first_step_prior == "none" else last @ self._first_motion(T_gt, dtype, device)
         prev = self.poses[-2].detach()
         return last @ torch.linalg.solve(prev, last)
+
+    def _first_motion(self, T_gt: torch.Tensor | None, dtype, device) -> torch.Tensor:
+        """Frame 0 → frame 1 motion of the ground-truth poses. Shape: T_gt (4, 4) -> (4, 4)."""
+        if T_gt is None or self._T_gt0 is None:
+            raise DcslamError(f"first_step_prior {self.first_step_prior!r} needs the ground-truth poses of frames 0 "
+                              "and 1 (T_gt)")
+        return torch.linalg.solve(self._T_gt0.to(dtype=dtype, device=device),
+                                  T_gt.detach().to(dtype=dtype, device=device))
 
     def step(self, depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None = None,
              T_gt: torch.Tensor | None = None, weight: torch.Tensor | None = None) -> StepReport:
@@ -192,8 +209,10 @@ class SLAM:
         measurements while the map fuses ``frame``; the report's sources and inliers are then its points. ``frame``
         alone fixes the scene scale and is fused. None: ``frame`` serves both."""
         start = time.perf_counter() if start is None else start
-        T_init = self._prediction(frame.vertex.dtype, frame.vertex.device)
+        T_init = self._prediction(frame.vertex.dtype, frame.vertex.device, T_gt)
         index = len(self.poses)
+        if index == 0 and T_gt is not None:
+            self._T_gt0 = T_gt.detach()
         scale = self._fix_scale(frame)
         if source_frame is not None and source_frame.shape != frame.shape:
             raise DcslamError(f"source frame of {source_frame.shape}, the frame of {frame.shape}: not the same camera")

@@ -15,7 +15,8 @@ def test_every_field_has_help():
 
 @pytest.mark.parametrize("kwargs", [dict(kernel="huber"), dict(gate_schedule="4,x"), dict(gate_schedule="0"),
                                     dict(source_voxel=-1), dict(local_map_frames=-1), dict(normal_search=-2),
-                                    dict(reference_depth=-1), dict(odometry="orb"), dict(coarse_iterations=-1)])
+                                    dict(reference_depth=-1), dict(odometry="orb"), dict(coarse_iterations=-1),
+                                    dict(first_step_prior="gps")])
 def test_bad_values_are_refused(kwargs):
     with pytest.raises(DcslamError):
         SlamSettings(**kwargs)

@@ -1,8 +1,10 @@
 import pytest
 import torch
 
+from dcslam.errors import DcslamError
 from dcslam.geometry.se3 import pose_error
 from dcslam.slam.config import SlamSettings, build_slam
+from dcslam.slam.pipeline import SLAM
 from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
 
 H, W = 64, 208
@@ -111,3 +113,38 @@ def test_slam_in_each_dtype_and_on_each_device(device, dtype, settings):
     assert slam.rejected == []
     dt, _ = pose_error(poses.double().cpu(), T)
     assert float(dt.max()) < 0.25
+
+
+def _open_road(frames: int, step: float):
+    """Exact depth of a road with two low kerbs along it and nothing across it: the along-road motion is barely
+    constrained (conditioning below hold_below), so each step keeps its prediction along the road."""
+    scene, K = StreetScene(0), kitti_K(H, W)
+    g = scene.ground_y
+    scene.boxes = torch.tensor([[-4.2, g - 0.15, -10, -4.0, g, 200], [4.0, g - 0.15, -10, 4.2, g, 200]],
+                               dtype=torch.float64)
+    T = street_trajectory(frames, step=step, sway=0.0, yaw_deg=0.0)
+    depth = torch.stack([scene.render(T[i], K, H, W) for i in range(frames)]).float()[:, None]
+    return depth, K, T
+
+
+def test_the_first_step_prior_carries_the_car_along_an_open_road():
+    """Without a velocity the first step starts at frame 0's pose and, on an open road, stays there: the car is
+    seen standing and every later step inherits that. Predicted from the drive's poses, it tracks."""
+    depth, K, T = _open_road(3, step=1.5)
+    errors = {}
+    for name in ("none", "drive-motion"):
+        slam = build_slam(SlamSettings(first_step_prior=name))
+        dt, _ = pose_error(slam.run(depth, K, T_gt=T.float()).double(), T)
+        errors[name] = dt
+    assert float(errors["none"][1]) > 1.4 and float(errors["none"][2]) > 2.9
+    assert float(errors["drive-motion"].max()) < 0.05
+
+
+def test_the_first_step_prior_needs_the_drive_poses():
+    depth, K, T = _open_road(2, step=1.5)
+    slam = build_slam(SlamSettings(first_step_prior="drive-motion"))
+    slam.step(depth[:1], K, T_gt=T[0].float())
+    with pytest.raises(DcslamError, match="ground-truth poses"):
+        slam.step(depth[1:2], K)
+    with pytest.raises(DcslamError, match="first-step prior"):
+        SLAM(slam.odometry, slam.mapper, first_step_prior="gps")
