@@ -239,3 +239,33 @@ def test_a_measured_row_reads_its_own_slam_folder_and_the_layer_s_depth(tmp_path
                         [16], ["drive_d"])
     row = next(r for r in table.rows if r["input"] == "exact, measured sources")
     assert row["vs_sparse"] == "one drive" and row["gap_closed"] == pytest.approx(0.25 / 0.1)
+
+
+def test_a_measured_row_over_training_seeds_reads_each_seed_s_slam_folder(tmp_path):
+    import json
+
+    from dcslam.io.drive import DriveFile
+    from dcslam.io.tum import write_tum
+    from dcslam.report.table_5_2 import SeedResults
+    from dcslam.report.table_beams import beams_results
+    from dcslam.workspace import Workspace
+    from tests.fixtures import depth as depth_fixtures
+
+    depth_fixtures.write_workspace(tmp_path, n=4, extra=True)
+    ws = Workspace(tmp_path)
+    with DriveFile(ws.drives / "drive_d.h5") as drive:
+        t, T = drive.timestamps, drive.poses
+    for k, run in enumerate(("nconv", "nconv-s1")):
+        (ws.runs / run).mkdir(parents=True)
+        (ws.runs / run / "config.json").write_text(json.dumps({"settings": {"seed": k}}))
+        for name, offset in ((f"{run}-sparse16", 0.4), (f"{run}-sparse16+measured", 0.1 + k / 10)):
+            (ws.slam / name).mkdir(parents=True)
+            moved = T.copy()
+            moved[:, 0, 3] += offset
+            write_tum(ws.slam / name / "drive_d.txt", t, moved)
+    results = beams_results(ws, [16], ["drive_d"])
+    row = results[(16, "nconv, measured sources")]
+    assert isinstance(row, SeedResults) and [m.seed for m in row.members] == [0, 1]
+    assert [m.layer for m in row.members] == ["nconv-sparse16", "nconv-s1-sparse16"]
+    assert [m.localisation for m in row.members] == [pytest.approx(0.1), pytest.approx(0.2)]
+    assert results[(16, "nconv")].members[1].localisation == pytest.approx(0.4)

@@ -183,3 +183,19 @@ def test_a_kitti_root_plans_no_row_that_needs_exact_depth(tmp_path):
     assert not [n for n in names if "exact" in n or "geometry" in n]
     assert "train-sparse-conv" in names and any(n.startswith("slam-nconv-sparse16+measured-") for n in names)
     assert any(n.startswith("slam-ip-basic-fast-sparse8+measured-") for n in names)
+
+
+def test_every_training_seed_has_its_measured_source_runs(tmp_path):
+    from dcslam.report.seeds import seed_run_name
+    from dcslam.stages.reproduce_plan import planned_stages
+    from dcslam.workspace import Workspace
+
+    stages = {s.name: s for s in planned_stages(Workspace(tmp_path / "ws"), PROFILES["smoke"], "beams", seeds=2)}
+    for run in ("sparse-conv-geometry", "nconv-pose"):
+        for k in range(2):
+            name = f"{seed_run_name(run, k)}-sparse16+measured"
+            stage = next(s for n, s in stages.items() if n.startswith(f"slam-{name}-"))
+            assert (stage.config.sources, stage.config.measured, stage.config.out.name) == ("measured", "sparse@16",
+                                                                                             name)
+            assert stage.seed == k
+    assert sum(n.startswith("slam-exact+measured-") for n in stages) == 2  # once per beam count, not per seed
