@@ -47,10 +47,12 @@ reproduce-table-5-2: setup
 reproduce-table-5-1: setup
 	$(DCSLAM) reproduce --table 5.1 $(REPRO_ARGS)
 
-# The beams experiment: every input (sparse, IP-Basic, SparseConvNet, nconv unmasked and masked by its
-# confidence, nconv-guided, nconv fine-tuned through the pose loss, annotated dense, exact) at 64/32/16/8 LiDAR
-# beams; table, per-drive CSV and a PNG of localisation against beam count under $(WORKSPACE)/results/
-# (table_beams.*, beams_localisation.png).
+# The beams experiment: every input (sparse, IP-Basic, SparseConvNet trained against annotated depth, against
+# exact depth and against exact depth with the geometry losses, nconv unmasked and masked by its confidence,
+# nconv-guided, nconv fine-tuned through the pose loss, annotated dense, exact) at 64/32/16/8 LiDAR beams, each
+# completion and exact depth also with measured ICP sources (the B-beam pixels against the completed map); table,
+# per-drive CSV and a PNG of localisation against beam count under $(WORKSPACE)/results/ (table_beams.*,
+# beams_localisation.png).
 reproduce-beams: setup
 	$(DCSLAM) reproduce --table beams $(REPRO_ARGS)
 

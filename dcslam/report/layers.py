@@ -22,9 +22,11 @@ __all__ = ["LayerRef", "TrajectoryPair", "drive_file", "find_layer", "load_pair"
            "slam_surface_settings", "slam_trajectory", "surface_frames", "surface_target"]
 
 #: The SLAM settings that make two trajectories comparable (``beams``: the sparse input's beam count, when known;
-#: ``confidence`` and ``min_confidence``: how a layer's confidence was used, ``none`` for a layer without one).
+#: ``confidence`` and ``min_confidence``: how a layer's confidence was used, ``none`` for a layer without one;
+#: ``sources`` and ``measured``: the ICP sources as the run used them, ``depth`` or ``measured`` and the measured
+#: drive depth kind, None in depth mode).
 RUN_SETTINGS = ("frames", "odometry", "mapper", "solver", "association", "voxel_size", "beams", "confidence",
-                "min_confidence")
+                "min_confidence", "sources", "measured")
 
 
 def score_layer_depth(ws: Workspace, layer: LayerRef, drives: list[str], interpolate: bool = True,
@@ -222,6 +224,10 @@ def slam_settings(ws: Workspace, layer: str, drive: str, root: Path | None = Non
     used = record.get("confidence")
     if isinstance(used, dict) and "mode" in used:    # what was done, not what was asked (a layer may have none)
         settings.update(confidence=used["mode"], min_confidence=used.get("min_confidence", 0.0))
+    # what ran, not what was asked (``measured`` defaults to the layer's input); a summary from before the option
+    # records none: its run aligned the depth's own points
+    sources = record.get("sources") if isinstance(record.get("sources"), dict) else {"mode": "depth"}
+    settings.update(sources=sources.get("mode", "depth"), measured=sources.get("kind"))
     out = {k: settings[k] for k in RUN_SETTINGS if k in settings}
     out["suspect"] = run_verdict(record, str(path)).suspect
     return out

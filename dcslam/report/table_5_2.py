@@ -359,9 +359,10 @@ def _depth_per_drive(per_frame: dict[str, list]) -> dict[str, DepthErrors]:
 def score_layer(ws: Workspace, label: str, layer_name: str, drives: list[str], devkit_exact: bool = False,
                 max_time_diff: float = EVO_MAX_TIME_DIFF_S, failure_threshold: float = FAILURE_THRESHOLD,
                 slam_root: Path | None = None, depth: bool = True,
-                surface_frames: int = SURFACE_FRAMES) -> LayerResult:
-    """Depth (unless not ``depth``) and trajectory scores of a layer over ``drives``, its SLAM outputs under
-    ``slam_root`` (default ``slam/``); missing inputs are recorded, bad ones fail. With the depth errors come the
+                surface_frames: int = SURFACE_FRAMES, slam_name: str | None = None) -> LayerResult:
+    """Depth (unless not ``depth``) and trajectory scores of a layer over ``drives``, its SLAM outputs those of
+    ``<slam_root>/<slam_name>/`` (default ``slam/<layer_name>/``; another name: SLAM runs of the layer made another
+    way, e.g. with measured ICP sources); missing inputs are recorded, bad ones fail. With the depth errors come the
     surface errors of ``surface_frames`` evenly spaced frames of each drive
     (:func:`dcslam.report.layers.surface_frames`; 0: none) against the exact depth when every drive has it, else
     the annotated one (:func:`dcslam.report.layers.surface_target`)."""
@@ -378,12 +379,13 @@ def score_layer(ws: Workspace, label: str, layer_name: str, drives: list[str], d
             if surface_frames:
                 _score_surface(ws, result, layer, drives, surface_frames)
     root = ws.slam if slam_root is None else slam_root
-    absent = [d for d in drives if not (root / layer_name / f"{d}.txt").exists()]
+    slam_name = layer_name if slam_name is None else slam_name
+    absent = [d for d in drives if not (root / slam_name / f"{d}.txt").exists()]
     if absent:
-        result.missing.append(f"{root.name}/{layer_name}/ for {len(absent)} test drive(s) (dcslam slam)")
+        result.missing.append(f"{root.name}/{slam_name}/ for {len(absent)} test drive(s) (dcslam slam)")
     else:
-        result.pairs = score_layer_trajectories(ws, layer_name, drives, max_time_diff, root)
-        result.settings = {d: slam_settings(ws, layer_name, d, root) for d in drives}
+        result.pairs = score_layer_trajectories(ws, slam_name, drives, max_time_diff, root)
+        result.settings = {d: slam_settings(ws, slam_name, d, root) for d in drives}
     return result
 
 

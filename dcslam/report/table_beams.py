@@ -1,9 +1,11 @@
 """The beams experiment's table: depth and localisation of every input at every LiDAR beam count.
 
 For each beam count B and each input made from the B-beam sparse depth — the sparse depth itself, IP-Basic's
-completion, SparseConvNet, nconv unmasked and masked by its confidence, nconv-guided, nconv fine-tuned through the
-pose loss (its confidence as ICP weights) — and for the inputs that do not
-depend on B (annotated dense depth, the generator's exact depth): MAE / RMSE against the annotated depth and
+completion, SparseConvNet (trained against the annotated depth, against the exact depth, and against the exact
+depth with the geometry losses), nconv unmasked and masked by its confidence, nconv-guided, nconv fine-tuned through
+the pose loss (its confidence as ICP weights), each completion again with measured ICP sources (the B-beam pixels
+aligned against the map fused from it) and exact depth with those sources (the ceiling) — and for the inputs that do
+not depend on B (annotated dense depth, the generator's exact depth): MAE / RMSE against the annotated depth and
 localisation (the thesis's metric, ATE, RPE) as the mean over the test drives ± the half-width of the 95 % t-interval
 (:mod:`dcslam.report.spread`), the median, the failures, whether the row differs from the sparse input of its beam
 count beyond the spread (paired by drive), and the share of the gap from that sparse input to exact depth that it
@@ -13,7 +15,8 @@ settings are refused: a comparison across them would mean nothing.
 Layer names (one function, :func:`layer_name`, used by the pipeline that makes them and by this table):
 ``sparse`` / ``sparse@B`` (the drive files' depth), ``ip-basic-fast-sparseB``, ``<run>-sparseB`` (a trained
 completer's predictions of the B-beam input), ``nconv-sparseB+masked`` (those predictions filtered by confidence),
-``nconv-pose-sparseB`` (the pose-loss run's), ``dense``, ``exact``.
+``nconv-pose-sparseB`` (the pose-loss run's), ``dense``, ``exact``; the SLAM runs of a layer under ``slam/<layer>/``,
+with measured sources under ``slam/<layer>+measured/`` (exact's ``slam/exact+measured-sparseB/``, :func:`slam_name`).
 """
 from __future__ import annotations
 
@@ -36,26 +39,45 @@ MASKED = "masked"  # name of the confidence filter's output (``<run>-sparseB+mas
 @dataclass(frozen=True)
 class BeamsInput:
     """One input of the table: its label, the completer behind it (``None``: the sparse depth itself; ``""``: none,
-    a layer of the drive files that does not depend on the beam count), whether it is masked by confidence, and the
-    label of the input it was fine-tuned from (``tuned_from``; its findings line compares the two)."""
+    a layer of the drive files), whether it is masked by confidence, the label of the input it was fine-tuned from
+    (``tuned_from``; its findings line compares the two), the ICP sources of its SLAM runs (``sources``:
+    :data:`dcslam.stages.slam.SOURCES`; ``measured``: the B-beam sparse depth's pixels against the map fused from the
+    layer) and whether it needs the generator's exact depth (``needs_exact``: the exact layer, or a completer
+    trained against it)."""
 
     label: str
     completer: str | None
     masked: bool = False
     tuned_from: str | None = None
+    sources: str = "depth"
+    needs_exact: bool = False
 
     @property
     def per_beam(self) -> bool:
-        return self.completer != ""
+        """A row per beam count: a layer made from the B-beam input, or SLAM whose sources are the B-beam pixels."""
+        return self.completer != "" or self.sources == MEASURED
 
 
-INPUTS = (BeamsInput("sparse", None), BeamsInput("IP-Basic", IP_BASIC_RUN),
-          BeamsInput("SparseConvNet", "sparse-conv"), BeamsInput("nconv", "nconv"),
-          BeamsInput("nconv masked", "nconv", masked=True), BeamsInput("nconv-guided", "nconv-guided"),
-          BeamsInput("nconv pose", "nconv-pose", tuned_from="nconv"),
-          BeamsInput("annotated dense", ""), BeamsInput("exact", ""))
+MEASURED = "measured"
+MEASURED_LABEL = ", measured sources"  # the label suffix of a measured-source row
+_DEPTH_INPUTS = (BeamsInput("sparse", None), BeamsInput("IP-Basic", IP_BASIC_RUN),
+                 BeamsInput("SparseConvNet", "sparse-conv"),
+                 BeamsInput("SparseConvNet → exact", "sparse-conv-exact", needs_exact=True),
+                 BeamsInput("SparseConvNet geometry", "sparse-conv-geometry", needs_exact=True),
+                 BeamsInput("nconv", "nconv"), BeamsInput("nconv masked", "nconv", masked=True),
+                 BeamsInput("nconv-guided", "nconv-guided"), BeamsInput("nconv pose", "nconv-pose", tuned_from="nconv"))
+# measured sources for every completer but the masked one (its map is nconv's, less the pixels it drops) and for
+# exact, the ceiling; the sparse input's measured sources are its own points, the same run as its depth row
+_MEASURED_INPUTS = tuple(
+    BeamsInput(i.label + MEASURED_LABEL, i.completer, tuned_from=i.tuned_from and i.tuned_from + MEASURED_LABEL,
+               sources=MEASURED, needs_exact=i.needs_exact)
+    for i in _DEPTH_INPUTS if i.completer is not None and not i.masked)
+INPUTS = (*_DEPTH_INPUTS, *_MEASURED_INPUTS, BeamsInput("exact" + MEASURED_LABEL, "", sources=MEASURED,
+                                                        needs_exact=True),
+          BeamsInput("annotated dense", ""), BeamsInput("exact", "", needs_exact=True))
 TRAINED = tuple(dict.fromkeys(i.completer for i in INPUTS if i.completer not in (None, "", IP_BASIC_RUN)))
 """Run names of the learned completers the table expects (``runs/<name>/``)."""
+INPUT_OF = {i.label: i for i in INPUTS}
 
 
 def sparse_kind(beams: int) -> str:
@@ -69,15 +91,25 @@ def prediction_name(completer: str, beams: int) -> str:
 
 
 def layer_name(item: BeamsInput, beams: int | None, run: str | None = None) -> str:
-    """The layer behind ``item`` at ``beams`` beams (``beams`` is ignored for the beam-independent inputs); ``run``:
-    the trained completer's run when it is not ``item.completer`` itself (another training seed's,
+    """The depth layer behind ``item`` at ``beams`` beams (``beams`` is ignored for the beam-independent layers);
+    ``run``: the trained completer's run when it is not ``item.completer`` itself (another training seed's,
     :func:`dcslam.report.seeds.seed_run_name`)."""
-    if not item.per_beam:
+    if item.completer == "":
         return "dense" if item.label == "annotated dense" else "exact"
     if item.completer is None:
         return sparse_kind(beams)
     name = prediction_name(run or item.completer, beams)
     return f"{name}+{MASKED}" if item.masked else name
+
+
+def slam_name(item: BeamsInput, beams: int | None, run: str | None = None) -> str:
+    """The folder of ``item``'s SLAM runs under ``slam/``: its layer's name in depth mode; with measured sources
+    ``<layer>+measured`` (exact: ``exact+measured-sparseB``, one per beam count), apart from the depth-mode runs of
+    the same layer."""
+    layer = layer_name(item, beams, run)
+    if item.sources != MEASURED:
+        return layer
+    return f"{layer}+{MEASURED}-sparse{beams}" if item.completer == "" else f"{layer}+{MEASURED}"
 
 
 def seed_runs(ws: Workspace, completer: str) -> list[tuple[str, int | None]]:
@@ -110,15 +142,22 @@ def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_d
     """Scores of every (beam count, input): ``{(beams, label): result}``, beam counts from the largest; the
     beam-independent inputs last, under ``(None, label)``. A trained completer with runs of several seeds
     (:func:`seed_runs`) gives a :class:`dcslam.report.table_5_2.SeedResults` over them, other inputs a
-    :class:`LayerResult`. Missing inputs are recorded in each result (see
-    :func:`dcslam.report.table_5_2.score_layer`). ``jobs`` > 1 scores the layers in that many worker processes."""
+    :class:`LayerResult`: the depth errors of the input's layer, the localisation of its SLAM runs
+    (:func:`slam_name`). Missing inputs are recorded in each result (see
+    :func:`dcslam.report.table_5_2.score_layer`); the inputs that need exact depth (:attr:`BeamsInput.needs_exact`)
+    are left out when a test drive has none (real KITTI). ``jobs`` > 1 scores the layers in that many worker
+    processes."""
+    from dcslam.report.layers import surface_target
     from dcslam.report.table_5_2 import SeedResults
 
-    keys = [(b, i) for b in sorted(beams, reverse=True) for i in INPUTS if i.per_beam]
-    keys += [(None, i) for i in INPUTS if not i.per_beam]
+    exact = surface_target(ws, drives) == "exact"
+    inputs = [i for i in INPUTS if exact or not i.needs_exact]
+    keys = [(b, i) for b in sorted(beams, reverse=True) for i in inputs if i.per_beam]
+    keys += [(None, i) for i in inputs if not i.per_beam]
     runs = {c: seed_runs(ws, c) for c in TRAINED}
     members = {key: runs[key[1].completer] if key[1].completer in TRAINED else [(None, None)] for key in keys}
-    work = [(ws, item.label, layer_name(item, b, run), drives, max_time_diff, failure_threshold)
+    work = [(ws, item.label, layer_name(item, b, run), drives, max_time_diff, failure_threshold,
+             slam_name(item, b, run))
             for b, item in keys for run, _ in members[(b, item)]]
     if jobs <= 1:
         scored = [_score(*args) for args in work]
@@ -137,26 +176,32 @@ def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_d
     return results
 
 
-def _score(ws, label, layer, drives, max_time_diff, failure_threshold) -> LayerResult:
-    result = score_layer(ws, label, layer, drives, max_time_diff=max_time_diff, failure_threshold=failure_threshold)
+def _score(ws, label, layer, drives, max_time_diff, failure_threshold, slam) -> LayerResult:
+    result = score_layer(ws, label, layer, drives, max_time_diff=max_time_diff, failure_threshold=failure_threshold,
+                         slam_name=slam)
     _ = result.scores  # computed here, in the worker
     return result
 
 
 CONFIDENCE_SETTINGS = ("confidence", "min_confidence")
+MODE_SETTINGS = ("sources", "measured")  # checked per row against its input's mode (:func:`_check_mode`)
 
 
 def common_settings(results: dict[tuple[int | None, str], LayerResult]) -> dict:
-    """The SLAM settings every row was made with; a :class:`DcslamError` naming two rows that differ (and how).
+    """The SLAM settings every row was made with; a :class:`DcslamError` naming two rows that differ (and how), or
+    a row whose ICP sources are not those of its input (:attr:`BeamsInput.sources`; a measured-source row's
+    measured kind must be the sparse depth of its beam count, which differs from row to row as ``beams`` does).
 
     How a confidence was used (``confidence``, ``min_confidence``) is compared only among the rows whose layer has a
     confidence (mode other than ``none``): a layer without one (sparse, IP-Basic, SparseConvNet) cannot differ in it."""
     firsts: dict[str, tuple] = {}  # "base" / "confidence" → (settings, key) of the first row of that kind
+    modes = set()
     for key, result in results.items():
         if not result.pairs:
             continue
         settings = {k: v for k, v in result.run_settings().items() if k != "beams"}
-        parts = {"base": {k: v for k, v in settings.items() if k not in CONFIDENCE_SETTINGS}}
+        modes.add(_check_mode(key, result, settings))
+        parts = {"base": {k: v for k, v in settings.items() if k not in (*CONFIDENCE_SETTINGS, *MODE_SETTINGS)}}
         if settings.get("confidence", "none") not in (None, "none"):
             parts["confidence"] = {k: settings.get(k) for k in CONFIDENCE_SETTINGS}
         for part, own in parts.items():
@@ -174,7 +219,29 @@ def common_settings(results: dict[tuple[int | None, str], LayerResult]) -> dict:
     common = dict(firsts["base"][0]) if "base" in firsts else {}
     if "confidence" in firsts:
         common.update({f"{k} (layers with a confidence)": v for k, v in firsts["confidence"][0].items()})
+    if modes:
+        common["sources"] = " / ".join(m for m in ("depth", MEASURED) if m in modes)
     return common
+
+
+def _check_mode(key: tuple[int | None, str], result: LayerResult, settings: dict) -> str:
+    """The ICP sources of a row's SLAM runs (``depth`` for a summary that records none), refused unless they are
+    those of its input and, measured, the sparse depth of its beam count."""
+    item = INPUT_OF.get(key[1])
+    want = item.sources if item is not None else "depth"
+    ran = settings.get("sources") or "depth"
+    if ran != want:
+        raise DcslamError(
+            f"the beams table's row {_row_name(key)} ({result.layer}) was made with sources={ran}, its rows with "
+            f"sources={want}; rerun `dcslam reproduce --table beams` (or `dcslam slam --sources {want} --force` on "
+            "that row's layer)")
+    kind = settings.get("measured")
+    if want == MEASURED and key[0] is not None and kind is not None and kind != sparse_kind(key[0]):
+        raise DcslamError(
+            f"the beams table's row {_row_name(key)} ({result.layer}) aligned measured={kind}, not the "
+            f"{key[0]}-beam sparse depth ({sparse_kind(key[0])}); rerun `dcslam reproduce --table beams` (or "
+            f"`dcslam slam --sources measured --measured {sparse_kind(key[0])} --force` on that row's layer)")
+    return ran
 
 
 def _row_name(key: tuple[int | None, str]) -> str:
@@ -226,7 +293,8 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
     seeds = seeded(list(results.values()))
     table = Table(f"The beams experiment — {len(drives)} test drive(s) ({', '.join(drives)})",
                   with_seed_columns(COLUMNS, seeds))
-    table.csv_columns = [Column(k, k) for k in ("beams", "input", "layer", "drives", *(("seeds",) if seeds else ()),
+    table.csv_columns = [Column(k, k) for k in ("beams", "input", "layer", "sources", "drives",
+                                                *(("seeds",) if seeds else ()),
                                                 "failures", "vs_sparse", "gap_closed")] + [
         Column(f"{k}{s}", "") for k in FIGURES for s in csv_suffixes(seeds)] + [
         Column("missing", "")]
@@ -236,7 +304,9 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
         b, label = key
         sparse = results.get((b if b is not None else top, "sparse"))
         row = result.row()
-        row.update(beams=b if b is not None else "any", input=label, vs_sparse=_verdict(result, sparse))
+        item = INPUT_OF.get(label)
+        row.update(beams=b if b is not None else "any", input=label, vs_sparse=_verdict(result, sparse),
+                   sources=item.sources if item is not None else "depth")
         gap = None if result is exact else _gap_closed(result, sparse, exact)
         row["gap_closed"] = gap
         row["gap_closed_text"] = None if gap is None else f"{100 * gap:.0f} %"
@@ -251,6 +321,11 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
         f"vs sparse: paired t-interval (95 %) of the per-drive differences from the sparse input of the same beam "
         f"count (rows 'any': from {top}-beam sparse); better / worse beyond the spread, or within it",
         GAP_NOTE,
+        ("measured sources: SLAM whose ICP aligns only the B-beam sparse depth's measured pixels against the map "
+         "fused from the row's layer (`dcslam slam --sources measured`; runs under slam/<layer>+measured/, exact's "
+         "under slam/exact+measured-sparseB/); its depth figures are the layer's, as in its depth-mode row"
+         if any(INPUT_OF.get(k[1]) is not None and INPUT_OF[k[1]].sources == MEASURED for k in results) else ""),
+        left_out_note(results),
         "MAE / RMSE: against the annotated depth, KITTI devkit with dcslam's two departures (predictions below 0.1 m "
         "are holes; pixels the devkit cannot interpolate are left out)",
         surface_note(list(results.values())),
@@ -268,6 +343,15 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
         *findings(results, beams)]
     table.notes = [n for n in table.notes if n]
     return table
+
+
+def left_out_note(results: dict[tuple[int | None, str], LayerResult]) -> str:
+    """One line naming the inputs that need exact depth when the results hold none of them (drives without it,
+    real KITTI); empty otherwise."""
+    absent = [i.label for i in INPUTS if i.needs_exact and not any(k[1] == i.label for k in results)]
+    if not results or len(absent) < sum(i.needs_exact for i in INPUTS):
+        return ""
+    return f"left out: {', '.join(absent)} (they need the generator's exact depth, which the test drives lack)"
 
 
 def findings(results: dict[tuple[int | None, str], LayerResult], beams: list[int]) -> list[str]:
@@ -350,14 +434,14 @@ def plot_localisation_vs_beams(path: Path | str, results: dict[tuple[int | None,
         mean = [s.mean for _, s in points]
         low = [0.0 if s.ci_low is None else s.mean - max(s.ci_low, 0.05 * s.mean) for _, s in points]
         high = [0.0 if s.ci_high is None else s.ci_high - s.mean for _, s in points]
-        ax.errorbar(x, mean, yerr=[low, high], marker="os^vDPX"[i % 7], color=f"C{i}", capsize=3, lw=1.4,
-                    label=item.label)
+        ax.errorbar(x, mean, yerr=[low, high], marker="os^vDPX"[i % 7], color=f"C{i % 10}", capsize=3, lw=1.4,
+                    ls=":" if item.sources == MEASURED else "-", label=item.label)
     for j, item in enumerate(i for i in INPUTS if not i.per_beam):
         result = results.get((None, item.label))
         if result is None or not result.pairs:
             continue
         s = result.localisation_spread()
-        colour = f"C{len(per_beam) + j}"
+        colour = f"C{(len(per_beam) + j) % 10}"
         ax.axhline(s.mean, color=colour, ls="--", lw=1.2, label=f"{item.label} (any beam count)")
         if s.ci_low is not None:
             ax.axhspan(max(s.ci_low, 0.05 * s.mean), s.ci_high, color=colour, alpha=0.12)

@@ -5,9 +5,11 @@ The experiment composes the other stages as :mod:`dcslam.stages.reproduce` does 
 finished stages, same ``jobs``)::
 
     synth (unless a KITTI root is given) → prepare-kitti --beams 32,16,8 (plus depth/exact on generated drives)
-    → train SparseConvNet, nconv, nconv-guided, then nconv-pose (nconv fine-tuned through the pose loss, its
+    → train SparseConvNet (against annotated depth, exact depth, exact depth + geometry losses; the last two only on
+      generated drives), nconv, nconv-guided, then nconv-pose (nconv fine-tuned through the pose loss, its
       confidence as ICP weights) → predict each (and IP-Basic) at every beam count
-    → filter nconv's predictions by confidence ("masked") → slam over every (input, beam count, test drive)
+    → filter nconv's predictions by confidence ("masked") → slam over every (input, beam count, test drive), the
+      completions and exact depth again with measured ICP sources (the B-beam pixels against the completed map)
     → score: the beams table, its per-drive CSV, the rank correlation of its depth metrics with localisation
       and a plot of localisation against beam count
 
@@ -24,8 +26,8 @@ from pathlib import Path
 from dcslam.errors import DcslamError
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
 from dcslam.report.table_5_2 import FAILURE_THRESHOLD
-from dcslam.report.table_beams import (FULL_BEAMS, INPUTS, IP_BASIC_RUN, TRAINED, layer_name,
-                                       prediction_name, sparse_kind)
+from dcslam.report.table_beams import (FULL_BEAMS, INPUTS, IP_BASIC_RUN, MEASURED, TRAINED, layer_name,
+                                       prediction_name, slam_name, sparse_kind)
 from dcslam.stages import filter as filter_stage
 from dcslam.stages import predict, prepare, slam, train
 from dcslam.stages.config import option
@@ -41,7 +43,7 @@ class BeamsProfile:
     name: str
     drives: int                          # generated drives
     frames: int                          # raw frames per generated drive (depth exists for frames 5 … N−6)
-    train: Mapping[str, Mapping]         # run name (sparse-conv, nconv, nconv-guided, nconv-pose) → `dcslam train`
+    train: Mapping[str, Mapping]         # run name (TRAINED: sparse-conv…, nconv…) → `dcslam train`
                                          # options (checked against TrainStageConfig's fields when the profile is
                                          # made); a run with ``init`` is trained after the run it starts from
     slam_frames: int                     # frames of each test drive fed to SLAM
@@ -90,9 +92,10 @@ class BeamsProfile:
             options = options | {"init": seed_run_name(options["init"], k)}
         return (train_options(model=run) | options).build(name=seed_run_name(run, k), seed=seed + k)
 
-    def stages_of_training(self) -> list[list[str]]:
-        """The runs in the order they can be trained: those from scratch, then those fine-tuned from them."""
-        return training_rounds({run: self.train[run] for run in TRAINED})
+    def stages_of_training(self, exact: bool = True) -> list[list[str]]:
+        """The runs in the order they can be trained: those from scratch, then those fine-tuned from them; without
+        ``exact`` (drives without the generator's exact depth) not the runs trained against it."""
+        return training_rounds({run: self.train[run] for run in TRAINED if exact or run not in _NEEDS_EXACT})
 
 
 _QUICK = {"epochs": 2, "max_frames": 31, "scale": 0.5}  # as the Table 5.2 quick profile
@@ -106,6 +109,18 @@ _CORRECT = {"correct_fill": True, "input_mix": ["sparse", "sparse", "sparse", "s
 # nconv fine-tuned through the pose loss: the network's confidence is each pixel's ICP weight, so this
 # loss is the one that can teach the confidence which pixels ICP should trust
 _POSE = {"model": "nconv", "loss": "pose", "init": "nconv"}
+# SparseConvNet against the exact depth (the target's effect alone), and with the geometry losses added, each
+# weighted to the order of MSE + 30 x L1 at the start of training (docs/training.md, "Geometry losses")
+_EXACT = {"model": "sparse-conv", "target": "exact"}
+_GEOMETRY = {**_EXACT, "normal_weight": 100.0, "plane_weight": 7.0, "edge_weight": 10.0}
+_RECIPES = {"sparse-conv-exact": _EXACT, "sparse-conv-geometry": _GEOMETRY}
+_NEEDS_EXACT = frozenset(i.completer for i in INPUTS if i.needs_exact and i.completer in TRAINED)
+
+
+def _corrected(options: Mapping) -> dict:
+    """``options`` (a fill-correcting recipe's) for every SparseConvNet run: the plain one, then the exact and
+    geometry ones (:data:`_RECIPES`) with their own target and losses."""
+    return {"sparse-conv": dict(options), **{run: {**options, **recipe} for run, recipe in _RECIPES.items()}}
 # its scale in the quick profile, as Table 5.2's quick pose runs: 1 epoch of 16 frames per drive (12 windows of 4),
 # the last 2 LM iterations with gradient, at most 2000 sources per frame
 _POSE_QUICK = {"epochs": 1, "max_frames": 16, "scale": 0.5, "lr": 1e-3, "pose_grad_iterations": 2,
@@ -113,30 +128,33 @@ _POSE_QUICK = {"epochs": 1, "max_frames": 16, "scale": 0.5, "lr": 1e-3, "pose_gr
 PROFILES = {
     "quick": BeamsProfile(
         name="quick", drives=8, frames=42, split=(3, 1, 4), slam_frames=30,
-        train={"sparse-conv": {**_QUICK, **_CORRECT}, "nconv": {**_QUICK, **_CORRECT},
+        train={**_corrected({**_QUICK, **_CORRECT}), "nconv": {**_QUICK, **_CORRECT},
                "nconv-guided": {**_QUICK, **_CORRECT}, "nconv-pose": {**_POSE, **_POSE_QUICK}},
         description="8 generated drives of 42 frames (3 train / 1 val / 4 test, the drives of the Table 5.2 quick "
-                    "profile), 64/32/16/8 beams, SparseConvNet, nconv and nconv-guided each correcting a "
+                    "profile), 64/32/16/8 beams, SparseConvNet (against the annotated depth, the exact depth, and the "
+                    "exact depth with the geometry losses), nconv and nconv-guided each correcting a "
                     "nearest-neighbour fill of its input, trained 2 epochs at half resolution on the 64-beam input "
                     "(half the frames) and the 32/16/8-beam inputs, nconv then fine-tuned 1 epoch through the pose "
-                    "loss, SLAM on the first 30 frames of each test drive"),
+                    "loss, SLAM on the first 30 frames of each test drive, with the depth's own and with the "
+                    "measured ICP sources"),
     "smoke": BeamsProfile(
         name="smoke", drives=3, frames=12, beams=(64, 16), slam_frames=2,
         train={run: {"epochs": 1, "max_frames": 2, "scale": 0.25,
-                     **(_POSE if run == "nconv-pose" else {"correct_fill": True})} for run in TRAINED},
+                     **(_POSE if run == "nconv-pose" else {"correct_fill": True, **_RECIPES.get(run, {})})}
+               for run in TRAINED},
         slam={"iterations": 3, "voxel_size": 0.2},
         description="a check that every stage runs (3 drives of 12 frames, 64 and 16 beams, tiny training, SLAM "
                     "over 2 frames): numbers mean nothing"),
     "thesis": BeamsProfile(
         name="thesis", drives=24, frames=211, slam_frames=30,
-        train={"sparse-conv": {"epochs": 5, "max_frames": 200, **_CORRECT},
+        train={**_corrected({"epochs": 5, "max_frames": 200, **_CORRECT}),
                "nconv": {"epochs": 5, "max_frames": 200, **_CORRECT},
                "nconv-guided": {"epochs": 5, "max_frames": 200, **_CORRECT},
                "nconv-pose": {**_POSE, "epochs": 1, "max_frames": 200}},
         description="the thesis's scale: 15 / 4 / 5 drives of 200 frames, full resolution (use a GPU)"),
     "study": BeamsProfile(
         name="study", drives=14, frames=42, split=(5, 1, 8), slam_frames=30, beams=(64, 16, 8), seeds=3,
-        train={"sparse-conv": {**_QUICK, **_CORRECT}, "nconv": {**_QUICK, **_CORRECT},
+        train={**_corrected({**_QUICK, **_CORRECT}), "nconv": {**_QUICK, **_CORRECT},
                "nconv-guided": {**_QUICK, **_CORRECT}, "nconv-pose": {**_POSE, **_POSE_QUICK}},
         description="the quick profile's training at a scale whose rows can be told apart: 14 generated drives of "
                     "42 frames (5 train / 1 val / 8 test, the drives of the Table 5.2 study profile), 64/16/8 "
@@ -208,7 +226,12 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
     test, learn = make_drives(pipe, drives=profile.drives, frames=profile.frames, split=profile.split,
                               kitti_root=kitti_root, seed=seed, jobs=jobs,
                               beams=tuple(b for b in profile.beams if b != FULL_BEAMS))
-    for runs in profile.stages_of_training():
+    exact = kitti_root is None if pipe.planning else _have_exact(test + learn)
+    if not exact and not pipe.planning:
+        pipe.log("[note] the drives have no exact depth (real KITTI): the rows that need it (exact, "
+                 f"{', '.join(sorted(_NEEDS_EXACT))}) are left out")
+    made_runs = [run for run in TRAINED if exact or run not in _NEEDS_EXACT]
+    for runs in profile.stages_of_training(exact):
         stages = []
         for k in range(seeds):
             for run in runs:
@@ -219,7 +242,7 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
                                     inputs=lambda c=config: learn + _init_model(ws, {"init": c.init}),
                                     seed=seed + k))
         pipe.run_all(stages, jobs)
-    completers = [(IP_BASIC_RUN, None)] + [(seed_run_name(run, k), seed + k) for k in range(seeds) for run in TRAINED]
+    completers = [(IP_BASIC_RUN, None)] + [(seed_run_name(run, k), seed + k) for k in range(seeds) for run in made_runs]
     predictions = []
     for b in profile.beams:
         for completer, run_seed in completers:
@@ -247,26 +270,27 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
     pipe.run_all(masked, jobs)
 
     slam_stages, slam_outputs = [], []
-    exact = kitti_root is None if pipe.planning else _have_exact(test)
-    if not exact and not pipe.planning:
-        pipe.log("[note] the test drives have no exact depth (real KITTI): the exact row stays empty")
     for item in INPUTS:
-        if item.label == "exact" and not exact:
+        if item.needs_exact and not exact:
             continue
         trained = item.completer in TRAINED
         for k in range(seeds if trained else 1):
             run = seed_run_name(item.completer, k) if trained else None
             for b in (profile.beams if item.per_beam else [None]):
-                layer = layer_name(item, b, run)
+                layer, name = layer_name(item, b, run), slam_name(item, b, run)
                 folder = None if item.completer in (None, "") else (ws.filtered if item.masked else ws.predictions)
                 reference = layer if folder is None else f"{'filtered' if item.masked else 'predicted'}/{layer}"
+                # measured: the B-beam sparse pixels are the ICP sources, named (not left to the layer's record)
+                # so that exact, which has no beam count of its own, takes each one
+                mode = ({"sources": MEASURED, "measured": sparse_kind(b), "out": ws.slam / name}
+                        if item.sources == MEASURED else {})
                 for drive in test:
-                    made = [ws.slam / layer / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt")]
+                    made = [ws.slam / name / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt")]
                     slam_outputs += made
                     config = slam.SlamStageConfig(**{"odometry": "icp", **profile.slam}, depth=reference,
-                                                  drive=[drive.stem], frames=profile.slam_frames)
+                                                  drive=[drive.stem], frames=profile.slam_frames, **mode)
                     source = [] if folder is None else [folder / layer / drive.name]
-                    slam_stages.append(Stage(f"slam-{layer}-{drive.stem}", slam.run, config,
+                    slam_stages.append(Stage(f"slam-{name}-{drive.stem}", slam.run, config,
                                              outputs=lambda m=made: m, inputs=lambda d=drive, s=source: [d, *s],
                                              seed=seed + k if trained else None))
     pipe.run_all(slam_stages, jobs)

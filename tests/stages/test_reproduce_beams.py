@@ -41,15 +41,35 @@ def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(cli, tmp_
     assert "The beams experiment" in result.stdout and "depth metrics against localisation" in result.stdout
     with open(results / "table_beams.csv") as f:
         rows = list(csv.DictReader(f))
-    assert [(r["beams"], r["input"]) for r in rows][:7] == [("64", label) for label in (
-        "sparse", "IP-Basic", "SparseConvNet", "nconv", "nconv masked", "nconv-guided", "nconv pose")]
-    assert len(rows) == 2 * 7 + 2 and not any(r["missing"] for r in rows)
+    depth_rows = ("sparse", "IP-Basic", "SparseConvNet", "SparseConvNet → exact", "SparseConvNet geometry", "nconv",
+                  "nconv masked", "nconv-guided", "nconv pose")
+    measured_rows = tuple(f"{label}, measured sources" for label in (
+        "IP-Basic", "SparseConvNet", "SparseConvNet → exact", "SparseConvNet geometry", "nconv", "nconv-guided",
+        "nconv pose", "exact"))
+    assert [(r["beams"], r["input"]) for r in rows][:17] == [("64", label) for label in depth_rows + measured_rows]
+    assert len(rows) == 2 * 17 + 2 and not any(r["missing"] for r in rows)
+    assert {r["sources"] for r in rows if r["input"] in measured_rows} == {"measured"}
     assert all(r["drives"] == "1" and r["localisation"] for r in rows)
     for layer in ("sparse", "sparse@16", "nconv-sparse16+masked", "nconv-guided-sparse64", "nconv-pose-sparse16",
-                  "exact", "dense"):
+                  "exact", "dense", "sparse-conv-exact-sparse16", "sparse-conv-geometry-sparse64",
+                  "ip-basic-fast-sparse16+measured", "nconv-pose-sparse64+measured", "exact+measured-sparse16",
+                  "exact+measured-sparse64"):
         assert (tmp_path / "slam" / layer / "drive_d.txt").exists(), layer
     with open(results / "table_beams_per_drive.csv") as f:
-        assert len(list(csv.DictReader(f))) == 16  # one test drive
+        assert len(list(csv.DictReader(f))) == 2 * 17 + 2  # one test drive
+    # the measured-source runs align the B-beam pixels against the map of their layer
+    for name, depth, kind in (("exact+measured-sparse16", "exact", "sparse@16"),
+                              ("nconv-sparse16+measured", "predicted/nconv-sparse16", "sparse@16"),
+                              ("ip-basic-fast-sparse64+measured", "predicted/ip-basic-fast-sparse64", "sparse")):
+        record = json.loads((tmp_path / "slam" / name / "drive_d.json").read_text())
+        assert record["sources"] == {"mode": "measured", "kind": kind} and record["settings"]["depth"] == depth
+    assert json.loads((tmp_path / "slam" / "nconv-sparse16" / "drive_d.json").read_text())["sources"] == {
+        "mode": "depth"}
+    geometry = json.loads((tmp_path / "runs" / "sparse-conv-geometry" / "config.json").read_text())["settings"]
+    assert (geometry["model"], geometry["target"], geometry["normal_weight"], geometry["plane_weight"],
+            geometry["edge_weight"]) == ("sparse-conv", "exact", 100.0, 7.0, 10.0)
+    exact = json.loads((tmp_path / "runs" / "sparse-conv-exact" / "config.json").read_text())["settings"]
+    assert (exact["model"], exact["target"], exact["normal_weight"]) == ("sparse-conv", "exact", 0.0)
     masked = json.loads((tmp_path / "filtered" / "nconv-sparse16+masked" / "config.json").read_text())
     keep = PROFILES["smoke"].confidence_keep
     assert masked["settings"]["filters"] == [{"filter": "confidence", "min": 0.0, "keep": keep}]
@@ -74,7 +94,7 @@ def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(cli, tmp_
 
     again = cli(*ARGS, "--workspace", tmp_path)
     assert again.exit_code == 0, again.output
-    assert "[run]" not in again.stderr and again.stderr.count("[skip]") >= 30
+    assert "[run]" not in again.stderr and again.stderr.count("[skip]") >= 60
 
     # one row's SLAM run made with another setting: the table is refused, with exit code 1 and one line
     summary = tmp_path / "slam" / "nconv-sparse16" / "drive_d.json"
@@ -89,8 +109,23 @@ def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(cli, tmp_
 def test_profiles_hold_the_training_options_of_every_completer_and_the_full_beam_count():
     quick = PROFILES["quick"]
     assert quick.beams == (64, 32, 16, 8) and quick.split[2] >= 4 and set(quick.train) == {
-        "sparse-conv", "nconv", "nconv-guided", "nconv-pose"}
-    assert quick.stages_of_training() == [["sparse-conv", "nconv", "nconv-guided"], ["nconv-pose"]]
+        "sparse-conv", "sparse-conv-exact", "sparse-conv-geometry", "nconv", "nconv-guided", "nconv-pose"}
+    assert quick.stages_of_training() == [["sparse-conv", "sparse-conv-exact", "sparse-conv-geometry", "nconv",
+                                           "nconv-guided"], ["nconv-pose"]]
+    # drives without exact depth: not the runs trained against it
+    assert quick.stages_of_training(exact=False) == [["sparse-conv", "nconv", "nconv-guided"], ["nconv-pose"]]
+    for name, profile in PROFILES.items():  # the exact and geometry recipes: SparseConvNet's, plus their target
+        plain = profile.train_config("sparse-conv", seed=0)
+        for run, extra in (("sparse-conv-exact", {}), ("sparse-conv-geometry", {
+                "normal_weight": 100.0, "plane_weight": 7.0, "edge_weight": 10.0})):
+            config = profile.train_config(run, seed=0)
+            assert (config.model, config.target, config.name) == ("sparse-conv", "exact", run), name
+            for field in ("epochs", "max_frames", "scale", "l1_weight", "lr", "input_mix", "model_hparams"):
+                value = getattr(config, field)
+                assert (value() if callable(value) else value) == (
+                    getattr(plain, field)() if callable(getattr(plain, field)) else getattr(plain, field)), field
+            for field in ("normal_weight", "plane_weight", "edge_weight"):
+                assert getattr(config, field) == extra.get(field, 0.0), (name, run, field)
     tuned = quick.train_config("nconv-pose", seed=0)
     assert (tuned.loss, tuned.model, tuned.init, tuned.name) == ("pose", "nconv", "nconv", "nconv-pose")
     assert quick.train_config("nconv", seed=3).model == "nconv" and quick.train_config("nconv", 3).seed == 3
@@ -98,7 +133,8 @@ def test_profiles_hold_the_training_options_of_every_completer_and_the_full_beam
         config = quick.train_config(run, seed=0)
         assert config.model_hparams() == {"correct_fill": True} and config.input_mix.count("sparse") == 3
         assert {"sparse@32", "sparse@16", "sparse@8"} < set(config.input_mix)
-    with pytest.raises(DcslamError, match="exactly sparse-conv, nconv, nconv-guided, nconv-pose"):
+    with pytest.raises(DcslamError, match="exactly sparse-conv, sparse-conv-exact, sparse-conv-geometry, nconv, "
+                                          "nconv-guided, nconv-pose"):
         BeamsProfile(name="bad", drives=3, frames=12, train={"nconv": {}}, slam_frames=2)
     for init in ("nconv-guided-x", "nconv-pose"):  # not a run of the profile; a run that is itself fine-tuned
         chained = {**quick.train, "nconv-pose": {**quick.train["nconv-pose"], "init": init}}
@@ -129,3 +165,37 @@ def test_print_config_of_the_beams_table_lists_its_stages_and_runs_nothing(cli, 
     assert sorted(stages["prepare-kitti"]["beams"]) == sorted(b for b in PROFILES["quick"].beams if b != 64)
     assert {n for n in names if n.startswith("train-")} == {f"train-{r}" for r in PROFILES["quick"].train}
     assert any(n.startswith("slam-exact-") for n in names)  # generated drives: the exact row is planned
+    assert any(n.startswith("slam-exact+measured-sparse16-") for n in names)
+    assert any(n.startswith("slam-nconv-pose-sparse8+measured-") for n in names)
+    measured = next(v for n, v in stages.items() if n.startswith("slam-ip-basic-fast-sparse32+measured-"))
+    assert (measured["sources"], measured["measured"]) == ("measured", "sparse@32")
+    assert str(measured["out"]).endswith("slam/ip-basic-fast-sparse32+measured")
+
+
+def test_a_kitti_root_plans_no_row_that_needs_exact_depth(tmp_path):
+    """Real KITTI has no exact depth: exact, SparseConvNet → exact and SparseConvNet geometry (and their measured-
+    source runs) are left out of the plan; the other measured-source runs stay."""
+    from dcslam.stages.reproduce_plan import planned_stages
+    from dcslam.workspace import Workspace
+
+    names = [s.name for s in planned_stages(Workspace(tmp_path / "ws"), PROFILES["quick"], "beams",
+                                            kitti_root=tmp_path)]
+    assert not [n for n in names if "exact" in n or "geometry" in n]
+    assert "train-sparse-conv" in names and any(n.startswith("slam-nconv-sparse16+measured-") for n in names)
+    assert any(n.startswith("slam-ip-basic-fast-sparse8+measured-") for n in names)
+
+
+def test_every_training_seed_has_its_measured_source_runs(tmp_path):
+    from dcslam.report.seeds import seed_run_name
+    from dcslam.stages.reproduce_plan import planned_stages
+    from dcslam.workspace import Workspace
+
+    stages = {s.name: s for s in planned_stages(Workspace(tmp_path / "ws"), PROFILES["smoke"], "beams", seeds=2)}
+    for run in ("sparse-conv-geometry", "nconv-pose"):
+        for k in range(2):
+            name = f"{seed_run_name(run, k)}-sparse16+measured"
+            stage = next(s for n, s in stages.items() if n.startswith(f"slam-{name}-"))
+            assert (stage.config.sources, stage.config.measured, stage.config.out.name) == ("measured", "sparse@16",
+                                                                                             name)
+            assert stage.seed == k
+    assert sum(n.startswith("slam-exact+measured-") for n in stages) == 2  # once per beam count, not per seed
