@@ -31,6 +31,7 @@ class HealthRules:
 
     min_pairs: a step with fewer pairs (inliers) than this is degraded. A count, not a share of the frame's points:
         how precisely a step is measured depends on how many pairs constrain it, whatever the depth's density.
+        150: 8-beam steps that track have 159 and more, 16-beam ones 224 and more; the odometry rejects below 100.
     min_conditioning: normalised conditioning (see :meth:`ICPOdometry._conditioning`) below which a step is
         degraded (the odometry itself rejects below its own, lower, bound).
     max_prediction_gap_m, max_prediction_gap_deg: distance of the estimate from the constant-velocity prediction
@@ -45,7 +46,7 @@ class HealthRules:
         sooner.
     """
 
-    min_pairs: int = 250
+    min_pairs: int = 150
     min_conditioning: float = 2.5e-3
     max_prediction_gap_m: float = 0.5
     max_prediction_gap_deg: float = 3.0
