@@ -91,11 +91,16 @@ def unavailable(why: str, verdict: str = "unavailable") -> dict:
 
 def merge(health: dict, evidence: dict) -> dict:
     """``health`` (:func:`dcslam.slam.health.summarise`) with the evidence verdict folded in: ``evidence`` added,
-    ``suspect`` set and its reason appended when the evidence makes the run suspect."""
+    ``suspect`` set and its reason appended when the evidence makes the run suspect.
+
+    A companion that agrees outweighs the run's own weak-step reasons (degraded steps, its drift bound: on completed
+    depth they misjudge in both directions) when no step was rejected; those reasons move to ``overruled``."""
     merged = {**health, "reasons": list(health.get("reasons", [])), "evidence": evidence}
     if evidence.get("suspect"):
         merged["suspect"] = True
         merged["reasons"].append(evidence["reason"])
+    elif evidence.get("verdict") == "agrees" and merged.get("suspect") and not health.get("rejected", 0):
+        merged["overruled"], merged["reasons"], merged["suspect"] = merged["reasons"], [], False
     return merged
 
 

@@ -61,3 +61,12 @@ def test_without_a_companion_the_summary_says_so_and_stays_unflagged():
     assert "--evidence none" in evidence_line(merge({"suspect": False}, unavailable("--evidence none", "off")))
     with pytest.raises(ValueError):
         unavailable("x", "agrees")
+
+
+def test_an_agreeing_companion_outweighs_weak_steps_but_not_rejected_ones():
+    agrees = judge(_trajectory([0, 1]), _trajectory([0, 1.1]), GOOD, "sparse")
+    weak = {"suspect": True, "reasons": ["3 of 29 steps degraded (more than 10%)"], "rejected": 0}
+    health = merge(weak, agrees)
+    assert not health["suspect"] and health["reasons"] == [] and health["overruled"] == weak["reasons"]
+    refused = {**weak, "rejected": 1, "reasons": ["1 of 29 steps rejected (pose predicted, not measured)"]}
+    assert merge(refused, agrees)["suspect"] and "overruled" not in merge(refused, agrees)
