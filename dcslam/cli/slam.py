@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dcslam.cli.app import app, summary
 from dcslam.cli.options import stage_command
+from dcslam.slam.evidence import evidence_line
 from dcslam.stages import slam
 
 HELP = ("Dense SLAM over drive files (all test drives by default): writes per drive a TUM trajectory, a PLY map "
@@ -16,6 +17,9 @@ def report(results: list[slam.SlamDriveResult]) -> None:
         verdict = f"SUSPECT ({'; '.join(h['reasons'])})" if h["suspect"] else "ok"
         used = s.get("sources", {})
         sources = f", ICP sources {used['kind']}" if used.get("mode") == "measured" else ""
+        said = evidence_line(h)
+        if not h["suspect"] and said:  # completed depth no companion vouches for is not simply ok
+            verdict = f"ok, {said}" if h["evidence"]["verdict"] == "agrees" else f"UNVERIFIED ({said})"
         summary(f"{r.drive}: {s['frames']} frames, {s['points']} points, {s['seconds_per_frame']:.2f} s/frame, "
                 f"final drift {s['translation_error_m']['final']:.3f} m{sources}, steps {h['accepted']} accepted / "
                 f"{h['degraded']} degraded / {h['rejected']} rejected, {verdict} -> {r.written['trajectory'].parent}")

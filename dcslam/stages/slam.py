@@ -24,6 +24,9 @@ from dcslam.stages.config import option
 from dcslam.workspace import Workspace
 
 
+#: Whether a run on completed depth gets an independent companion on its measured pixels (``--evidence``).
+EVIDENCE_USES = ("auto", "none")
+
 #: How SLAM uses a depth layer's per-pixel confidence (``--confidence``).
 CONFIDENCE_USES = ("weights", "mask", "ignore")
 #: Which points the odometry aligns (``--sources``): the depth input's own, or the measured LiDAR pixels behind it.
@@ -83,6 +86,11 @@ class SlamStageConfig(SlamSettings):
     measured: str | None = option(None, help=(
         "With --sources measured: the drive depth kind whose pixels are the ICP sources, e.g. sparse@16. Default: "
         "the input a layer was predicted from (sparse for dense and exact)."))
+    evidence: str = option("auto", choices=EVIDENCE_USES, help=(
+        "auto: beside a run on completed depth (dense, exact, a predicted or filtered layer), run SLAM on the "
+        "measured LiDAR pixels behind it and flag the run when its trajectory leaves that companion's by more than "
+        "the companion's own uncertainty allows; none: no companion (the summary says that no evidence bounds "
+        "the drift). A sparse input is its own evidence."))
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -96,6 +104,8 @@ class SlamStageConfig(SlamSettings):
             raise DcslamError(f"--min-confidence must be within [0, 1], got {self.min_confidence}")
         if self.confidence == "ignore" and self.min_confidence > 0:
             raise DcslamError("--min-confidence needs --confidence weights or mask (ignore uses no confidence)")
+        if self.evidence not in EVIDENCE_USES:
+            raise DcslamError(f"unknown evidence use {self.evidence!r} (choose from {', '.join(EVIDENCE_USES)})")
         if self.confidence == "mask" and self.min_confidence <= 0:
             raise DcslamError("--confidence mask drops the pixels below --min-confidence; give one above 0")
         if self.sources not in SOURCES:
@@ -161,6 +171,7 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
                                   settings={**to_dict(config), "source": str(source)},
                                   confidence=config.confidence_use(), sources_kind=measured)
             drive_run.name = path.stem
+            drive_run.evidence = companion_evidence(path, source, drive_run, config, measured)
             written = write_outputs(drive_run, out_dir, force)
             results.append(SlamDriveResult(path.stem, drive_run.summary(), written))
     suspect = [r for r in results if r.summary["health"]["suspect"]]
@@ -233,6 +244,7 @@ class DriveRun:
     effective_settings: dict = field(default_factory=dict)  # SLAM.effective_settings(): after the scene scale
     health_rules: object = None  # the HealthRules the steps were judged by (None: the defaults); the run is too
     sources: dict = field(default_factory=lambda: {"mode": "depth"})  # the ICP sources used: mode, measured kind
+    evidence: dict | None = None  # dcslam.slam.evidence.judge / unavailable (None: not asked, as before it existed)
 
     def __post_init__(self) -> None:
         from dcslam.geometry.rotations import nearest_rotation
@@ -250,12 +262,17 @@ class DriveRun:
 
         dt, dr = pose_error(torch.from_numpy(self.T_gt), torch.from_numpy(self.T_world_cam))
         n = len(self.reports)
+        health = summarise(self.reports, *([self.health_rules] if self.health_rules is not None else []))
+        if self.evidence is not None:
+            from dcslam.slam.evidence import merge
+
+            health = merge(health, self.evidence)
         return {
             "drive": self.name, "frames": n, "points": len(self.map),
             "seconds": round(self.seconds, 3), "seconds_per_frame": round(self.seconds / max(n, 1), 4),
             "map_megabytes": round(self.map.nbytes() / 2 ** 20, 2),
             "rejected_steps": [{"frame": r.index, "reason": r.reason} for r in self.reports if not r.accepted],
-            "health": summarise(self.reports, *([self.health_rules] if self.health_rules is not None else [])),
+            "health": health,
             "translation_error_m": {"final": float(dt[-1]), "max": float(dt.max()), "mean": float(dt.mean())},
             "rotation_error_deg": {"final": float(dr[-1]) * 180 / np.pi, "max": float(dr.max()) * 180 / np.pi},
             "confidence": self.confidence,
@@ -336,6 +353,41 @@ def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | No
         return DriveRun(drive.name, poses, drive.timestamps[:n].copy(), T_gt.copy(), global_map,
                         list(slam.reports), seconds, dict(settings or {}), used, slam.effective_settings(),
                         slam.health, sources)
+
+
+def companion_evidence(drive_path: Path, source: str | Path, main: DriveRun, config: SlamStageConfig,
+                       sources_kind: str | None = None) -> dict:
+    """The evidence verdict of ``main`` (a run over ``source`` on ``drive_path``): :func:`dcslam.slam.evidence.judge`
+    against a companion run with the same settings and frames on the measured depth kind behind ``source``
+    (:func:`dcslam.io.drive.measured_kind`; with measured ICP sources, ``sources_kind``, the kind they came from, so
+    that exact depth aligned by 16-beam points is checked against 16-beam SLAM); ``own`` for a sparse input,
+    ``off`` with ``--evidence none``, ``unavailable`` when no measured kind can be named or the drive lacks it."""
+    from dcslam.io.drive import DriveFile, is_depth_kind, measured_kind
+    from dcslam.slam.config import build_slam
+    from dcslam.slam.evidence import judge, unavailable
+    from dcslam.slam.health import summarise
+
+    named = None if isinstance(source, Path) else str(source)
+    if named is not None and is_depth_kind(named) and measured_kind(named) == named:
+        return unavailable(f"{named} is measured depth: its own run is its evidence", "own")
+    if config.evidence == "none":
+        return unavailable("--evidence none", "off")
+    kind = sources_kind or measured_kind(source if named is None or not is_depth_kind(named) else named)
+    if kind is None:
+        return unavailable(f"{source} does not say which measured depth it was made from")
+    with DriveFile(drive_path) as drive:
+        has_kind = kind in drive.kinds
+    if not has_kind:
+        return unavailable(f"{drive_path.name} holds no {kind} depth")
+    slam = build_slam(config.settings())
+    companion = run_drive(drive_path, kind, slam, config.frames or None, config.device,
+                          description=f"{drive_path.stem} companion {kind}")
+    verdict = judge(main.T_world_cam, companion.T_world_cam,
+                    summarise(companion.reports, *([companion.health_rules] if companion.health_rules else [])),
+                    kind)
+    final = np.linalg.norm(companion.T_world_cam[-1, :3, 3] - companion.T_gt[-1, :3, 3])
+    return {**verdict, "companion_final_error_m": round(float(final), 4),
+            "companion_seconds": round(companion.seconds, 3)}
 
 
 @contextlib.contextmanager

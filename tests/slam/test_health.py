@@ -57,11 +57,15 @@ def test_good_drive_is_not_flagged(street_drive):
 
 
 def test_too_few_pairs_to_measure_is_flagged(street_drive):
-    """The good street drive seen through a few scan lines (every 24th row, as 8 beams at this size): each step rests
-    on fewer pairs than the health rule trusts, and the run says so, whatever share of its points paired."""
+    """The good street drive seen through a few scan lines (every 24th row and 4th column: 124-134 pairs per step)
+    under rules that trust 150 pairs (the default, 100, is the ICP odometry's own rejection bound): each step rests
+    on fewer pairs than the rule trusts, and the run says so, whatever share of its points paired."""
+    from dcslam.slam.health import HealthRules
+
     depth, K, T = street_drive
-    sparse = depth * lidar_mask(depth.shape[-2], depth.shape[-1], row_step=24, col_step=2)
+    sparse = depth * lidar_mask(depth.shape[-2], depth.shape[-1], row_step=24, col_step=4)
     slam = build_slam(SlamSettings())
+    slam.health = HealthRules(min_pairs=150)
     slam.run(sparse, K)
     summary = slam.health_summary()
     assert summary["suspect"]
@@ -98,8 +102,8 @@ class TestAssess:
         """A dense frame pairs a small share of its many points and is still well measured; a sparse one with few
         pairs is not, whatever its share."""
         assert assess(True, "", 800, 16000, 0.02, 0.0, 0.0, True)[0] == "accepted"      # 5 % of a dense frame
-        verdict, why = assess(True, "", 200, 400, 0.02, 0.0, 0.0, True)                   # half of a sparse one
-        assert verdict == "degraded" and "fewer than 250 pairs" in why[0]
+        verdict, why = assess(True, "", 90, 180, 0.02, 0.0, 0.0, True)                    # half of a sparse one
+        assert verdict == "degraded" and "fewer than 100 pairs" in why[0]
 
     def test_prediction_gap_needs_a_velocity(self):
         assert assess(True, "", 900, 1000, 0.1, 0.9, 0.0, False)[0] == "accepted"

@@ -1,0 +1,198 @@
+"""Calibrate the evidence rule (dcslam.slam.evidence) and the pair count of the health rules from the SLAM outputs of
+a workspace, post hoc: every run of ``slam/<layer>/<drive>.{json,txt}`` is judged against the run of its measured
+depth kind (``slam/<kind>/<drive>``, the companion that ``dcslam slam --evidence auto`` would run beside it), with
+the truth being whether it ends (final translation error) more than ``--truth`` metres off.
+
+Prints, per input and beam count, runs / ending > truth / flagged of those / flagged of the others, for the stored
+verdicts (``stored``: the health in each JSON as written) and for the candidate rules (``--floors``, ``--sigmas``,
+``--min-pairs``); ``--json`` also writes the per-run rows.
+
+    python benchmarks/slam_evidence.py /tmp/repro-ws-b --floors 0.2,0.3,0.4 --sigmas 3 --min-pairs 250,150
+"""
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import re
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+
+from dcslam.slam.evidence import EvidenceRules, judge, merge
+from dcslam.slam.health import HealthRules
+
+PAIRS = re.compile(r"^(\d+) of \d+ points paired")
+
+
+def layer_input(layer: str) -> tuple[str, str]:
+    """(input, beams) of a layer's name: ``sparse@16`` -> (sparse, 16); ``nconv-sparse8+masked`` ->
+    (nconv+masked, 8); ``sparse`` -> (sparse, 64); ``dense`` -> (dense, -)."""
+    if layer in ("dense", "exact"):
+        return layer, "-"
+    if layer == "sparse":
+        return "sparse", "64"
+    if layer.startswith("sparse@"):
+        return "sparse", layer.split("@", 1)[1]
+    m = re.match(r"^(.*)-sparse(\d*)(\+.*)?$", layer)
+    if m:
+        return m.group(1) + (m.group(3) or ""), m.group(2) or "64"
+    return layer, "?"
+
+
+@functools.lru_cache(maxsize=None)
+def _measured(source: str) -> str | None:
+    from dcslam.io.drive import is_depth_kind, measured_kind
+
+    return measured_kind(source if is_depth_kind(source) else Path(source))
+
+
+def companion_layer(layer: str, record: dict) -> str | None:
+    """The layer folder of the run's measured depth kind (None: a sparse input, its own evidence)."""
+    from dcslam.io.drive import is_depth_kind
+
+    if layer == "sparse" or layer.startswith("sparse@"):
+        return None
+    source = record.get("settings", {}).get("source")
+    kind = _measured(source) if source and (is_depth_kind(source) or Path(source).is_file()) else None
+    if kind is None:  # a moved workspace: the beams from the layer's name
+        _, beams = layer_input(layer)
+        kind = "sparse" if beams in ("64", "-") else f"sparse@{beams}"
+    return kind
+
+
+def rejudge(health: dict, rules: HealthRules) -> dict:
+    """The stored run verdict re-decided with ``rules.min_pairs`` at or below the one it was judged with: a step
+    degraded only for its pair count becomes accepted when it has at least ``min_pairs`` pairs (its other checks
+    passed); the run-level rules of :func:`dcslam.slam.health.summarise` then apply as written."""
+    verdicts = {}
+    for step in health.get("flagged_steps", []):
+        verdict = step["verdict"]
+        if verdict == "degraded":
+            why = list(step["why"])
+            left = [w for w in why if not (PAIRS.match(w) and int(PAIRS.match(w).group(1)) >= rules.min_pairs)]
+            verdict = "degraded" if left else "accepted"
+        verdicts[step["frame"]] = verdict
+    steps = health["accepted"] + health["degraded"] + health["rejected"]
+    rejected = sum(v == "rejected" for v in verdicts.values())
+    degraded = sum(v == "degraded" for v in verdicts.values())
+    reasons = []
+    if rejected > rules.max_rejected:
+        reasons.append(f"{rejected} of {steps} steps rejected")
+    if steps and degraded > rules.max_degraded_fraction * steps:
+        reasons.append(f"{degraded} of {steps} steps degraded")
+    run = longest = 0
+    for frame in range(1, steps + 1):
+        run = run + 1 if verdicts.get(frame) == "degraded" else 0
+        longest = max(longest, run)
+    if longest > rules.max_degraded_run:
+        reasons.append(f"{longest} consecutive steps degraded")
+    sigma = float(health.get("drift_sigma_m", 0.0))
+    if rules.max_drift_m > 0 and 3 * sigma > rules.max_drift_m:
+        reasons.append(f"accumulated uncertainty {3 * sigma:.2f} m (3 sigma)")
+    return {**health, "accepted": steps - rejected - degraded, "degraded": degraded, "rejected": rejected,
+            "suspect": bool(reasons), "reasons": reasons}
+
+
+def load_runs(slam_dir: Path) -> dict[tuple[str, str], dict]:
+    """{(layer, drive): {"record": summary JSON, "T": (N, 4, 4) trajectory}} of every run under ``slam_dir``."""
+    from dcslam.io.tum import read_tum
+
+    runs = {}
+    for summary in sorted(slam_dir.glob("*/*.json")):
+        trajectory = summary.with_suffix(".txt")
+        if not trajectory.exists():
+            continue
+        record = json.loads(summary.read_text())
+        _, T = read_tum(trajectory)
+        runs[(summary.parent.name, summary.stem)] = {"record": record, "T": T}
+    return runs
+
+
+def verdicts(runs: dict, rules: HealthRules | None, evidence: EvidenceRules | None) -> list[dict]:
+    """One row per run: input, beams, drive, final error, flagged (and why). ``rules`` None: the stored health;
+    ``evidence`` None: no companion."""
+    rows = []
+    for (layer, drive), run in sorted(runs.items()):
+        record = run["record"]
+        health = record["health"] if rules is None else rejudge(record["health"], rules)
+        verdict = None
+        kind = companion_layer(layer, record)
+        if evidence is not None and kind is not None:
+            companion = runs.get((kind, drive))
+            if companion is None:
+                verdict = "no companion run"
+            else:
+                c_health = (companion["record"]["health"] if rules is None
+                            else rejudge(companion["record"]["health"], rules))
+                health = merge(health, judge(run["T"], companion["T"], c_health, kind, evidence))
+                verdict = health["evidence"]["verdict"]
+        source, beams = layer_input(layer)
+        rows.append({"input": source, "beams": beams, "layer": layer, "drive": drive,
+                     "final_m": float(record["translation_error_m"]["final"]),
+                     "max_m": float(record["translation_error_m"]["max"]), "flagged": bool(health["suspect"]),
+                     "evidence": verdict, "gap_m": health.get("evidence", {}).get("gap_m"),
+                     "reasons": list(health["reasons"])})
+    return rows
+
+
+def table(rows: list[dict], truth: float) -> list[tuple]:
+    """(input, beams, runs, > truth, flagged of those, flagged of the others) per input and beam count, and a total."""
+    groups = defaultdict(list)
+    for r in rows:
+        groups[(r["input"], r["beams"])].append(r)
+    out = []
+    for key in sorted(groups, key=lambda k: (k[0], -int(k[1]) if k[1].isdigit() else 0)):
+        rs = groups[key]
+        bad = [r for r in rs if r["final_m"] > truth]
+        good = [r for r in rs if r["final_m"] <= truth]
+        out.append((*key, len(rs), len(bad), sum(r["flagged"] for r in bad), sum(r["flagged"] for r in good)))
+    bad = [r for r in rows if r["final_m"] > truth]
+    good = [r for r in rows if r["final_m"] <= truth]
+    out.append(("all", "", len(rows), len(bad), sum(r["flagged"] for r in bad), sum(r["flagged"] for r in good)))
+    return out
+
+
+def print_table(title: str, lines: list[tuple], truth: float) -> None:
+    print(f"\n{title}")
+    print(f"| input | beams | runs | > {truth:g} m | flagged of those | false flags |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    for source, beams, n, bad, hit, false in lines:
+        print(f"| {source} | {beams} | {n} | {bad} | {hit} | {false} of {n - bad} |")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("workspace", type=Path)
+    parser.add_argument("--truth", type=float, default=0.5, help="a run ending further than this (m) is bad")
+    parser.add_argument("--floors", default="0.3", help="candidate floor_m values, comma-separated")
+    parser.add_argument("--sigmas", default="3", help="candidate sigmas values, comma-separated")
+    parser.add_argument("--min-pairs", default=str(HealthRules().min_pairs), help="candidate min_pairs values")
+    parser.add_argument("--json", type=Path, help="write the per-run rows of every candidate here")
+    parser.add_argument("--runs", action="store_true", help="print every run of the last candidate")
+    args = parser.parse_args(argv)
+    runs = load_runs(args.workspace / "slam")
+    if not runs:
+        print(f"no SLAM outputs under {args.workspace / 'slam'}", file=sys.stderr)
+        return 1
+    results = {"stored": verdicts(runs, None, None)}
+    print_table("stored verdicts (no evidence)", table(results["stored"], args.truth), args.truth)
+    for pairs in (int(p) for p in args.min_pairs.split(",")):
+        for sigmas in (float(s) for s in args.sigmas.split(",")):
+            for floor in (float(f) for f in args.floors.split(",")):
+                name = f"min_pairs {pairs}, evidence {sigmas:g} sigma, floor {floor:g} m"
+                rows = verdicts(runs, HealthRules(min_pairs=pairs), EvidenceRules(sigmas=sigmas, floor_m=floor))
+                results[name] = rows
+                print_table(name, table(rows, args.truth), args.truth)
+    if args.runs:
+        for r in rows:
+            print(f"{r['layer']:28s} {r['drive'][-9:-5]} final {r['final_m']:6.3f} gap {r['gap_m'] or 0:6.3f} "
+                  f"{'FLAG' if r['flagged'] else '    '} {r['evidence']} {'; '.join(r['reasons'])[:120]}")
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

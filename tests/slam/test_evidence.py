@@ -1,0 +1,72 @@
+import numpy as np
+import pytest
+
+from dcslam.slam.evidence import EvidenceRules, evidence_line, judge, merge, position_gaps, unavailable
+
+
+def _trajectory(xs):
+    """Poses along x at the given positions. Shape: -> (N, 4, 4)."""
+    T = np.tile(np.eye(4), (len(xs), 1, 1))
+    T[:, 0, 3] = xs
+    return T
+
+
+GOOD = {"suspect": False, "reasons": [], "drift_sigma_m": 0.02}
+
+
+def test_position_gaps_over_the_frames_both_have():
+    assert np.allclose(position_gaps(_trajectory([0, 1, 2]), _trajectory([0, 1.5])), [0, 0.5])
+
+
+def test_a_run_that_agrees_with_its_companion_is_ok():
+    verdict = judge(_trajectory([0, 1, 2.1]), _trajectory([0, 1, 2]), GOOD, "sparse@16")
+    assert verdict["verdict"] == "agrees" and not verdict["suspect"] and verdict["reason"] is None
+    assert verdict["gap_m"] == pytest.approx(0.1) and verdict["bound_m"] == 0.5
+    health = merge({"suspect": False, "reasons": []}, verdict)
+    assert not health["suspect"] and health["evidence"] is verdict
+    assert evidence_line(health) == "within 0.10 m of the sparse@16 companion (bound 0.50 m)"
+
+
+def test_a_gap_beyond_the_bound_flags_the_run_and_says_why():
+    verdict = judge(_trajectory([0, 1.2, 2.8, 3.9]), _trajectory([0, 1, 2, 3]), GOOD, "sparse")
+    assert verdict["verdict"] == "departs" and verdict["suspect"] and verdict["gap_frame"] == 3
+    assert verdict["reason"] == ("0.90 m from the sparse companion at frame 3 (bound 0.50 m: 3 x its sigma 0.020 m, "
+                                 "at least 0.5 m)")
+    health = merge({"suspect": False, "reasons": ["x"], "accepted": 3}, verdict)
+    assert health["suspect"] and health["reasons"] == ["x", verdict["reason"]] and health["accepted"] == 3
+
+
+def test_the_bound_grows_with_the_companions_own_uncertainty():
+    rules = EvidenceRules(sigmas=3.0, floor_m=0.5)
+    assert rules.bound_m(0.01) == 0.5 and rules.bound_m(0.3) == pytest.approx(0.9)
+    loose = {"suspect": False, "reasons": [], "drift_sigma_m": 0.3}
+    assert judge(_trajectory([0, 0.8]), _trajectory([0, 0]), loose, "sparse", rules)["verdict"] == "agrees"
+
+
+def test_a_suspect_companion_bounds_nothing():
+    companion = {"suspect": True, "reasons": ["13 of 29 steps rejected"], "drift_sigma_m": 0.07}
+    verdict = judge(_trajectory([0, 1]), _trajectory([0, 1]), companion, "sparse@8")
+    assert verdict["verdict"] == "unbounded" and verdict["suspect"]
+    assert verdict["reason"] == ("no evidence bounds the drift (the sparse@8 companion is itself suspect: "
+                                 "13 of 29 steps rejected)")
+
+
+def test_without_a_companion_the_summary_says_so_and_stays_unflagged():
+    none = unavailable("layer.h5 does not say which measured depth it was made from")
+    health = merge({"suspect": False, "reasons": []}, none)
+    assert not health["suspect"] and health["reasons"] == []
+    assert evidence_line(health) == ("no evidence bounds the drift (layer.h5 does not say which measured depth it "
+                                     "was made from)")
+    assert evidence_line(merge({"suspect": False, "reasons": []}, unavailable("x", "own"))) is None
+    assert "--evidence none" in evidence_line(merge({"suspect": False}, unavailable("--evidence none", "off")))
+    with pytest.raises(ValueError):
+        unavailable("x", "agrees")
+
+
+def test_an_agreeing_companion_outweighs_weak_steps_but_not_rejected_ones():
+    agrees = judge(_trajectory([0, 1]), _trajectory([0, 1.1]), GOOD, "sparse")
+    weak = {"suspect": True, "reasons": ["3 of 29 steps degraded (more than 10%)"], "rejected": 0}
+    health = merge(weak, agrees)
+    assert not health["suspect"] and health["reasons"] == [] and health["overruled"] == weak["reasons"]
+    refused = {**weak, "rejected": 1, "reasons": ["1 of 29 steps rejected (pose predicted, not measured)"]}
+    assert merge(refused, agrees)["suspect"] and "overruled" not in merge(refused, agrees)

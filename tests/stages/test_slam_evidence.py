@@ -1,0 +1,90 @@
+"""A completed depth that is wrong in a consistent way (the exact depth scaled by 1.2: every step pairs thousands of
+points with a tight covariance and agrees with the motion prediction, yet the trajectory stretches) is trusted by
+the per-step checks and caught by the companion run on the measured pixels."""
+import json
+
+import numpy as np
+import pytest
+
+from dcslam.io.drive import DriveFile, DriveFrame, DriveWriter, Layer, load_depth, write_layer
+from dcslam.io.slam_summary import read_verdict
+from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
+from dcslam.stages import slam
+from dcslam.workspace import Workspace
+
+H, W, N = 96, 320, 8
+
+
+@pytest.fixture(scope="module")
+def scaled(tmp_path_factory):
+    """(workspace, drive file, layer folder): an 8-frame street at 0.8 m per frame and a layer of its dense depth
+    times 1.2 that says it completed the drive's sparse depth."""
+    root = tmp_path_factory.mktemp("evidence")
+    scene, K = StreetScene(1), kitti_K(H, W)
+    poses = street_trajectory(N, step=0.8)
+    rng = np.random.default_rng(0)
+    path = root / "street.h5"
+    with DriveWriter(path, K.double().numpy(), H, W, source="synthetic", date="2011_09_26", drive="street",
+                     split="test") as writer:
+        for i in range(N):
+            dense = scene.render(poses[i], K, H, W).float().numpy()
+            writer.append(DriveFrame(rng.integers(0, 255, (H, W, 3), dtype=np.uint8),
+                                     dense * lidar_mask(H, W).numpy(), dense, poses[i].numpy(), 0.1 * i, i))
+    with DriveFile(path) as drive:
+        dense = load_depth(drive, "dense")
+    layer = root / "layer"
+    layer.mkdir()
+    write_layer(layer / "street.h5", Layer(depth=(1.2 * dense).astype(np.float32), drive="street",
+                                           made_by="test", config={"input": "sparse"}))
+    return Workspace(root / "ws"), path, layer
+
+
+def _run(ws, path, layer, out, evidence):
+    return slam.run(ws, slam.SlamStageConfig(depth=str(layer), drive=[str(path)], out=out, evidence=evidence))[0]
+
+
+def test_consistently_wrong_completion_is_flagged_by_its_companion(scaled, tmp_path, capsys):
+    from dcslam.cli.slam import report
+
+    ws, path, layer = scaled
+    alone = _run(ws, path, layer, tmp_path / "none", "none")
+    health = alone.summary["health"]
+    assert alone.summary["translation_error_m"]["final"] > 0.5
+    assert not health["suspect"] and health["accepted"] == N - 1 and health["evidence"]["verdict"] == "off"
+    assert not read_verdict(alone.written["summary"]).suspect  # what every table reads
+
+    checked = _run(ws, path, layer, tmp_path / "auto", "auto")
+    health = checked.summary["health"]
+    evidence = health["evidence"]
+    assert health["suspect"] and evidence["verdict"] == "departs" and evidence["companion"] == "sparse"
+    assert evidence["gap_m"] > evidence["bound_m"] and evidence["companion_final_error_m"] < 0.5
+    assert health["reasons"][-1].startswith(f"{evidence['gap_m']:.2f} m from the sparse companion at frame")
+    assert np.allclose(checked.summary["translation_error_m"]["final"], alone.summary["translation_error_m"]["final"])
+    written = json.loads(checked.written["summary"].read_text())
+    assert written["health"]["suspect"] and written["health"]["evidence"]["verdict"] == "departs"
+    verdict = read_verdict(checked.written["summary"])
+    assert verdict.suspect and evidence["reason"] in verdict.reasons
+
+    report([alone, checked])
+    lines = capsys.readouterr().out.splitlines()
+    assert "UNVERIFIED (no evidence bounds the drift (--evidence none))" in lines[0]
+    assert f"SUSPECT ({evidence['reason']})" in lines[1]
+
+
+def test_a_sparse_input_is_its_own_evidence_and_a_foreign_layer_has_none(scaled, tmp_path, capsys):
+    from dcslam.cli.slam import report
+
+    ws, path, layer = scaled
+    own = _run(ws, path, "sparse", tmp_path / "sparse", "auto")
+    assert own.summary["health"]["evidence"]["verdict"] == "own"
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    with DriveFile(path) as drive:
+        write_layer(foreign / "street.h5", Layer(depth=load_depth(drive, "dense"), drive="street", made_by="other"))
+    unknown = _run(ws, path, foreign, tmp_path / "foreign-out", "auto")
+    evidence = unknown.summary["health"]["evidence"]
+    assert evidence["verdict"] == "unavailable" and not unknown.summary["health"]["suspect"]
+    report([own, unknown])
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split(", ")[-1].startswith("ok ->")
+    assert "UNVERIFIED (no evidence bounds the drift (" in lines[1] and "does not say which measured depth" in lines[1]
