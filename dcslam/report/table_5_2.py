@@ -535,7 +535,9 @@ def table_5_2(results: list[LayerResult], thesis: dict, drives: list[str], devki
     table.notes += [  # short on purpose: how each column is computed is in docs/metrics.md
         "localisation accuracy: the thesis's metric (m + rad, lower is better); every figure: mean over the test "
         "drives ± the half-width of its 95 % t-interval (std, interval and median in the CSV)",
-        f"failed: drives flagged suspect by the SLAM or with a localisation error above {threshold:g}; vs sparse: "
+        f"failed: drives flagged suspect by the SLAM (its step verdicts, its drift bound, or for completed depth a "
+        f"companion run on the measured LiDAR pixels it departs from) or with a localisation error above "
+        f"{threshold:g}; vs sparse: "
         "paired 95 % t-interval of the per-drive differences",
         "MAE, RMSE, iMAE, iRMSE: " + ("exactly as the KITTI devkit" if devkit_exact else
                                      "KITTI devkit with two departures (--devkit-exact removes them)"),

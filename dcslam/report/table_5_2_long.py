@@ -106,7 +106,8 @@ def table_5_2_long(results: list, drives: list[str]) -> Table:
         "the profile names; localisation accuracy: the thesis's metric (m + rad), which grows with a drive's length, "
         "so compare rows here, not with Table 5.2",
         "every figure: mean over the test drives ± the half-width of its 95 % t-interval; failed: drives whose SLAM "
-        "run was flagged suspect (rejected or degraded steps; no threshold on the thesis's error, which grows with "
+        "run was flagged suspect (rejected or degraded steps, drift bound, a departure from the companion run on the "
+        "measured pixels; no threshold on the thesis's error, which grows with "
         "length); vs sparse: paired t-interval of the per-drive localisation differences",
         "t_rel / r_rel: KITTI odometry devkit drift over 100–800 m segments from every 10th frame, averaged over the "
         "drives long enough; a drive shorter than 100 m has none (notes give the longest path)",

@@ -330,7 +330,8 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
         "are holes; pixels the devkit cannot interpolate are left out)",
         surface_note(list(results.values())),
         "which depth metric predicts localisation: table_beams_correlation.md",
-        f"failed: drives whose SLAM run was flagged suspect (rejected or degraded steps, drift bound) or whose "
+        f"failed: drives whose SLAM run was flagged suspect (rejected or degraded steps, drift bound, a departure from "
+        f"the companion run on the measured pixels or a companion itself suspect) or whose "
         f"localisation exceeds "
         f"{next(iter(results.values())).failure_threshold:g} m + rad (kept in the means)" if results else "",
         "SLAM settings of every row: " + (", ".join(f"{k}={settings[k]}" for k in sorted(settings)) or "none "
