@@ -433,6 +433,18 @@ def _split_file(ws: Workspace) -> Path:
     return ws.root / ".reproduce" / "splits.json"
 
 
+def generated_names(kitti: Path, counts: tuple[int, int, int]) -> list[str] | None:
+    """The drive names of a generated root (``dcslam synth``'s ``SYNTHETIC`` marker) holding as many drives as a
+    profile splits (``counts``), sorted; None for real KITTI, a missing root or another number of drives (which
+    ``prepare-kitti`` then splits in the thesis's proportion)."""
+    from dcslam.io.kitti import dataset_source, find_drives
+
+    if not Path(kitti).is_dir() or dataset_source(kitti) != "synthetic":
+        return None
+    names = sorted({d.name for d in find_drives(kitti)})
+    return names if len(names) == sum(counts) else None
+
+
 def _profile_splits(ws: Workspace, kitti: Path, counts: tuple[int, int, int]) -> Path:
     """Write the profile's split of the generated drives (sorted by name: train, then val, then test)."""
     from dcslam.io.kitti import find_drives
@@ -478,6 +490,9 @@ def make_drives(pipe: Pipeline, *, drives: int, frames: int, split: tuple[int, i
     split_file = None
     if kitti_root is None and split:
         split_file = _split_file(ws) if pipe.planning else _profile_splits(ws, kitti, split)
+    elif split and not pipe.planning and generated_names(kitti, split) is not None:
+        # drives generated before (`dcslam synth`, or another workspace's kitti/) split as the profile splits its own
+        split_file = _profile_splits(ws, kitti, split)
     pipe.run(Stage("prepare-kitti", prepare.run, prepare.PrepareConfig(kitti=kitti, splits=split_file,
                                                                        beams=list(beams)),
                    outputs=lambda: [ws.splits, *sorted(ws.drives.glob("*.h5"))],

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from dcslam.stages.reproduce import Pipeline, Profile, ReproduceConfig, Stage, compose, split_by_counts
+from dcslam.stages.reproduce import (Pipeline, Profile, ReproduceConfig, Stage, compose, generated_names,
+                                     split_by_counts)
 from dcslam.workspace import Workspace
 
 
@@ -26,14 +27,18 @@ class _Listing(Pipeline):
 
 
 def planned_splits(ws: Workspace, profile: Profile, kitti_root: Path | None = None) -> dict[str, list[str]]:
-    """The split ``prepare-kitti`` will write: for generated drives their names split as the profile says (or in the
-    thesis's proportion); for a KITTI root the workspace's ``splits.json`` if there is one, else the thesis's."""
+    """The split ``prepare-kitti`` will write: for generated drives (made here, or a generated root given as the
+    KITTI root) their names split as the profile says (or in the thesis's proportion); for a real KITTI root the
+    workspace's ``splits.json`` if there is one, else the thesis's."""
     from dcslam.io.drive import read_splits
     from dcslam.stages.prepare import THESIS_SPLITS, proportional_splits
     from dcslam.synth.street.generate import drive_name
 
     if kitti_root is not None:
-        return read_splits(ws.splits) if ws.splits.exists() else THESIS_SPLITS
+        if ws.splits.exists():
+            return read_splits(ws.splits)
+        names = generated_names(Path(kitti_root), profile.split) if profile.split else None
+        return THESIS_SPLITS if names is None else split_by_counts(names, profile.split)
     names = sorted(drive_name(i) for i in range(profile.drives))
     return proportional_splits(names) if profile.split is None else split_by_counts(names, profile.split)
 
