@@ -1,6 +1,8 @@
 """`dcslam score`: depth errors, trajectory errors, map chamfer, and the thesis's Tables 5.1 / 5.2."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import typer
 
 from dcslam.cli.app import app, summary
@@ -67,9 +69,15 @@ def report_tables(report) -> None:
             continue
         full = written.get(name, name + ".md")
         print_table(compact(table, COMPACT[name], str(full)) if name in COMPACT else table)
-    summary(f"wrote {len(report.written)} file(s):")
+    if not report.written:
+        return
+    import os
+
+    # named under their common folder, once: a line per file stays short however deep the workspace lies
+    folder = Path(os.path.commonpath([str(p.parent) for p in report.written]))
+    summary(f"wrote {len(report.written)} file(s) in {folder}:")
     for path in report.written:
-        summary(f"  {path}")
+        summary(f"  {Path(path).relative_to(folder)}")
 
 
 stage_command(score_app, "depth", score.ScoreDepthConfig, score.run_depth, report,
