@@ -387,17 +387,23 @@ def findings(results: dict[tuple[int | None, str], LayerResult], beams: list[int
 
 
 def correlation(results: dict[tuple[int | None, str], LayerResult], drives: list[str]) -> Table:
-    """The rank correlation of each depth metric with localisation over every (row, drive) pair of the beams table
-    (:func:`dcslam.report.correlation_table.correlation_table`)."""
+    """The rank correlation of each depth metric with localisation over every (row, drive) pair of the beams table's
+    rows whose SLAM aligned the layer's own points (:func:`dcslam.report.correlation_table.correlation_table`): a
+    measured-source row has the depth metrics of its layer's depth row and another SLAM, so it would count each
+    layer twice, once for a question the metrics do not ask."""
     from dcslam.report.correlation_table import correlation_table
     from dcslam.report.table_5_2 import surface_note
 
     threshold = next(iter(results.values())).failure_threshold if results else FAILURE_THRESHOLD
-    return correlation_table(
-        [(_row_name(key), result) for key, result in results.items()],
+    depth_mode = {i.label for i in INPUTS if i.sources != MEASURED}
+    table = correlation_table(
+        [(_row_name(key), result) for key, result in results.items() if key[1] in depth_mode],
         f"The beams experiment: depth metrics against localisation over rows × {len(drives)} test drive(s)",
         threshold, depth_note="MAE / RMSE: against the annotated depth over every frame; " + (
             surface_note(list(results.values())) or "no surface errors scored"))
+    table.notes.append("rows: those whose SLAM aligned the layer's own points (the measured-source rows, whose "
+                       "depth is their depth rows', are left out)")
+    return table
 
 
 def per_drive_table(results: dict[tuple[int | None, str], LayerResult]) -> Table:
