@@ -138,7 +138,7 @@ def seed_runs(ws: Workspace, completer: str) -> list[tuple[str, int | None]]:
 
 def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_diff: float = EVO_MAX_TIME_DIFF_S,
                   failure_threshold: float = FAILURE_THRESHOLD,
-                  jobs: int = 1) -> dict:
+                  jobs: int = 1, inputs: list[str] | None = None) -> dict:
     """Scores of every (beam count, input): ``{(beams, label): result}``, beam counts from the largest; the
     beam-independent inputs last, under ``(None, label)``. A trained completer with runs of several seeds
     (:func:`seed_runs`) gives a :class:`dcslam.report.table_5_2.SeedResults` over them, other inputs a
@@ -146,12 +146,13 @@ def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_d
     (:func:`slam_name`). Missing inputs are recorded in each result (see
     :func:`dcslam.report.table_5_2.score_layer`); the inputs that need exact depth (:attr:`BeamsInput.needs_exact`)
     are left out when a test drive has none (real KITTI). ``jobs`` > 1 scores the layers in that many worker
-    processes."""
+    processes. ``inputs``: the labels of the rows to score (None: every input), e.g. a study of a few of them."""
     from dcslam.report.layers import surface_target
     from dcslam.report.table_5_2 import SeedResults
 
+    check_inputs(inputs)
     exact = surface_target(ws, drives) == "exact"
-    inputs = [i for i in INPUTS if exact or not i.needs_exact]
+    inputs = [i for i in INPUTS if (exact or not i.needs_exact) and (inputs is None or i.label in inputs)]
     keys = [(b, i) for b in sorted(beams, reverse=True) for i in inputs if i.per_beam]
     keys += [(None, i) for i in inputs if not i.per_beam]
     runs = {c: seed_runs(ws, c) for c in TRAINED}
@@ -174,6 +175,16 @@ def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_d
             result.seed = seed
         results[(b, item.label)] = group[0] if len(group) == 1 else SeedResults(item.label, group)
     return results
+
+
+def check_inputs(inputs: list[str] | None) -> None:
+    """A :class:`DcslamError` naming the first of ``inputs`` that is not a row label of the table (None: every row)."""
+    labels = [i.label for i in INPUTS]
+    for label in inputs or ():
+        if label not in labels:
+            raise DcslamError(f"the beams table has no input {label!r}; choose from: {'; '.join(labels)}")
+    if inputs is not None and not inputs:
+        raise DcslamError("the beams table needs at least one input")
 
 
 def _score(ws, label, layer, drives, max_time_diff, failure_threshold, slam) -> LayerResult:
@@ -481,18 +492,19 @@ class BeamsReport:
 
 def build_beams_report(ws: Workspace, beams: list[int], drives: list[str], out_dir: Path | None = None,
                        force: bool = False, max_time_diff: float = EVO_MAX_TIME_DIFF_S,
-                       failure_threshold: float = FAILURE_THRESHOLD, jobs: int = 1) -> BeamsReport:
-    """Score every row and write ``table_beams.{md,csv}``, ``table_beams_per_drive.{md,csv}``,
-    ``table_beams_correlation.{md,csv}`` and ``beams_localisation.png`` under ``out_dir`` (default ``results/``);
-    nothing is written when an output exists without ``force``, or when rows were made with different SLAM settings
-    (``jobs``: worker processes that score the rows)."""
+                       failure_threshold: float = FAILURE_THRESHOLD, jobs: int = 1,
+                       inputs: list[str] | None = None) -> BeamsReport:
+    """Score every row (``inputs``: only the rows of these labels) and write ``table_beams.{md,csv}``,
+    ``table_beams_per_drive.{md,csv}``, ``table_beams_correlation.{md,csv}`` and ``beams_localisation.png`` under
+    ``out_dir`` (default ``results/``); nothing is written when an output exists without ``force``, or when rows
+    were made with different SLAM settings (``jobs``: worker processes that score the rows)."""
     from dcslam.io.atomic import write_text_atomic
     from dcslam.report.scores import check_outputs
 
     if not beams or not drives:
         raise DcslamError("the beams table needs at least one beam count and one test drive")
     out_dir = Path(out_dir) if out_dir else ws.results
-    results = beams_results(ws, beams, drives, max_time_diff, failure_threshold, jobs)
+    results = beams_results(ws, beams, drives, max_time_diff, failure_threshold, jobs, inputs)
     table, per_drive = table_beams(results, beams, drives), per_drive_table(results)
     ranks = correlation(results, drives)
     tables = {"table_beams": table, "table_beams_per_drive": per_drive, "table_beams_correlation": ranks}

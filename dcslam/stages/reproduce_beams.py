@@ -173,6 +173,7 @@ class BeamsTableConfig:
     max_time_diff: float = option(EVO_MAX_TIME_DIFF_S, min=0.0, help="Trajectory association tolerance (s).")
     failure_threshold: float = option(FAILURE_THRESHOLD, min=0.0, help="Localisation above which a drive failed.")
     jobs: int = option(1, internal=True, help="Worker processes that score the rows (not part of the stamp).")
+    inputs: list[str] | None = option(None, help="Rows to score, by input label (default: every input).")
 
 
 def run_table(ws: Workspace, config: BeamsTableConfig, *, force: bool = False):
@@ -185,7 +186,8 @@ def run_table(ws: Workspace, config: BeamsTableConfig, *, force: bool = False):
 
     report = build_beams_report(ws, list(config.beams), select_drives(ws, config.drive), out_dir=config.out_dir,
                                 force=force, max_time_diff=config.max_time_diff,
-                                failure_threshold=config.failure_threshold, jobs=config.jobs)
+                                failure_threshold=config.failure_threshold, jobs=config.jobs,
+                                inputs=config.inputs)
     write_json_atomic(report.written[0].parent / "table_beams.json", stage_config("score-beams", to_dict(config)),
                       force=True)
     return report

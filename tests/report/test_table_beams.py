@@ -269,3 +269,22 @@ def test_a_measured_row_over_training_seeds_reads_each_seed_s_slam_folder(tmp_pa
     assert [m.layer for m in row.members] == ["nconv-sparse16", "nconv-s1-sparse16"]
     assert [m.localisation for m in row.members] == [pytest.approx(0.1), pytest.approx(0.2)]
     assert results[(16, "nconv")].members[1].localisation == pytest.approx(0.4)
+
+
+def test_inputs_select_the_rows_scored_and_an_unknown_label_is_refused(tmp_path):
+    """``inputs``: only those rows are scored (a study of a few inputs); a label the table does not have is one
+    line naming the labels, before any work."""
+    from dcslam.errors import DcslamError
+    from dcslam.report.table_beams import beams_results
+    from dcslam.stages import slam
+    from dcslam.workspace import Workspace
+    from tests.fixtures.depth import write_workspace
+
+    ws = Workspace(write_workspace(tmp_path / "ws", n=6, extra=True))
+    for depth in ("sparse", "sparse@16"):
+        slam.run(ws, slam.SlamStageConfig(odometry="gt", frames=2, depth=depth, drive=["drive_d"]))
+    results = beams_results(ws, [64, 16], ["drive_d"], inputs=["sparse", "IP-Basic"])
+    assert sorted(results) == [(16, "IP-Basic"), (16, "sparse"), (64, "IP-Basic"), (64, "sparse")]
+    assert results[(16, "sparse")].pairs and not results[(16, "IP-Basic")].pairs
+    with pytest.raises(DcslamError, match="no input 'IP Basic'; choose from: sparse; IP-Basic"):
+        beams_results(ws, [64], ["drive_d"], inputs=["IP Basic"])
