@@ -5,23 +5,15 @@ import torch
 
 from dcslam.io.drive import DriveFrame, DriveWriter
 from dcslam.slam.config import SlamSettings, build_slam
-from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
+from dcslam.slam.scene import kitti_K, lidar_mask, street_trajectory, StreetScene
 from dcslam.stages.slam import run_drive, write_outputs
+from tests.fixtures.street import write_analytic_street
 
 H, W, N = 48, 160, 4
 
 
 def _write_drive(path, frames=N):
-    scene, K = StreetScene(1), kitti_K(H, W)
-    poses = street_trajectory(frames, step=0.5)
-    rng = np.random.default_rng(0)
-    with DriveWriter(path, K.double().numpy(), H, W, source="synthetic", date="2011_09_26", drive="street",
-                     split="test") as writer:
-        for i in range(frames):
-            dense = scene.render(poses[i], K, H, W).float().numpy()
-            writer.append(DriveFrame(rng.integers(0, 255, (H, W, 3), dtype=np.uint8),
-                                     dense * lidar_mask(H, W).numpy(), dense, poses[i].numpy(), 0.1 * i, i))
-    return K, poses
+    return write_analytic_street(path, frames, H, W)
 
 
 def test_prefetched_frames_give_the_poses_of_a_plain_loop(tmp_path):

@@ -6,11 +6,11 @@ import json
 import numpy as np
 import pytest
 
-from dcslam.io.drive import DriveFile, DriveFrame, DriveWriter, Layer, load_depth, write_layer
+from dcslam.io.drive import DriveFile, Layer, load_depth, write_layer
 from dcslam.io.slam_summary import read_verdict
-from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
 from dcslam.stages import slam
 from dcslam.workspace import Workspace
+from tests.fixtures.street import write_analytic_street
 
 H, W, N = 96, 320, 8
 
@@ -20,16 +20,8 @@ def scaled(tmp_path_factory):
     """(workspace, drive file, layer folder): an 8-frame street at 0.8 m per frame and a layer of its dense depth
     times 1.2 that says it completed the drive's sparse depth."""
     root = tmp_path_factory.mktemp("evidence")
-    scene, K = StreetScene(1), kitti_K(H, W)
-    poses = street_trajectory(N, step=0.8)
-    rng = np.random.default_rng(0)
     path = root / "street.h5"
-    with DriveWriter(path, K.double().numpy(), H, W, source="synthetic", date="2011_09_26", drive="street",
-                     split="test") as writer:
-        for i in range(N):
-            dense = scene.render(poses[i], K, H, W).float().numpy()
-            writer.append(DriveFrame(rng.integers(0, 255, (H, W, 3), dtype=np.uint8),
-                                     dense * lidar_mask(H, W).numpy(), dense, poses[i].numpy(), 0.1 * i, i))
+    write_analytic_street(path, N, H, W, step=0.8)
     with DriveFile(path) as drive:
         dense = load_depth(drive, "dense")
     layer = root / "layer"

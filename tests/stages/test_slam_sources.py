@@ -54,17 +54,9 @@ def test_a_layer_that_does_not_say_its_input_errors_in_one_line_and_writes_nothi
 
 def _street_drive(path, frames=4, H=48, W=160):
     """An analytic street (dcslam.slam.scene) whose sparse depth ICP aligns with accepted steps."""
-    from dcslam.io.drive import DriveFrame, DriveWriter
-    from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
+    from tests.fixtures.street import write_analytic_street
 
-    scene, K, poses = StreetScene(1), kitti_K(H, W), street_trajectory(frames, step=0.5)
-    rng = np.random.default_rng(0)
-    with DriveWriter(path, K.double().numpy(), H, W, source="synthetic", date="2011_09_26", drive="street",
-                     split="test") as writer:
-        for i in range(frames):
-            dense = scene.render(poses[i], K, H, W).float().numpy()
-            writer.append(DriveFrame(rng.integers(0, 255, (H, W, 3), dtype=np.uint8),
-                                     dense * lidar_mask(H, W).numpy(), dense, poses[i].numpy(), 0.1 * i, i))
+    write_analytic_street(path, frames, H, W)
     return path
 
 
