@@ -25,6 +25,8 @@ ARCHITECTURES = {  # trainable network name → "module:class" (the class takes 
 CLASSICAL = {  # completer that needs no training → "module:factory" (called with no argument)
     "ip-basic-fast": "dcslam.depth.models.ip_basic:fast",
     "ip-basic-multiscale": "dcslam.depth.models.ip_basic:multiscale",
+    "scanline": "dcslam.depth.models.scanline:scanline",
+    "planefit": "dcslam.depth.models.planefit:planefit",
 }
 ALIASES = {"ip-basic": "ip-basic-fast"}  # other names of registered completers
 IP_BASIC_NAMES = tuple(name for name in CLASSICAL if name.startswith("ip-basic"))
