@@ -60,10 +60,20 @@ def _box(integral: np.ndarray, rows: tuple[int, int], cols: tuple[int, int], at=
     """For each pixel (r, c), the sum over rows r + rows[0] .. r + rows[1] and columns c + cols[0] .. c + cols[1]
     (inclusive, clipped to the image; empty ranges sum to 0): (H, W), or (M,) at the pixels ``at = (r, c)``."""
     h, w = integral.shape[0] - 1, integral.shape[1] - 1
-    r, c = (np.arange(h)[:, None], np.arange(w)[None, :]) if at is None else at
-    top, bottom = np.clip(r + rows[0], 0, h), np.clip(r + rows[1] + 1, 0, h)
-    left, right = np.clip(c + cols[0], 0, w), np.clip(c + cols[1] + 1, 0, w)
-    return integral[bottom, right] - integral[top, right] - integral[bottom, left] + integral[top, left]
+    if at is not None:
+        r, c = at
+        top, bottom = np.clip(r + rows[0], 0, h), np.clip(r + rows[1] + 1, 0, h)
+        left, right = np.clip(c + cols[0], 0, w), np.clip(c + cols[1] + 1, 0, w)
+        return integral[bottom, right] - integral[top, right] - integral[bottom, left] + integral[top, left]
+    # the whole image by slices: an integral image padded with its edge values is the clipped lookup
+    pr, pc = max(-rows[0], rows[1] + 1, 0), max(-cols[0], cols[1] + 1, 0)
+    padded = np.pad(integral, ((pr, pr), (pc, pc)), mode="edge")
+
+    def corner(dr: int, dc: int) -> np.ndarray:
+        return padded[pr + dr:pr + dr + h, pc + dc:pc + dc + w]
+
+    top, bottom, left, right = rows[0], rows[1] + 1, cols[0], cols[1] + 1
+    return corner(bottom, right) - corner(top, right) - corner(bottom, left) + corner(top, left)
 
 
 def complete_planefit(depth_m: np.ndarray, max_half_height: int = MAX_HALF_HEIGHT,
