@@ -200,7 +200,8 @@ class WriteSink(io.RawIOBase):
 
 class AtomicSet:
     """Files that appear together or not at all: :meth:`stage` gives each final path a temporary name beside it,
-    and leaving the ``with`` block cleanly renames them all; any exception (Ctrl-C included) removes them all.
+    and leaving the ``with`` block cleanly renames them all; any exception (Ctrl-C included) removes them all. A
+    failed write of a member (a full disk, ...) is one :class:`DcslamError` line naming it and the reason.
 
     >>> with AtomicSet() as files:
     ...     for drive in drives:
@@ -227,11 +228,26 @@ class AtomicSet:
             if exc_type is None:
                 check()
                 for tmp, path in self._staged:
-                    os.replace(tmp, path)
+                    try:
+                        os.replace(tmp, path)
+                    except OSError as error:
+                        translated = as_write_error(error, path, tmp)
+                        if translated is not None:
+                            raise translated from error
+                        raise
         finally:
             for tmp, _ in self._staged:
-                with contextlib.suppress(FileNotFoundError):
+                with contextlib.suppress(OSError):
                     tmp.unlink()
+        if isinstance(exc, OSError) and self._staged:  # a failed write of a member names the member
+            filename = getattr(exc, "filename", None)
+            named = [path for tmp, path in self._staged
+                     if filename is not None and Path(os.fsdecode(filename)).absolute() in (tmp.absolute(),
+                                                                                            path.absolute())]
+            if filename is None or named:
+                translated = as_write_error(exc, (named or [self._staged[-1][1]])[0])
+                if translated is not None:
+                    raise translated from exc
 
 
 def write_text_atomic(path: Path | str, text: str, force: bool = True) -> Path:
@@ -265,3 +281,78 @@ def _json_default(obj):
     if hasattr(obj, "tolist"):
         return obj.tolist()
     raise TypeError(f"cannot write {type(obj).__name__} as JSON")
+
+
+class CommittedSet(AtomicSet):
+    """An :class:`AtomicSet` whose completion is recorded by a marker file written last (the names and sizes of its
+    files), so that a set is complete or, for every reader, absent: a crash or a full disk between two renames, or
+    before the marker, leaves files that :func:`is_committed` rejects. Entering the block first removes the marker
+    of an older set of the same name, whose files are about to be replaced.
+
+    >>> with CommittedSet(out / f"{drive}.done") as files:
+    ...     write_tum(files.stage(out / f"{drive}.txt"), ...)
+    ...     write_json_atomic(files.stage(out / f"{drive}.json"), ...)
+    >>> is_committed(out / f"{drive}.done")
+    True
+    """
+
+    def __init__(self, marker: Path | str) -> None:
+        super().__init__()
+        self.marker = Path(marker)
+
+    def __enter__(self) -> "CommittedSet":
+        try:
+            self.marker.unlink(missing_ok=True)
+        except OSError as exc:
+            error = as_write_error(exc, self.marker)
+            if error is not None:
+                raise error from exc
+            raise
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        super().__exit__(exc_type, exc, tb)
+        if exc_type is None:
+            files = [{"name": os.path.relpath(path, self.marker.parent), "bytes": path.stat().st_size}
+                     for _, path in self._staged]
+            write_json_atomic(self.marker, {"schema": COMMIT_SCHEMA, "files": files})
+
+
+#: The schema of a :class:`CommittedSet`'s marker file.
+COMMIT_SCHEMA = "dcslam.commit/1"
+
+
+def committed_files(marker: Path | str) -> list[Path]:
+    """The files of the set that ``marker`` commits; :class:`DcslamError` naming what is wrong when the set is not
+    committed (no marker, an unreadable marker, a file missing or of another size than committed)."""
+    marker = Path(marker)
+    try:
+        record = json.loads(marker.read_text())
+    except FileNotFoundError:
+        raise DcslamError(f"{marker} not found: the output set was not completed; rerun the command that makes it "
+                          "with --force") from None
+    except (OSError, ValueError) as exc:
+        raise DcslamError(f"{marker}: not a readable commit marker ({exc}); rerun the command that makes it with "
+                          "--force") from None
+    if (not isinstance(record, dict) or record.get("schema") != COMMIT_SCHEMA
+            or not isinstance(record.get("files"), list)):
+        raise DcslamError(f"{marker}: not a {COMMIT_SCHEMA} commit marker; rerun the command that makes it with "
+                          "--force")
+    files = []
+    for entry in record["files"]:
+        path = marker.parent / str(entry.get("name", "")) if isinstance(entry, dict) else None
+        if path is None or not path.is_file() or path.stat().st_size != entry.get("bytes"):
+            what = "missing" if path is None or not path.is_file() else "changed since it was committed"
+            raise DcslamError(f"{path or marker}: {what} (committed by {marker}); rerun the command that makes it "
+                              "with --force")
+        files.append(path)
+    return files
+
+
+def is_committed(marker: Path | str) -> bool:
+    """Whether ``marker`` commits a complete set: every file it names is there, at its committed size."""
+    try:
+        committed_files(marker)
+    except DcslamError:
+        return False
+    return True
