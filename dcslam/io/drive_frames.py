@@ -54,11 +54,15 @@ def drive_frames(path: Path | str, source: str | Path, frames: int | None = None
         n = len(drive) if not frames else min(frames, len(drive))
         if n < 1:
             raise DcslamError(f"{path}: no frames")
-        if not isinstance(source, Path) and is_depth_kind(str(source)):
+        is_kind = not isinstance(source, Path) and is_depth_kind(str(source))
+        if is_kind:
             depth_at, confidence_at = (lambda i: drive.depth(str(source), i)), None
         else:
             depth_at, confidence_at = stack.enter_context(layer_frames(drive, source))
         separate = sources_kind is not None and not (isinstance(source, str) and source == sources_kind)
+        for kind in ([str(source)] if is_kind else []) + ([sources_kind] if separate else []):
+            if kind not in drive.kinds:
+                drive.depth(kind, 0)  # before any frame: its one-line error names the kinds the drive holds
 
         def read() -> Iterator[DepthFrame]:
             for i in range(n):
