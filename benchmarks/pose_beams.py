@@ -109,7 +109,7 @@ def score(ws, runs: list[str], beams: list[int]) -> None:
 
     from dcslam.io.drive import read_splits
     from dcslam.report.spread import spread
-    from dcslam.report.table_5_2 import score_layer
+    from dcslam.report.results import score_layer
     from dcslam.report.table_beams import prediction_name
 
     test = read_splits(ws.splits)["test"]

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from dcslam.errors import DcslamError
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
-from dcslam.report.table_5_2 import FAILURE_THRESHOLD
+from dcslam.report.results import FAILURE_THRESHOLD
 from dcslam.report.table_beams import (FULL_BEAMS, INPUTS, IP_BASIC_RUN, MEASURED, TRAINED, layer_name,
                                        prediction_name, slam_name, sparse_kind)
 from dcslam.stages import filter as filter_stage

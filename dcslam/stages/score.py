@@ -10,6 +10,7 @@ from pathlib import Path
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import DEPARTURES_TEXT
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
+from dcslam.report.results import FAILURE_THRESHOLD
 from dcslam.stages.config import option
 from dcslam.workspace import Workspace
 
@@ -165,7 +166,7 @@ class ScoreTablesConfig:
                                   help="Output folder (default: <workspace>/results).")
     devkit_exact: bool = option(False, flags=("--devkit-exact",), help=DEPARTURES_TEXT)
     max_time_diff: float = option(EVO_MAX_TIME_DIFF_S, min=0.0, help=MAX_TIME_DIFF_HELP)
-    failure_threshold: float = option(1.0, min=0.0, help=FAILURE_HELP)
+    failure_threshold: float = option(FAILURE_THRESHOLD, min=0.0, help=FAILURE_HELP)
 
 
 def run_tables(ws: Workspace, config: ScoreTablesConfig, *, force: bool = False):
