@@ -117,7 +117,7 @@ def failed_by_all(rows: Mapping[str, Mapping[str, float]], threshold: float | No
                   flagged: Mapping[str, set] | None = None) -> list[str]:
     """The drives on which every row fails, exact depth included: no input localises there, so the drive says
     nothing about which input is better and is reported apart. A row fails on a drive when its figure (the thesis
-    localisation error) exceeds ``threshold`` (default the tables' :data:`dcslam.report.table_5_2.FAILURE_THRESHOLD`)
+    localisation error) exceeds ``threshold`` (default the tables' :data:`dcslam.report.results.FAILURE_THRESHOLD`)
     or when ``flagged[row]`` names the drive (its SLAM run was flagged suspect).
 
     Args:
@@ -126,7 +126,7 @@ def failed_by_all(rows: Mapping[str, Mapping[str, float]], threshold: float | No
         the drives, sorted.
     """
     if threshold is None:
-        from dcslam.report.table_5_2 import FAILURE_THRESHOLD as threshold
+        from dcslam.report.results import FAILURE_THRESHOLD as threshold
     if not rows:
         raise DcslamError("failed drives of no rows")
     flagged = flagged or {}

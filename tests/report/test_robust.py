@@ -93,7 +93,7 @@ def test_failed_by_all():
 
 
 def test_default_threshold_is_the_tables():
-    from dcslam.report.table_5_2 import FAILURE_THRESHOLD
+    from dcslam.report.results import FAILURE_THRESHOLD
 
     rows = {"sparse": {"a": FAILURE_THRESHOLD * 1.01}, "exact": {"a": FAILURE_THRESHOLD * 1.01}}
     assert failed_by_all(rows) == ["a"] and failed_by_all({"x": {"a": FAILURE_THRESHOLD}}) == []
