@@ -39,6 +39,10 @@ def test_export_then_import_then_score_filter_and_slam(cli, ws):
     result = cli("slam", "-w", ws, "--depth", "method", "--frames", "3")
     assert result.exit_code == 0, result.output
     assert (ws / "slam" / "method" / "drive_d.txt").is_file()
+    result = cli("score", "tables", "-w", ws)
+    assert result.exit_code == 0, result.output
+    row = next(line for line in (ws / "results" / "table_5_2.md").read_text().splitlines() if "(imported)" in line)
+    assert row.startswith("| method (imported) |") and "—" not in row.split("|")[2], row
 
     again = cli("export", "-w", ws, "--depth", "predicted/method", "--out", ws / "again", "--layout", "index")
     assert again.exit_code == 0, again.output
