@@ -69,3 +69,18 @@ def test_refused_exports_exit_1_and_usage_errors_exit_2(cli, ws):
     assert cli("import", "-w", ws, "--src", ws, "--crop", "7").exit_code == 2
     result = cli("import", "-w", ws, "--src", ws / "nowhere")
     assert result.exit_code == 1 and "not a folder" in result.stderr
+
+
+def test_the_command_lines_of_the_page_parse(cli, tmp_path):
+    """Every `dcslam ...` line of docs/bring-your-own-completer.md is a configuration its command accepts."""
+    import re
+    import shlex
+    from pathlib import Path
+
+    page = (Path(__file__).parents[2] / "docs" / "bring-your-own-completer.md").read_text()
+    lines = [line.split("#")[0] for block in re.findall(r"```\n(.*?)```", page, re.S) for line in block.splitlines()
+             if line.startswith("dcslam ")]
+    assert len(lines) >= 8
+    for line in lines:
+        result = cli(*shlex.split(line)[1:], "--print-config", "-w", tmp_path / "ws")
+        assert result.exit_code == 0, (line, result.output)
