@@ -86,9 +86,9 @@ class ImportResult:
     frames: int
 
 
-def _drive_files(src: Path, drive: str, kind: str | None, frame_ids: np.ndarray) -> list[Path]:
-    """The per-drive layout's PNG of every frame of a drive, in the drive's order; a missing or extra file is a
-    :class:`DcslamError` naming it."""
+def _drive_files(src: Path, drive: str, kind: str | None, frame_ids: np.ndarray) -> tuple[list[Path], str]:
+    """The per-drive layout's PNG of every frame of a drive, in the drive's order, and the folder under
+    ``proj_depth/`` they are in; a missing or extra file is a :class:`DcslamError` naming it."""
     from dcslam.io.devkit import drive_folder, drive_png
 
     if not (src / drive).is_dir():
@@ -107,7 +107,7 @@ def _drive_files(src: Path, drive: str, kind: str | None, frame_ids: np.ndarray)
     if extra:
         raise DcslamError(f"{extra[0]}: not a frame of drive {drive} ({len(extra)} such file(s)); remove it or "
                           "import against the drive it belongs to")
-    return files
+    return files, kind
 
 
 def _index_files(src: Path, entries: list[tuple[str, int]], frames: dict[str, np.ndarray],
@@ -152,6 +152,7 @@ def run(ws: Workspace, config: ImportConfig, *, force: bool = False) -> ImportRe
         raise DcslamError(f"--src {src} is not a folder of devkit PNGs")
     name = plain_name(config.name or src.resolve().name, "--name")
     out_dir = output_folder(ws.predictions / name, "predictions/<name>")
+    kinds = None
     if config.layout == "index":
         entries = read_list(config.list_file, [p.stem for p in list_drives(ws.drives)])
         drives = list(dict.fromkeys(drive for drive, _ in entries))
@@ -175,10 +176,13 @@ def run(ws: Workspace, config: ImportConfig, *, force: bool = False) -> ImportRe
     if entries is not None:
         files = _index_files(src, entries, frames, Path(config.list_file))
     else:
-        files = {drive: _drive_files(src, drive, config.kind, frames[drive]) for drive in drives}
+        found = {drive: _drive_files(src, drive, config.kind, frames[drive]) for drive in drives}
+        files = {drive: paths for drive, (paths, _) in found.items()}
+        kinds = sorted({kind for _, kind in found.values()})
 
     list_file = str(Path(config.list_file).resolve()) if config.list_file else None
-    imported = {"source": str(src.resolve()), "layout": config.layout, "kind": config.kind, "list": list_file,
+    kind = kinds[0] if kinds and len(kinds) == 1 else kinds  # the folder under proj_depth/ (drive layout)
+    imported = {"source": str(src.resolve()), "layout": config.layout, "kind": kind, "list": list_file,
                 "crop": list(config.offset)}
     # each drive's layer is staged as soon as its files are read and checked (one drive in memory at a time); the
     # layers appear together when every drive passed, and a refused file leaves none

@@ -62,6 +62,8 @@ def test_round_trip_through_the_drive_layout(ws, kind):
         np.testing.assert_array_equal(back.frame_ids, drive_depth(ws, drive)[1])
         assert back.config["imported"]["source"] == str(out.resolve())
         assert back.config["imported"]["layout"] == "drive" and back.config["input"] == "sparse"
+        assert back.config["imported"]["kind"] == {"sparse": "velodyne_raw", "dense": "groundtruth"}.get(kind,
+                                                                                                          "prediction")
     config = json.loads((ws.predictions / "back" / "config.json").read_text())
     assert config["stage"] == "import" and config["settings"]["drives"] == DRIVES
 
