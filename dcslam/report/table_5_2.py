@@ -58,6 +58,19 @@ def filters_of(ws: Workspace, source_layer: str) -> list[str]:
     return names
 
 
+def imported_layers(ws: Workspace) -> list[str]:
+    """Names of the layers ``dcslam import`` brought in (``predictions/<name>/config.json`` of stage ``import``)."""
+    names = []
+    for config in sorted(ws.predictions.glob("*/config.json")) if ws.predictions.is_dir() else []:
+        try:
+            stage = json.loads(config.read_text()).get("stage")
+        except (json.JSONDecodeError, AttributeError):
+            raise DcslamError(f"{config}: not a JSON object") from None
+        if stage == "import":
+            names.append(config.parent.name)
+    return names
+
+
 def score_runs(ws: Workspace, label: str, runs: list[RunSummary], drives: list[str], suffix: str = "",
                **options) -> "LayerResult | SeedResults":
     """The row of ``runs`` (the seeds of one run, :func:`dcslam.report.seeds.seed_groups`): layer
@@ -96,6 +109,7 @@ def table_5_2_results(ws: Workspace, runs: list[RunSummary], drives: list[str], 
     found = [name for name in IP_BASIC if find_layer(ws, name) is not None]
     results += [score("IP-Basic", name) for name in found] or [
         LayerResult(label="IP-Basic", layer="—", missing=[f"no layer {' or '.join(IP_BASIC)} (dcslam predict)"])]
+    results += [score(f"{name} (imported)", name) for name in imported_layers(ws)]  # other methods' predictions
     for group in groups:
         run, label = group[0], f"{group[0].recipe} + best filter"
         names = filters_of(ws, run.name)
