@@ -196,7 +196,7 @@ def to_toml(config, title: str | None = None) -> str:
 
 def code_version() -> str:
     """dcslam's version and a hash of its Python sources: changes when the code that makes outputs changes."""
-    from dcslam import __version__
+    from dcslam.version import __version__
 
     root = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
