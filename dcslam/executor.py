@@ -391,7 +391,10 @@ NEVER_STARTS = ("PartitionConfig", "PartitionNodeLimit", "PartitionTimeLimit", "
 def _queued_jobs() -> dict[str, str] | None:
     """This user's jobs in the queue (pending, running, completing) → the reason a pending one waits ("" when
     running); array tasks one by one, and an array's own id for its tasks that squeue still shows folded. None when
-    squeue does not answer (then every job counts as queued)."""
+    squeue does not answer (then every job counts as queued).
+
+    squeue rather than submitit's ``job.state``: submitit reads ``sacct``, which answers only where the cluster
+    keeps an accounting database and never gives the reason a pending job waits (what :data:`NEVER_STARTS` needs)."""
     try:
         done = subprocess.run(["squeue", "--me", "-h", "-r", "-o", "%i %T %r"], capture_output=True, text=True,
                               timeout=60)
