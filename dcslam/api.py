@@ -24,8 +24,8 @@ from dcslam.errors import DcslamError
 from dcslam.eval.trajectory import TrajectoryScores, score_trajectory
 from dcslam.slam.config import SlamSettings
 
-__all__ = ["SlamSettings", "TrainedRun", "complete", "complete_drive", "load_completer", "load_run", "run_slam",
-           "score_trajectory", "slam_arrays", "TrajectoryScores"]
+__all__ = ["SlamSettings", "TrainedRun", "TrajectoryScores", "complete", "complete_drive", "load_completer",
+           "load_run", "run_slam", "score_trajectory", "slam_arrays"]
 
 
 def load_completer(model: str | Path = "ip-basic-fast", device: str = "cpu"):
