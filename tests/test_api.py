@@ -29,7 +29,8 @@ def test_public_names_are_pinned():
 
 def test_import_dcslam_loads_no_numpy_or_torch():
     # the command line imports the package first: `dcslam --help` must not pay for NumPy, torch or Open3D
-    code = "import sys, dcslam; print(sorted(m for m in ('numpy', 'torch', 'open3d', 'dcslam.api') if m in sys.modules))"
+    code = ("import sys, dcslam; "
+            "print(sorted(m for m in ('numpy', 'torch', 'open3d', 'dcslam.api') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
 
