@@ -138,14 +138,32 @@ def _index_files(src: Path, entries: list[tuple[str, int]], frames: dict[str, np
     return files
 
 
+def _drives_of(ws: Workspace, config: ImportConfig, src: Path) -> tuple[list | None, list[str]]:
+    """(the list's (drive, frame) entries or None, the drives imported): those of the list (index layout), else the
+    drives selected, refusing a drive folder in ``src`` that is not among them (drive layout)."""
+    from dcslam.io.devkit import read_list
+    from dcslam.io.drive import list_drives
+    from dcslam.workspace import select_drives
+
+    if config.layout == "index":
+        entries = read_list(config.list_file, [p.stem for p in list_drives(ws.drives)])
+        return entries, list(dict.fromkeys(drive for drive, _ in entries))
+    drives = select_drives(ws, config.drive)
+    others = sorted(p.name for p in src.iterdir() if p.is_dir() and not p.name.startswith(".") and p.name not in drives)
+    if others:
+        raise DcslamError(f"{src / others[0]}: predictions of a drive not imported (drives: {', '.join(drives)})"
+                          f"; pass --drive {others[0]} too, or remove the folder")
+    return None, drives
+
+
 def run(ws: Workspace, config: ImportConfig, *, force: bool = False) -> ImportResult:
     """Read and check every PNG, then write ``<out>/<drive>.h5`` for each drive and ``<out>/config.json``."""
     from dcslam.io.atomic import AtomicSet, write_json_atomic
-    from dcslam.io.devkit import read_list, read_prediction
-    from dcslam.io.drive import DriveFile, Layer, input_beams, list_drives, write_layer
+    from dcslam.io.devkit import read_prediction
+    from dcslam.io.drive import DriveFile, Layer, input_beams, write_layer
     from dcslam.progress import track
     from dcslam.stages.config import to_dict
-    from dcslam.workspace import drive_file, new_folder, output_folder, plain_name, select_drives, stage_config
+    from dcslam.workspace import drive_file, new_folder, output_folder, plain_name, stage_config
 
     src = Path(config.src)
     if not src.is_dir():
@@ -153,17 +171,7 @@ def run(ws: Workspace, config: ImportConfig, *, force: bool = False) -> ImportRe
     name = plain_name(config.name or src.resolve().name, "--name")
     out_dir = output_folder(ws.predictions / name, "predictions/<name>")
     kinds = None
-    if config.layout == "index":
-        entries = read_list(config.list_file, [p.stem for p in list_drives(ws.drives)])
-        drives = list(dict.fromkeys(drive for drive, _ in entries))
-    else:
-        entries = None
-        drives = select_drives(ws, config.drive)
-        others = sorted(p.name for p in src.iterdir() if p.is_dir() and not p.name.startswith(".")
-                        and p.name not in drives)
-        if others:
-            raise DcslamError(f"{src / others[0]}: predictions of a drive not imported (drives: {', '.join(drives)})"
-                              f"; pass --drive {others[0]} too, or remove the folder")
+    entries, drives = _drives_of(ws, config, src)
     outputs = {drive: out_dir / f"{drive}.h5" for drive in drives}
     existing = [p for p in [*outputs.values(), out_dir / "config.json"] if p.exists()]
     if existing and not force:
