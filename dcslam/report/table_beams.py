@@ -29,6 +29,7 @@ from dcslam.report.seeds import paired
 from dcslam.report.spread import TWO_LEVEL_METHOD
 from dcslam.report.results import (FAILURE_THRESHOLD, LayerResult, SeedResults, csv_suffixes, score_layer, seed_layer,
                                    seeded, surface_note, with_seed_columns)
+from dcslam.report.robust_rows import ROBUST_NOTE, drive_localisation, left_out_text, robust_columns
 from dcslam.report.tables import Column, Table
 from dcslam.workspace import Workspace
 
@@ -265,7 +266,9 @@ GAP_NOTE = ("gap closed: (sparse − row) / (sparse − exact) of the mean local
 COLUMNS = [Column("beams", "beams"), Column("input", "input"), Column("layer", "layer"), Column("drives", "drives"),
            Column("failures", "failed"), Column("localisation_text", "localisation"),
            Column("localisation_median_text", "median"), Column("vs_sparse", "vs sparse"),
-           Column("gap_closed_text", "gap closed"), Column("mae_mm_text", "MAE (mm)"),
+           Column("gap_closed_text", "gap closed"), Column("signed_rank_p_text", "signed-rank p"),
+           Column("median_diff_text", "median Δ vs sparse"), Column("robust_vs_sparse", "robust vs sparse"),
+           Column("gap_closed_median_text", "gap closed (medians)"), Column("mae_mm_text", "MAE (mm)"),
            Column("rmse_mm_text", "RMSE (mm)"), Column("ate_rmse_m_text", "ATE RMSE (m)"),
            Column("rpe_rmse_m_text", "RPE RMSE (m)"), Column("rpe_rmse_deg_text", "RPE RMSE (°)"),
            Column("notes", "why —")]
@@ -294,10 +297,14 @@ def _gap_closed(result: LayerResult, sparse: LayerResult | None, exact: LayerRes
     return None if gap <= 0 else (sparse.localisation - result.localisation) / gap
 
 
+ROBUST_CSV = ("robust_drives", "signed_rank_n", "signed_rank_p", "median_diff", "median_diff_ci_low",
+              "median_diff_ci_high", "robust_vs_sparse", "gap_closed_median")
+
+
 def csv_columns(seeds: bool) -> list[Column]:
     """The beams table's CSV columns: every figure's mean, spread and median (with ``seeds``: its seed-to-seed std)."""
     return [Column(k, k) for k in ("beams", "input", "layer", "sources", "drives", *(("seeds",) if seeds else ()),
-                                   "failures", "vs_sparse", "gap_closed")] + [
+                                   "failures", "vs_sparse", "gap_closed", *ROBUST_CSV)] + [
         Column(f"{k}{s}", "") for k in FIGURES for s in csv_suffixes(seeds)] + [Column("missing", "")]
 
 
@@ -312,6 +319,7 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
     table.csv_columns = csv_columns(seeds)
     exact = results.get((None, "exact"))
     top = max(beams)
+    robust, failed_all = robust_columns(results, beams)
     for key, result in results.items():
         b, label = key
         sparse = results.get((b if b is not None else top, "sparse"))
@@ -322,6 +330,7 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
         gap = None if result is exact else _gap_closed(result, sparse, exact)
         row["gap_closed"] = gap
         row["gap_closed_text"] = None if gap is None else f"{100 * gap:.0f} %"
+        row.update(robust.get(key, {}))
         row["notes"] = row.get("missing")
         table.rows.append(row)
     table.notes += [
@@ -333,6 +342,8 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
         f"vs sparse: paired t-interval (95 %) of the per-drive differences from the sparse input of the same beam "
         f"count (rows 'any': from {top}-beam sparse); better / worse beyond the spread, or within it",
         GAP_NOTE,
+        ROBUST_NOTE if robust else "",
+        left_out_text(failed_all) if robust else "",
         ("measured sources: SLAM whose ICP aligns only the B-beam sparse depth's measured pixels against the map "
          "fused from the row's layer (`dcslam slam --sources measured`; runs under slam/<layer>+measured/, exact's "
          "under slam/exact+measured-sparseB/); its depth figures are the layer's, as in its depth-mode row"
@@ -373,6 +384,12 @@ def findings(results: dict[tuple[int | None, str], LayerResult], beams: list[int
     whether each fine-tuned input (``tuned_from``) differs from the input it was fine-tuned from."""
     lines = []
     exact = results.get((None, "exact"))
+    robust = robust_columns(results, beams)[0] if results else {}
+    robust_better = {}
+    for (b, label), fields in robust.items():
+        if b is not None and fields.get("robust_vs_sparse") == "better" and INPUT_OF.get(label) is not None \
+                and INPUT_OF[label].completer:
+            robust_better.setdefault(b, []).append(label)
     for b in sorted(beams, reverse=True):
         sparse = results.get((b, "sparse"))
         if sparse is None or not sparse.pairs:
@@ -384,6 +401,7 @@ def findings(results: dict[tuple[int | None, str], LayerResult], beams: list[int
         best = min(scored, key=lambda r: r.localisation) if scored else None
         gap = _gap_closed(best, sparse, exact) if best is not None else None
         text = f"{b} beams: better than sparse beyond the spread: {', '.join(better) or 'none'}"
+        text += f"; by the median interval: {', '.join(robust_better.get(b, [])) or 'none'}"
         if best is not None:
             text += f"; best completed input {best.label} ({best.localisation:.4f} vs sparse {sparse.localisation:.4f}"
             text += f", {100 * gap:.0f} % of the gap to exact)" if gap is not None else ")"
@@ -422,10 +440,23 @@ def per_drive_table(results: dict[tuple[int | None, str], LayerResult]) -> Table
     from dcslam.report.scores import PER_DRIVE_KEYS
 
     columns = [Column("beams", "beams"), Column("input", "input"), Column("layer", "layer"), Column("seed", "seed"),
-               Column("drive", "drive")] + [Column(k, k) for k in PER_DRIVE_KEYS]
-    rows = [{"beams": b if b is not None else "any", "input": label, "layer": seed_layer(r, seed), "seed": seed,
-             "drive": drive, **values}
-            for (b, label), r in results.items() for seed, drive, values in r.per_drive_rows()]
+               Column("drive", "drive")] + [Column(k, k) for k in PER_DRIVE_KEYS] + [
+        Column("vs_sparse_m", "vs sparse"), Column("failed_by_all", "failed by all")]
+    beams = sorted({b for b, _ in results if b is not None}, reverse=True)
+    top = beams[0] if beams else None
+    failed_all = robust_columns(results, beams)[1] if beams else {}
+    sparse = {b: drive_localisation(results[(b, "sparse")]) for b in beams
+              if (b, "sparse") in results and results[(b, "sparse")].pairs}
+    rows = []
+    for (b, label), r in results.items():
+        reference = sparse.get(b if b is not None else top, {})
+        for seed, drive, values in r.per_drive_rows():
+            here = values.get("localisation")
+            rows.append({"beams": b if b is not None else "any", "input": label, "layer": seed_layer(r, seed),
+                         "seed": seed, "drive": drive, **values,
+                         # this run's localisation less the sparse input's on the drive (< 0: better than sparse)
+                         "vs_sparse_m": None if here is None or drive not in reference else here - reference[drive],
+                         "failed_by_all": drive in failed_all.get(b if b is not None else top, ())})
     return Table("The beams experiment per drive", columns, rows)
 
 
