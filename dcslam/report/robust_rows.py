@@ -95,7 +95,8 @@ def robust_columns(results: dict, beams: list[int]) -> tuple[dict[Key, dict], di
     """The robust fields of every row of the beams table (``results``: ``{(beams | None, label): result}``) and the
     drives every row fails on, by beam count. A row is compared with ``(b, "sparse")`` of its beam count (the
     beam-independent rows with the largest beam count's) and its gap measured to ``(None, "exact")``; the sparse row
-    itself is the ``reference``, exact has no gap of its own."""
+    itself is the ``reference``, exact has no gap of its own, and a row whose every drive is left out says ``no
+    drive``."""
     top = max(beams)
     scored = {k: r for k, r in results.items() if r.pairs}
     figures = {k: drive_localisation(r) for k, r in scored.items()}
@@ -113,12 +114,14 @@ def robust_columns(results: dict, beams: list[int]) -> tuple[dict[Key, dict], di
         sparse = figures.get((b, "sparse"))
         if sparse is None:
             continue
+        skip = set(left_out.get(b, ()))
         if key == (b, "sparse"):
-            fields[key] = {"robust_vs_sparse": "reference", "robust_drives": len(row)}
+            fields[key] = {"robust_vs_sparse": "reference", "robust_drives": len(set(row) - skip)}
             continue
-        comparison = compare(row, sparse, None if key == (None, "exact") else exact, set(left_out.get(b, ())))
-        if comparison is not None:
-            fields[key] = comparison.fields()
+        comparison = compare(row, sparse, None if key == (None, "exact") else exact, skip)
+        # every drive left out (every row failed on each): nothing to compare, and the row says so
+        fields[key] = comparison.fields() if comparison is not None else {"robust_vs_sparse": "no drive",
+                                                                           "robust_drives": 0}
     return fields, left_out
 
 
@@ -126,7 +129,8 @@ ROBUST_NOTE = (
     "robust columns: signed-rank p: two-sided Wilcoxon signed-rank test of the per-drive localisation differences "
     "from the sparse input of the same beam count (n<6: fewer than 6 drives differ, so no p below 0.05 is possible); "
     "median Δ: median of those differences (row − sparse; < 0 better) with its 95 % percentile-bootstrap interval "
-    "over drives; robust vs sparse: better / worse when that interval excludes zero, else within; gap closed "
+    "over drives; robust vs sparse: better / worse when that interval excludes zero, else within (no drive: every "
+    "drive left out); gap closed "
     "(medians): (median sparse − median row) / (median sparse − median exact) over the same drives; a row over "
     "several training seeds takes the mean of its seeds on each drive")
 

@@ -9,8 +9,11 @@ not depend on B (annotated dense depth, the generator's exact depth): MAE / RMSE
 localisation (the thesis's metric, ATE, RPE) as the mean over the test drives ± the half-width of the 95 % t-interval
 (:mod:`dcslam.report.spread`), the median, the failures, whether the row differs from the sparse input of its beam
 count beyond the spread (paired by drive), and the share of the gap from that sparse input to exact depth that it
-closes; a fine-tuned input is also compared with the input it was fine-tuned from. Rows made with different SLAM
-settings are refused: a comparison across them would mean nothing.
+closes; beside them the comparison with that sparse input that one failing drive does not swamp (signed-rank test,
+bootstrap interval of the median paired difference, gap closed between medians; :mod:`dcslam.report.robust_rows`),
+without the drives on which every row fails, which the notes name. A fine-tuned input is also compared with the
+input it was fine-tuned from. Rows made with different SLAM settings are refused: a comparison across them would
+mean nothing. The surface experiment's table is the same table over its own inputs (:data:`SURFACE_INPUTS`).
 
 Layer names (one function, :func:`layer_name`, used by the pipeline that makes them and by this table):
 ``sparse`` / ``sparse@B`` (the drive files' depth), ``ip-basic-fast-sparseB``, ``<run>-sparseB`` (a trained
@@ -79,7 +82,18 @@ INPUTS = (*_DEPTH_INPUTS, *_MEASURED_INPUTS, BeamsInput("exact" + MEASURED_LABEL
           BeamsInput("annotated dense", ""), BeamsInput("exact", "", needs_exact=True))
 TRAINED = tuple(dict.fromkeys(i.completer for i in INPUTS if i.completer not in (None, "", IP_BASIC_RUN)))
 """Run names of the learned completers the table expects (``runs/<name>/``)."""
-INPUT_OF = {i.label: i for i in INPUTS}
+SURFACE_COMPLETERS = ("scanline", "planefit")  # the classical completers that keep planes and scanline structure
+CLASSICAL_RUNS = (IP_BASIC_RUN, *SURFACE_COMPLETERS)
+"""Completers of ``dcslam predict --model`` (no training) behind a row."""
+_SURFACE_DEPTH = (BeamsInput("sparse", None), BeamsInput("IP-Basic", IP_BASIC_RUN),
+                  *(BeamsInput(c, c) for c in SURFACE_COMPLETERS))
+SURFACE_INPUTS = (*_SURFACE_DEPTH, *(BeamsInput(i.label + MEASURED_LABEL, i.completer, sources=MEASURED)
+                                     for i in _SURFACE_DEPTH if i.completer is not None),
+                  BeamsInput("exact" + MEASURED_LABEL, "", sources=MEASURED, needs_exact=True),
+                  BeamsInput("exact", "", needs_exact=True))
+"""The rows of the surface experiment: the classical completers, none trained, each in depth mode and with measured
+sources, between the sparse input and exact depth (:mod:`dcslam.stages.experiments.surface`)."""
+INPUT_OF = {i.label: i for i in (*INPUTS, *SURFACE_INPUTS)}  # a label names one input in every catalogue
 
 
 def sparse_kind(beams: int) -> str:
@@ -140,7 +154,7 @@ def seed_runs(ws: Workspace, completer: str) -> list[tuple[str, int | None]]:
 
 def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_diff: float = EVO_MAX_TIME_DIFF_S,
                   failure_threshold: float = FAILURE_THRESHOLD,
-                  jobs: int = 1, inputs: list[str] | None = None) -> dict:
+                  jobs: int = 1, inputs: list[str] | None = None, catalogue: tuple = INPUTS) -> dict:
     """Scores of every (beam count, input): ``{(beams, label): result}``, beam counts from the largest; the
     beam-independent inputs last, under ``(None, label)``. A trained completer with runs of several seeds
     (:func:`seed_runs`) gives a :class:`dcslam.report.results.SeedResults` over them, other inputs a
@@ -148,12 +162,13 @@ def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_d
     (:func:`slam_name`). Missing inputs are recorded in each result (see
     :func:`dcslam.report.results.score_layer`); the inputs that need exact depth (:attr:`BeamsInput.needs_exact`)
     are left out when a test drive has none (real KITTI). ``jobs`` > 1 scores the layers in that many worker
-    processes. ``inputs``: the labels of the rows to score (None: every input), e.g. a study of a few of them."""
+    processes. ``inputs``: the labels of the rows to score (None: every input), e.g. a study of a few of them;
+    ``catalogue``: the experiment's inputs (:data:`INPUTS`, :data:`SURFACE_INPUTS`)."""
     from dcslam.report.layers import surface_target
 
-    check_inputs(inputs)
+    check_inputs(inputs, catalogue)
     exact = surface_target(ws, drives) == "exact"
-    inputs = [i for i in INPUTS if (exact or not i.needs_exact) and (inputs is None or i.label in inputs)]
+    inputs = [i for i in catalogue if (exact or not i.needs_exact) and (inputs is None or i.label in inputs)]
     keys = [(b, i) for b in sorted(beams, reverse=True) for i in inputs if i.per_beam]
     keys += [(None, i) for i in inputs if not i.per_beam]
     runs = {c: seed_runs(ws, c) for c in TRAINED}
@@ -178,9 +193,9 @@ def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_d
     return results
 
 
-def check_inputs(inputs: list[str] | None) -> None:
+def check_inputs(inputs: list[str] | None, catalogue: tuple = INPUTS) -> None:
     """A :class:`DcslamError` naming the first of ``inputs`` that is not a row label of the table (None: every row)."""
-    labels = [i.label for i in INPUTS]
+    labels = [i.label for i in catalogue]
     for label in inputs or ():
         if label not in labels:
             raise DcslamError(f"the beams table has no input {label!r}; choose from: {'; '.join(labels)}")
@@ -308,13 +323,15 @@ def csv_columns(seeds: bool) -> list[Column]:
         Column(f"{k}{s}", "") for k in FIGURES for s in csv_suffixes(seeds)] + [Column("missing", "")]
 
 
-def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[int], drives: list[str]) -> Table:
-    """The beams table: one row per (beam count, input), then the beam-independent rows (compared with the 64-beam
-    sparse input, or the largest beam count's). Refuses rows made with different SLAM settings."""
+def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[int], drives: list[str],
+                name: str = "beams", catalogue: tuple = INPUTS) -> Table:
+    """The beams table (of experiment ``name``, its inputs ``catalogue``): one row per (beam count, input), then the
+    beam-independent rows (compared with the 64-beam sparse input, or the largest beam count's). Refuses rows made
+    with different SLAM settings."""
     settings = common_settings(results)
     frames = {p.T_est.shape[0] for r in results.values() for p in r.pairs.values()}
     seeds = seeded(list(results.values()))
-    table = Table(f"The beams experiment — {len(drives)} test drive(s) ({', '.join(drives)})",
+    table = Table(f"The {name} experiment — {len(drives)} test drive(s) ({', '.join(drives)})",
                   with_seed_columns(COLUMNS, seeds))
     table.csv_columns = csv_columns(seeds)
     exact = results.get((None, "exact"))
@@ -348,11 +365,11 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
          "fused from the row's layer (`dcslam slam --sources measured`; runs under slam/<layer>+measured/, exact's "
          "under slam/exact+measured-sparseB/); its depth figures are the layer's, as in its depth-mode row"
          if any(INPUT_OF.get(k[1]) is not None and INPUT_OF[k[1]].sources == MEASURED for k in results) else ""),
-        left_out_note(results),
+        left_out_note(results, catalogue),
         "MAE / RMSE: against the annotated depth, KITTI devkit with dcslam's two departures (predictions below 0.1 m "
         "are holes; pixels the devkit cannot interpolate are left out)",
         surface_note(list(results.values())),
-        "which depth metric predicts localisation: table_beams_correlation.md",
+        f"which depth metric predicts localisation: table_{name}_correlation.md",
         f"failed: drives whose SLAM run was flagged suspect (rejected or degraded steps, drift bound, a departure from "
         f"the companion run on the measured pixels or a companion itself suspect) or whose "
         f"localisation exceeds "
@@ -369,11 +386,11 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
     return table
 
 
-def left_out_note(results: dict[tuple[int | None, str], LayerResult]) -> str:
+def left_out_note(results: dict[tuple[int | None, str], LayerResult], catalogue: tuple = INPUTS) -> str:
     """One line naming the inputs that need exact depth when the results hold none of them (drives without it,
     real KITTI); empty otherwise."""
-    absent = [i.label for i in INPUTS if i.needs_exact and not any(k[1] == i.label for k in results)]
-    if not results or len(absent) < sum(i.needs_exact for i in INPUTS):
+    absent = [i.label for i in catalogue if i.needs_exact and not any(k[1] == i.label for k in results)]
+    if not results or len(absent) < sum(i.needs_exact for i in catalogue):
         return ""
     return f"left out: {', '.join(absent)} (they need the generator's exact depth, which the test drives lack)"
 
@@ -394,7 +411,7 @@ def findings(results: dict[tuple[int | None, str], LayerResult], beams: list[int
         sparse = results.get((b, "sparse"))
         if sparse is None or not sparse.pairs:
             continue
-        completed = [results[(b, i.label)] for i in INPUTS if i.completer and (b, i.label) in results
+        completed = [results[(b, i.label)] for i in _items(results) if i.completer and (b, i.label) in results
                      and results[(b, i.label)].pairs]
         better = [r.label for r in completed if _verdict(r, sparse) == "better"]
         scored = [r for r in completed if r.localisation is not None]
@@ -408,7 +425,7 @@ def findings(results: dict[tuple[int | None, str], LayerResult], beams: list[int
         masked, plain = results.get((b, "nconv masked")), results.get((b, "nconv"))
         if masked is not None and plain is not None and masked.pairs and plain.pairs:
             text += f"; nconv masked vs unmasked: {_verdict(masked, plain)}"
-        for item in (i for i in INPUTS if i.tuned_from):
+        for item in (i for i in _items(results) if i.tuned_from):
             tuned, base = results.get((b, item.label)), results.get((b, item.tuned_from))
             if tuned is not None and base is not None and tuned.pairs and base.pairs:
                 text += f"; {item.label} vs {item.tuned_from}: {_verdict(tuned, base)}"
@@ -416,7 +433,12 @@ def findings(results: dict[tuple[int | None, str], LayerResult], beams: list[int
     return lines
 
 
-def correlation(results: dict[tuple[int | None, str], LayerResult], drives: list[str]) -> Table:
+def _items(results: dict) -> list[BeamsInput]:
+    """The inputs of the rows of ``results``, each once, in the order of their first row."""
+    return [INPUT_OF[label] for label in dict.fromkeys(k[1] for k in results) if label in INPUT_OF]
+
+
+def correlation(results: dict[tuple[int | None, str], LayerResult], drives: list[str], name: str = "beams") -> Table:
     """The rank correlation of each depth metric with localisation over every (row, drive) pair of the beams table's
     rows whose SLAM aligned the layer's own points (:func:`dcslam.report.correlation_table.correlation_table`): a
     measured-source row has the depth metrics of its layer's depth row and another SLAM, so it would count each
@@ -424,10 +446,10 @@ def correlation(results: dict[tuple[int | None, str], LayerResult], drives: list
     from dcslam.report.correlation_table import correlation_table
 
     threshold = next(iter(results.values())).failure_threshold if results else FAILURE_THRESHOLD
-    depth_mode = {i.label for i in INPUTS if i.sources != MEASURED}
+    depth_mode = {i.label for i in INPUT_OF.values() if i.sources != MEASURED}
     table = correlation_table(
         [(_row_name(key), result) for key, result in results.items() if key[1] in depth_mode],
-        f"The beams experiment: depth metrics against localisation over rows × {len(drives)} test drive(s)",
+        f"The {name} experiment: depth metrics against localisation over rows × {len(drives)} test drive(s)",
         threshold, depth_note="MAE / RMSE: against the annotated depth over every frame; " + (
             surface_note(list(results.values())) or "no surface errors scored"))
     table.notes.append("rows: those whose SLAM aligned the layer's own points (the measured-source rows, whose "
@@ -435,7 +457,7 @@ def correlation(results: dict[tuple[int | None, str], LayerResult], drives: list
     return table
 
 
-def per_drive_table(results: dict[tuple[int | None, str], LayerResult]) -> Table:
+def per_drive_table(results: dict[tuple[int | None, str], LayerResult], name: str = "beams") -> Table:
     """Every figure of every row on every test drive (``results/table_beams_per_drive.csv``)."""
     from dcslam.report.scores import PER_DRIVE_KEYS
 
@@ -457,7 +479,7 @@ def per_drive_table(results: dict[tuple[int | None, str], LayerResult]) -> Table
                          # this run's localisation less the sparse input's on the drive (< 0: better than sparse)
                          "vs_sparse_m": None if here is None or drive not in reference else here - reference[drive],
                          "failed_by_all": drive in failed_all.get(b if b is not None else top, ())})
-    return Table("The beams experiment per drive", columns, rows)
+    return Table(f"The {name} experiment per drive", columns, rows)
 
 
 def plot_localisation_vs_beams(path: Path | str, results: dict[tuple[int | None, str], LayerResult],
@@ -470,7 +492,7 @@ def plot_localisation_vs_beams(path: Path | str, results: dict[tuple[int | None,
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 5))
     xs = sorted(beams)
-    per_beam = [item for item in INPUTS if item.per_beam]
+    per_beam = [item for item in _items(results) if item.per_beam]
     for i, item in enumerate(per_beam):
         points = [(b, results[(b, item.label)].localisation_spread())
                   for b in xs if (b, item.label) in results and results[(b, item.label)].pairs]
@@ -483,7 +505,7 @@ def plot_localisation_vs_beams(path: Path | str, results: dict[tuple[int | None,
         high = [0.0 if s.ci_high is None else s.ci_high - s.mean for _, s in points]
         ax.errorbar(x, mean, yerr=[low, high], marker="os^vDPX"[i % 7], color=f"C{i % 10}", capsize=3, lw=1.4,
                     ls=":" if item.sources == MEASURED else "-", label=item.label)
-    for j, item in enumerate(i for i in INPUTS if not i.per_beam):
+    for j, item in enumerate(i for i in _items(results) if not i.per_beam):
         result = results.get((None, item.label))
         if result is None or not result.pairs:
             continue
@@ -522,23 +544,25 @@ class BeamsReport:
 def build_beams_report(ws: Workspace, beams: list[int], drives: list[str], out_dir: Path | None = None,
                        force: bool = False, max_time_diff: float = EVO_MAX_TIME_DIFF_S,
                        failure_threshold: float = FAILURE_THRESHOLD, jobs: int = 1,
-                       inputs: list[str] | None = None) -> BeamsReport:
+                       inputs: list[str] | None = None, name: str = "beams",
+                       catalogue: tuple = INPUTS) -> BeamsReport:
     """Score every row (``inputs``: only the rows of these labels) and write ``table_beams.{md,csv}``,
     ``table_beams_per_drive.{md,csv}``, ``table_beams_correlation.{md,csv}`` and ``beams_localisation.png`` under
     ``out_dir`` (default ``results/``); nothing is written when an output exists without ``force``, or when rows
-    were made with different SLAM settings (``jobs``: worker processes that score the rows)."""
+    were made with different SLAM settings (``jobs``: worker processes that score the rows). ``name`` and
+    ``catalogue``: another experiment's files (``table_<name>*``, ``<name>_localisation.png``) and inputs."""
     from dcslam.io.atomic import write_text_atomic
     from dcslam.report.scores import check_outputs
 
     if not beams or not drives:
         raise DcslamError("the beams table needs at least one beam count and one test drive")
     out_dir = Path(out_dir) if out_dir else ws.results
-    results = beams_results(ws, beams, drives, max_time_diff, failure_threshold, jobs, inputs)
-    table, per_drive = table_beams(results, beams, drives), per_drive_table(results)
-    ranks = correlation(results, drives)
-    tables = {"table_beams": table, "table_beams_per_drive": per_drive, "table_beams_correlation": ranks}
+    results = beams_results(ws, beams, drives, max_time_diff, failure_threshold, jobs, inputs, catalogue)
+    table, per_drive = table_beams(results, beams, drives, name, catalogue), per_drive_table(results, name)
+    ranks = correlation(results, drives, name)
+    tables = {f"table_{name}": table, f"table_{name}_per_drive": per_drive, f"table_{name}_correlation": ranks}
     outputs = [out_dir / f"{name}.{ext}" for name in tables for ext in ("md", "csv")]
-    plot = out_dir / "beams_localisation.png"
+    plot = out_dir / f"{name}_localisation.png"
     check_outputs([*outputs, plot], force)
     written = []
     for name, t in tables.items():

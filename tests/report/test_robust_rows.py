@@ -61,7 +61,7 @@ def test_known_answers_with_the_drive_every_row_fails_on_left_out():
     nconv = fields[(16, "nconv")]
     assert nconv["median_diff"] == pytest.approx(-0.005) and nconv["robust_vs_sparse"] == "within"
     assert nconv["signed_rank_p"] > 0.5
-    assert fields[(16, "sparse")]["robust_vs_sparse"] == "reference"
+    assert fields[(16, "sparse")] == {"robust_vs_sparse": "reference", "robust_drives": 6}
     exact = fields[(None, "exact")]
     assert exact["gap_closed_median"] is None and exact["robust_vs_sparse"] == "better"
 

@@ -149,7 +149,7 @@ def test_profiles_hold_the_training_options_of_every_completer_and_the_full_beam
 def test_drives_without_exact_depth_leave_the_exact_row_empty(tmp_path):
     drives = [depth_fixtures.write_drive(tmp_path / f"{n}.h5", n=2, extra=extra) for n, extra in (("a", True),
                                                                                                   ("b", False))]
-    assert reproduce_beams._have_exact(drives[:1]) and not reproduce_beams._have_exact(drives)
+    assert reproduce_beams.have_exact(drives[:1]) and not reproduce_beams.have_exact(drives)
 
 
 def test_print_config_of_the_beams_table_lists_its_stages_and_runs_nothing(cli, tmp_path):

@@ -15,6 +15,7 @@ EXPERIMENTS = {
     "5.2": "dcslam.stages.experiments.table_5_2:TABLE_5_2",    # the thesis's Table 5.2: depth completion in SLAM
     "5.1": "dcslam.stages.experiments.table_5_2:TABLE_5_1",    # its Table 5.1: the recipes' validation (training)
     "beams": "dcslam.stages.experiments.beams:BEAMS",           # every input at 64/32/16/8 LiDAR beams
+    "surface": "dcslam.stages.experiments.surface:SURFACE",     # the surface-keeping completers at 64/16/8 beams
 }
 
 

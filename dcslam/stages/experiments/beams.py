@@ -26,8 +26,8 @@ from pathlib import Path
 from dcslam.errors import DcslamError
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
 from dcslam.report.results import FAILURE_THRESHOLD
-from dcslam.report.table_beams import (FULL_BEAMS, INPUTS, IP_BASIC_RUN, MEASURED, TRAINED, layer_name,
-                                       prediction_name, slam_name, sparse_kind)
+from dcslam.report.table_beams import (CLASSICAL_RUNS, FULL_BEAMS, INPUTS, IP_BASIC_RUN, MEASURED, TRAINED,
+                                       layer_name, prediction_name, slam_name, sparse_kind)
 from dcslam.stages import filter as filter_stage
 from dcslam.stages import predict, prepare, slam, train
 from dcslam.stages.config import option
@@ -177,9 +177,11 @@ class BeamsTableConfig:
     inputs: list[str] | None = option(None, help="Rows to score, by input label (default: every input).")
 
 
-def run_table(ws: Workspace, config: BeamsTableConfig, *, force: bool = False):
+def run_table(ws: Workspace, config: BeamsTableConfig, *, force: bool = False, name: str = "beams",
+              catalogue: tuple = INPUTS):
     """Write the beams table, its per-drive table and the plot (:func:`dcslam.report.table_beams.build_beams_report`)
-    and the configuration beside them (``table_beams.json``)."""
+    and the configuration beside them (``table_beams.json``); ``name`` and ``catalogue``: another experiment's tables
+    over its own inputs (``table_<name>.json``, its stage ``score-<name>``)."""
     from dcslam.io.atomic import write_json_atomic
     from dcslam.report.table_beams import build_beams_report
     from dcslam.stages.config import to_dict
@@ -188,8 +190,8 @@ def run_table(ws: Workspace, config: BeamsTableConfig, *, force: bool = False):
     report = build_beams_report(ws, list(config.beams), select_drives(ws, config.drive), out_dir=config.out_dir,
                                 force=force, max_time_diff=config.max_time_diff,
                                 failure_threshold=config.failure_threshold, jobs=config.jobs,
-                                inputs=config.inputs)
-    write_json_atomic(report.written[0].parent / "table_beams.json", stage_config("score-beams", to_dict(config)),
+                                inputs=config.inputs, name=name, catalogue=catalogue)
+    write_json_atomic(report.written[0].parent / f"table_{name}.json", stage_config(f"score-{name}", to_dict(config)),
                       force=True)
     return report
 
@@ -199,7 +201,7 @@ def _init_model(ws: Workspace, options: dict) -> list[Path]:
     return [ws.runs / options["init"] / "model.pt"] if options.get("init") is not None else []
 
 
-def _have_exact(drives: list[Path]) -> bool:
+def have_exact(drives: list[Path]) -> bool:
     """Whether every drive file holds the generator's exact depth (``depth/exact``)."""
     from dcslam.io.drive import EXACT, DriveFile
 
@@ -221,15 +223,17 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
     test, learn = make_drives(pipe, drives=profile.drives, frames=profile.frames, split=profile.split,
                               kitti_root=kitti_root, seed=seed, jobs=jobs,
                               beams=tuple(b for b in profile.beams if b != FULL_BEAMS))
-    exact = kitti_root is None if pipe.planning else _have_exact(test + learn)
+    exact = kitti_root is None if pipe.planning else have_exact(test + learn)
     if not exact and not pipe.planning:
         pipe.log("[note] the drives have no exact depth (real KITTI): the rows that need it (exact, "
                  f"{', '.join(sorted(_NEEDS_EXACT))}) are left out")
     _train(pipe, profile, learn, exact, seed, jobs, seeds)
     made_runs = [run for run in TRAINED if exact or run not in _NEEDS_EXACT]
-    _predict(pipe, profile, test, made_runs, seed, jobs, seeds)
+    completers = [(IP_BASIC_RUN, None)] + [(seed_run_name(run, k), seed + k) for k in range(seeds)
+                                           for run in made_runs]
+    pipe.run_all(predict_stages(ws, profile.beams, test, completers), jobs)
     _mask(pipe, profile, test, seed, jobs, seeds)
-    slam_stages = _slam_stages(ws, profile, test, exact, seed, seeds)
+    slam_stages = make_slam_stages(ws, profile, test, exact, seed, seeds)
     pipe.run_all(slam_stages, jobs)
     slam_outputs = [path for stage in slam_stages for path in stage.outputs()]
     table = BeamsTableConfig(beams=list(profile.beams), drive=[p.stem for p in test], jobs=jobs)
@@ -256,23 +260,21 @@ def _train(pipe: Pipeline, profile: BeamsProfile, learn: list[Path], exact: bool
         pipe.run_all(stages, jobs)
 
 
-def _predict(pipe: Pipeline, profile: BeamsProfile, test: list[Path], made_runs: list[str], seed: int, jobs: int,
-             seeds: int) -> None:
-    """Predict the test drives at every beam count with IP-Basic and every trained run."""
-    ws = pipe.ws
-    completers = [(IP_BASIC_RUN, None)] + [(seed_run_name(run, k), seed + k) for k in range(seeds) for run in made_runs]
-    predictions = []
-    for b in profile.beams:
+def predict_stages(ws: Workspace, beams, test: list[Path], completers: list[tuple[str, int | None]]) -> list[Stage]:
+    """The predictions of the test drives at every beam count of ``beams`` by each of ``completers`` (``(name,
+    training seed)``: a classical completer of :data:`CLASSICAL_RUNS`, seed None, or a trained run)."""
+    stages = []
+    for b in beams:
         for completer, run_seed in completers:
             out = ws.predictions / prediction_name(completer, b)
             made = [out / p.name for p in test]
-            config = (predict.PredictConfig(model=completer, input=sparse_kind(b), output=out)
-                      if completer == IP_BASIC_RUN else
+            classical = completer in CLASSICAL_RUNS
+            config = (predict.PredictConfig(model=completer, input=sparse_kind(b), output=out) if classical else
                       predict.PredictConfig(run=completer, input=sparse_kind(b), output=out))
-            needs = [] if completer == IP_BASIC_RUN else [ws.runs / completer / "model.pt"]
-            predictions.append(Stage(f"predict-{out.name}", predict.run, config, outputs=lambda m=made: m,
-                                     inputs=lambda n=needs: [*n, *test], seed=run_seed, kind="predict"))
-    pipe.run_all(predictions, jobs)
+            needs = [] if classical else [ws.runs / completer / "model.pt"]
+            stages.append(Stage(f"predict-{out.name}", predict.run, config, outputs=lambda m=made: m,
+                                inputs=lambda n=needs: [*n, *test], seed=run_seed, kind="predict"))
+    return stages
 
 
 def _mask(pipe: Pipeline, profile: BeamsProfile, test: list[Path], seed: int, jobs: int, seeds: int) -> None:
@@ -293,11 +295,12 @@ def _mask(pipe: Pipeline, profile: BeamsProfile, test: list[Path], seed: int, jo
     pipe.run_all(masked, jobs)
 
 
-def _slam_stages(ws: Workspace, profile: BeamsProfile, test: list[Path], exact: bool, seed: int,
-                 seeds: int) -> list[Stage]:
-    """The SLAM runs of every input (each training seed of a trained one), beam count and test drive."""
+def make_slam_stages(ws: Workspace, profile, test: list[Path], exact: bool, seed: int, seeds: int,
+                     inputs: tuple = INPUTS) -> list[Stage]:
+    """The SLAM runs of every input of ``inputs`` (each training seed of a trained one), beam count and test drive
+    (``profile``: its ``beams``, ``slam`` settings and ``slam_frames``)."""
     stages = []
-    for item in INPUTS:
+    for item in inputs:
         if item.needs_exact and not exact:
             continue
         trained = item.completer in TRAINED
@@ -322,7 +325,7 @@ def _slam_stages(ws: Workspace, profile: BeamsProfile, test: list[Path], exact: 
     return stages
 
 
-def workspace_beams(ws: Workspace, drives: list[str]) -> list[int]:
+def workspace_beams(ws: Workspace, drives: list[str], stage: str = "score-beams") -> list[int]:
     """The beam counts of a workspace's beams table: those the experiment's scoring stage last ran with (its stamp in
     ``.reproduce/``), else those the drive files hold (64, their own sparse depth, and every ``sparse@B`` that
     ``prepare-kitti --beams`` added), most beams first."""
@@ -331,7 +334,7 @@ def workspace_beams(ws: Workspace, drives: list[str]) -> list[int]:
     from dcslam.io.drive import DriveFile
     from dcslam.workspace import drive_file
 
-    stamp = ws.root / ".reproduce" / "score-beams.json"
+    stamp = ws.root / ".reproduce" / f"{stage}.json"
     try:
         beams = json.loads(stamp.read_text())["config"]["beams"] if stamp.exists() else None
     except (json.JSONDecodeError, KeyError, TypeError):

@@ -1,0 +1,125 @@
+"""``dcslam reproduce --table surface`` (``make reproduce-surface``): do the completers that keep surfaces (scanline,
+planefit) help SLAM where IP-Basic does not, when the LiDAR has fewer beams? (docs/slam.md, the surface experiment)
+
+No row is trained, so there are no training seeds and nothing but the test drives matters. The stages, through the
+stage engine and the beams experiment's machinery (:mod:`dcslam.stages.experiments.beams`)::
+
+    synth (unless a KITTI root is given) → prepare-kitti --beams 16,8 (plus depth/exact on generated drives)
+    → predict IP-Basic, scanline and planefit at every beam count
+    → slam over every (input, beam count, test drive): sparse, each completion, exact depth, and each completion
+      and exact depth again with measured ICP sources (the B-beam pixels against the completed map)
+    → score: the surface table (the beams table over these rows, with the robust comparison against sparse), its
+      per-drive CSV, the rank correlation of its depth metrics with localisation and a plot of localisation
+      against beam count (``dcslam score tables --table surface`` rebuilds them)
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from dcslam.errors import DcslamError
+from dcslam.report.table_beams import CLASSICAL_RUNS, FULL_BEAMS, SURFACE_INPUTS
+from dcslam.stages import prepare, slam
+from dcslam.stages.experiments.beams import (BeamsTableConfig, have_exact, make_slam_stages, predict_stages,
+                                             run_table, workspace_beams)
+from dcslam.stages.experiments.common import make_drives
+from dcslam.stages.pipeline import Experiment, Pipeline, Stage, profile_options
+from dcslam.workspace import Workspace
+
+NAME = "surface"
+
+
+@dataclass(frozen=True)
+class SurfaceProfile:
+    """The scale of one surface experiment: drives, beam counts and the SLAM over the test drives."""
+
+    name: str
+    drives: int                          # generated drives
+    frames: int                          # raw frames per generated drive (depth exists for frames 5 … N−6)
+    slam_frames: int                     # frames of each test drive fed to SLAM
+    beams: tuple[int, ...] = (64, 16, 8)
+    split: tuple[int, int, int] | None = None  # only the test drives are used: no row is trained
+    slam: Mapping = field(default_factory=dict)  # SLAM settings other than the defaults (fields of SlamStageConfig)
+    description: str = ""
+    seeds: int = 1                       # no trained row: one run of each (the plan and its cost read it)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "slam", profile_options(f"surface {self.name}", "slam", slam.SlamStageConfig,
+                                                         self.slam, frozenset(("depth", "drive", "frames", "out"))))
+        if self.seeds != 1:
+            raise DcslamError(f"surface profile {self.name}: seeds must be 1 (no row is trained), got {self.seeds}")
+        if FULL_BEAMS not in self.beams:
+            raise DcslamError(f"surface profile {self.name}: beams {self.beams} must include {FULL_BEAMS} (the "
+                              "drive's own sparse depth, the reference of the others)")
+        for b in self.beams:
+            prepare.check_beams(b)
+        if self.split is not None and (sum(self.split) != self.drives or min(self.split) < 1):
+            raise DcslamError(f"surface profile {self.name}: split {self.split} must be >= 1 drive each and add up "
+                              f"to {self.drives} drives")
+
+
+PROFILES = {
+    "smoke": SurfaceProfile(
+        name="smoke", drives=3, frames=12, beams=(64, 16), slam_frames=2, slam={"iterations": 3, "voxel_size": 0.2},
+        description="a check that every stage runs (3 drives of 12 frames, 64 and 16 beams, SLAM over 2 frames): "
+                    "numbers mean nothing"),
+    "quick": SurfaceProfile(
+        name="quick", drives=8, frames=42, split=(3, 1, 4), slam_frames=30,
+        description="8 generated drives of 42 frames (the 4 test drives of the beams and Table 5.2 quick "
+                    "profiles), 64/16/8 beams, SLAM on the first 30 frames of each test drive, with the depth's "
+                    "own and with the measured ICP sources"),
+    "study": SurfaceProfile(
+        name="study", drives=14, frames=42, split=(5, 1, 8), slam_frames=30,
+        description="14 generated drives of 42 frames whose 8 test drives are those of the beams and Table 5.2 "
+                    "study profiles (the 6 others are generated but unused: no row is trained), 64/16/8 beams, "
+                    "SLAM on the first 30 frames of each test drive; intervals and paired tests over the drives"),
+}
+
+
+def run_surface_table(ws: Workspace, config: BeamsTableConfig, *, force: bool = False):
+    """Write the surface table, its per-drive table, correlation and plot (``table_surface*``,
+    ``surface_localisation.png``) and the configuration beside them (``table_surface.json``)."""
+    return run_table(ws, config, force=force, name=NAME, catalogue=SURFACE_INPUTS)
+
+
+def compose(pipe: Pipeline, profile: SurfaceProfile, kitti_root: Path | None = None, seed: int = 0,
+            jobs: int = 1, seeds: int = 1) -> Path:
+    """Hand every stage of the surface experiment to ``pipe`` in order; return the Markdown file of its table.
+    ``seeds`` does not apply (no row is trained): more than one is noted and run once."""
+    if seeds < 1:
+        raise DcslamError(f"seeds must be >= 1, got {seeds}")
+    if seeds > 1:
+        pipe.log(f"[note] the surface experiment trains nothing: --seeds {seeds} does not apply, every row runs once")
+    ws = pipe.ws
+    test, _ = make_drives(pipe, drives=profile.drives, frames=profile.frames, split=profile.split,
+                          kitti_root=kitti_root, seed=seed, jobs=jobs,
+                          beams=tuple(b for b in profile.beams if b != FULL_BEAMS))
+    exact = kitti_root is None if pipe.planning else have_exact(test)
+    if not exact and not pipe.planning:
+        pipe.log("[note] the drives have no exact depth (real KITTI): the exact rows are left out")
+    pipe.run_all(predict_stages(ws, profile.beams, test, [(c, None) for c in CLASSICAL_RUNS]), jobs)
+    slam_stages = make_slam_stages(ws, profile, test, exact, seed, 1, inputs=SURFACE_INPUTS)
+    pipe.run_all(slam_stages, jobs)
+    slam_outputs = [path for stage in slam_stages for path in stage.outputs()]
+    table = BeamsTableConfig(beams=list(profile.beams), drive=[p.stem for p in test], jobs=jobs)
+    pipe.run(Stage(f"score-{NAME}", run_surface_table, table,
+                   outputs=lambda: [ws.results / f"table_{NAME}.md", ws.results / f"table_{NAME}_correlation.md"],
+                   inputs=lambda: slam_outputs, kind="score"))
+    return ws.results / f"table_{NAME}.md"
+
+
+def rebuild_tables(ws: Workspace, config, *, force: bool = False):
+    """``dcslam score tables --table surface``: the surface table, its per-drive table, correlation and plot from the
+    workspace's SLAM runs (the beam counts of the last scoring stage, else those the drive files hold)."""
+    from dcslam.workspace import select_drives
+
+    drives = select_drives(ws, config.drive)
+    table = BeamsTableConfig(beams=workspace_beams(ws, drives, f"score-{NAME}"), drive=list(drives),
+                             out_dir=config.out_dir, max_time_diff=config.max_time_diff,
+                             failure_threshold=config.failure_threshold)
+    return run_surface_table(ws, table, force=force)
+
+
+SURFACE = Experiment(NAME, "the surface experiment: sparse, IP-Basic, scanline, planefit and exact depth at 64/16/8 "
+                     "LiDAR beams, in depth mode and with measured sources", PROFILES, compose, rebuild_tables)
