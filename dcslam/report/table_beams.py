@@ -361,10 +361,7 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
         GAP_NOTE,
         ROBUST_NOTE if robust else "",
         left_out_text(failed_all) if robust else "",
-        ("measured sources: SLAM whose ICP aligns only the B-beam sparse depth's measured pixels against the map "
-         "fused from the row's layer (`dcslam slam --sources measured`; runs under slam/<layer>+measured/, exact's "
-         "under slam/exact+measured-sparseB/); its depth figures are the layer's, as in its depth-mode row"
-         if any(INPUT_OF.get(k[1]) is not None and INPUT_OF[k[1]].sources == MEASURED for k in results) else ""),
+        measured_note(results),
         left_out_note(results, catalogue),
         "MAE / RMSE: against the annotated depth, KITTI devkit with dcslam's two departures (predictions below 0.1 m "
         "are holes; pixels the devkit cannot interpolate are left out)",
@@ -384,6 +381,15 @@ def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[
         *findings(results, beams)]
     table.notes = [n for n in table.notes if n]
     return table
+
+
+def measured_note(results: dict[tuple[int | None, str], LayerResult]) -> str:
+    """The note on the measured-source rows; empty when the table has none."""
+    if not any(INPUT_OF.get(k[1]) is not None and INPUT_OF[k[1]].sources == MEASURED for k in results):
+        return ""
+    return ("measured sources: SLAM whose ICP aligns only the B-beam sparse depth's measured pixels against the map "
+            "fused from the row's layer (`dcslam slam --sources measured`; runs under slam/<layer>+measured/, "
+            "exact's under slam/exact+measured-sparseB/); its depth figures are the layer's, as in its depth-mode row")
 
 
 def left_out_note(results: dict[tuple[int | None, str], LayerResult], catalogue: tuple = INPUTS) -> str:
