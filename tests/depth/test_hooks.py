@@ -127,3 +127,22 @@ def test_the_training_modules_import_no_cycle():
 
     for m in TRAINING_MODULES:
         visit(m)
+
+
+def test_the_early_stopping_example_of_extending_md():
+    import re
+    from types import SimpleNamespace
+
+    page = (Path(__file__).parents[2] / "docs" / "extending.md").read_text()
+    block = next(b for b in re.findall(r"```python\n(.*?)```", page, re.S) if b.startswith("# mypkg/stopping.py"))
+    namespace = {}
+    exec(compile(block, "docs/extending.md stopping block", "exec"), namespace)
+    hook = namespace["EarlyStopping"](patience=2)
+    assert isinstance(hook, Hook)
+    state = SimpleNamespace(stop=False, last_val={"mse": 1.0}, best=None)
+    stops = []
+    for epoch, best_epoch in enumerate([0, 1, 1, 3, 3, 3]):  # improves in epochs 0, 1 and 3
+        state.epoch, state.best = epoch, {"epoch": best_epoch}
+        hook.after_epoch(state)
+        stops.append(state.stop)
+    assert stops == [False, False, False, False, False, True]
