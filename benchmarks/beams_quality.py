@@ -11,7 +11,7 @@ drives or real KITTI). Each model is trained once per seed (``--seeds``: the ini
 ``--crop`` rows, keeping the best validation checkpoint; its input is ``--train-input`` or, with ``--input-mix``,
 each frame's input drawn in turn from those kinds (density augmentation). With ``--profile-recipes`` each model
 takes its own recipe (lr, input, input mix, L1 weight, schedule, hole filling) from the beams profile
-(:data:`dcslam.stages.reproduce_beams.PROFILES`, ``quick``), the epochs, crop and frames staying this script's.
+(:data:`dcslam.stages.experiments.beams.PROFILES`, ``quick``), the epochs, crop and frames staying this script's.
 Then, on the test drives and at every beam count (``sparse`` = 64, and each ``sparse@B`` the drives hold), it
 prints MAE / RMSE in millimetres over EVERY ground-truth pixel, a hole left at a ground-truth pixel counted as a
 prediction of 0 m, for: a nearest-neighbour fill of the input, IP-Basic (fast), and each model untrained and
@@ -151,7 +151,7 @@ def main() -> None:
     def recipe(arch: str) -> dict:
         """The options of ``arch``'s training that differ between recipes."""
         if args.profile_recipes:
-            from dcslam.stages.reproduce_beams import PROFILES
+            from dcslam.stages.experiments.beams import PROFILES
 
             given = PROFILES["quick"].train_config(arch, seed=0)  # `dcslam train`'s options, its defaults filled in
             return {"lr": given.lr, "lr_schedule": given.lr_schedule, "l1_weight": given.l1_weight,

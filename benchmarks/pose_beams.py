@@ -9,7 +9,7 @@ Run, in order (each step skips what a previous call made; the steps after ``driv
     python benchmarks/pose_beams.py slam --workspace WS --run nconv --beams 64 [--frames 30] [--drives 1004 1005]
     python benchmarks/pose_beams.py score --workspace WS --runs nconv nconv-pose --beams 64 16
 
-Trainings use the beams quick profile's options (:data:`dcslam.stages.reproduce_beams.PROFILES`), so ``nconv`` and
+Trainings use the beams quick profile's options (:data:`dcslam.stages.experiments.beams.PROFILES`), so ``nconv`` and
 ``nconv-pose`` are the runs the experiment makes. ``train`` prints the run's CPU-seconds and its validation pose error
 (the pose loss's ICP over windows of 4 frames of the validation drive) with the validation pose error of the model it
 started from; ``slam`` prints the CPU-seconds of each prediction and SLAM run. ``score`` prints, per beam count, each
@@ -39,8 +39,9 @@ def _timed(label: str, fn, *args, **kwargs):
 
 
 def drives(ws) -> None:
-    from dcslam.stages.reproduce import Pipeline, make_drives
-    from dcslam.stages.reproduce_beams import PROFILES
+    from dcslam.stages.experiments.common import make_drives
+    from dcslam.stages.pipeline import Pipeline
+    from dcslam.stages.experiments.beams import PROFILES
 
     profile = PROFILES[QUICK]
     _timed("drives", make_drives, Pipeline(ws, print), drives=profile.drives, frames=profile.frames,
@@ -68,7 +69,7 @@ def train(ws, run: str, lr: float | None, name: str | None) -> None:
     from dataclasses import replace
 
     from dcslam.stages import train as train_stage
-    from dcslam.stages.reproduce_beams import PROFILES
+    from dcslam.stages.experiments.beams import PROFILES
 
     config = PROFILES[QUICK].train_config(run, seed=0)
     if lr is not None:
@@ -109,7 +110,7 @@ def score(ws, runs: list[str], beams: list[int]) -> None:
 
     from dcslam.io.drive import read_splits
     from dcslam.report.spread import spread
-    from dcslam.report.table_5_2 import score_layer
+    from dcslam.report.results import score_layer
     from dcslam.report.table_beams import prediction_name
 
     test = read_splits(ws.splits)["test"]

@@ -2,12 +2,13 @@
 (:class:`SlurmExecutor`, through submitit), behind one interface.
 
 An executor is handed :class:`Task` s that do not read one another's outputs and yields one :class:`Outcome` per task
-as each finishes (in any order); the caller (:meth:`dcslam.stages.reproduce.Pipeline.run_all`) stamps each one.
+as each finishes (in any order); the caller (:meth:`dcslam.stages.pipeline.Pipeline.run_all`) stamps each one.
 Closing the iterator before it is exhausted (a failure, Ctrl-C, SIGTERM) stops the work still running: local
 workers are terminated, Slurm jobs cancelled with ``scancel``, so nothing keeps writing after the caller gave up.
 
 On Slurm, every task is one job; tasks of one kind (``train``, ``predict``, ``filter``, ``slam``, ``score``,
-``other``) asking the same resources are submitted together as one job array. The workspace must be on a filesystem
+``other``: declared by whoever makes the task, :attr:`Task.kind`) asking the same resources are submitted together as
+one job array. The workspace must be on a filesystem
 the nodes share (the jobs read and write it), and so must the Python environment (the jobs run this interpreter).
 Each job's submitit folder, with its stdout / stderr logs, is ``<workspace>/logs/slurm/<job id>/``. The ``[slurm]``
 table of ``dcslam reproduce --config FILE`` sets the partition, account, QoS, extra sbatch options, commands run
@@ -33,20 +34,18 @@ KINDS = ("train", "predict", "filter", "slam", "score", "other")
 
 @dataclass(frozen=True)
 class Task:
-    """One stage to run: ``run(workspace, config, force=True)`` of a dcslam.stages module."""
+    """One stage to run: ``run(workspace, config, force=True)`` of a dcslam.stages module; ``kind`` (one of
+    :data:`KINDS`) chooses its resources."""
 
     name: str
     run: Callable
     config: object
     workspace: object  # dcslam.workspace.Workspace
+    kind: str = "other"
 
-    @property
-    def kind(self) -> str:
-        """``train``, ``predict``, ``filter``, ``slam``, ``score`` (from the stage function's module) or ``other``."""
-        module = self.run.__module__.rsplit(".", 1)[-1]
-        if module.startswith("reproduce") or module == "score":
-            return "score"
-        return module if module in KINDS else "other"
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise DcslamError(f"task {self.name}: unknown kind {self.kind!r}; expected one of {', '.join(KINDS)}")
 
     def labels(self) -> list[str]:
         """``drive …`` and ``seed …`` when the task's configuration has them (what a failure message names)."""
@@ -392,7 +391,10 @@ NEVER_STARTS = ("PartitionConfig", "PartitionNodeLimit", "PartitionTimeLimit", "
 def _queued_jobs() -> dict[str, str] | None:
     """This user's jobs in the queue (pending, running, completing) → the reason a pending one waits ("" when
     running); array tasks one by one, and an array's own id for its tasks that squeue still shows folded. None when
-    squeue does not answer (then every job counts as queued)."""
+    squeue does not answer (then every job counts as queued).
+
+    squeue rather than submitit's ``job.state``: submitit reads ``sacct``, which answers only where the cluster
+    keeps an accounting database and never gives the reason a pending job waits (what :data:`NEVER_STARTS` needs)."""
     try:
         done = subprocess.run(["squeue", "--me", "-h", "-r", "-o", "%i %T %r"], capture_output=True, text=True,
                               timeout=60)

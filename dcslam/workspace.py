@@ -24,7 +24,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from dcslam import __version__
+from dcslam.version import __version__
 from dcslam.errors import DcslamError
 
 ENV_VAR = "DCSLAM_WORKSPACE"

@@ -22,10 +22,12 @@ from dcslam.report.tables import Column, Table
 from dcslam.eval.trajectory import score_trajectory
 from dcslam.filters import FilterChain, filter_drives, parse_filter
 from dcslam.io.drive import read_splits
+from dcslam.io.drive_frames import drive_frames
+from dcslam.slam.drive import run_drive
 from dcslam.slam.fusion import PointFusion
 from dcslam.slam.odometry import ICPOdometry
 from dcslam.slam.pipeline import SLAM
-from dcslam.stages.slam import run_drive, write_outputs
+from dcslam.stages.slam import write_outputs
 from dcslam.io.atomic import write_text_atomic
 from dcslam.workspace import Workspace, require
 
@@ -83,7 +85,8 @@ def main() -> None:
         scores = []
         for drive in drives:
             slam = SLAM(ICPOdometry(iterations=a.icp_iterations), PointFusion())
-            run = run_drive(drive, paths[drive.stem], slam, a.frames or None)
+            with drive_frames(drive, paths[drive.stem], a.frames or None) as frames:  # read as SLAM uses them
+                run = run_drive(frames, slam)
             write_outputs(run, ws.slam / paths[drive.stem].parent.name, force=a.force)
             scores.append(score_trajectory(run.T_gt, run.T_world_cam))
         depth = mean_errors(e for d in drives for e in score_drive(d, paths[d.stem]))

@@ -34,8 +34,8 @@ def test_readme_is_short():
 
 def test_the_pages_exist():
     assert [p.name for p in PAGES[2:]] == sorted(
-        ["architecture.md", "benchmarks.md", "extending.md", "formats.md", "getting-started.md", "metrics.md",
-         "slam.md", "training.md", "usage.md"])
+        ["architecture.md", "benchmarks.md", "bring-your-own-completer.md", "extending.md", "formats.md",
+         "getting-started.md", "metrics.md", "slam.md", "training.md", "usage.md"])
     assert (ROOT / "CHANGELOG.md").is_file()
 
 

@@ -14,9 +14,10 @@ from dcslam.errors import DcslamError
 from dcslam.executor import (DEFAULT_RESOURCES, LocalExecutor, Outcome, Resources, SlurmExecutor, SlurmSettings,
                              Task)
 from dcslam.stages import filter as filter_stage
-from dcslam.stages import predict, score, slam, synth, train
+from dcslam.stages import predict, prepare, score, slam, synth, train
 from dcslam.stages.config import to_toml
-from dcslam.stages.reproduce import Pipeline, ReproduceConfig, Stage
+from dcslam.stages.pipeline import Pipeline, Stage
+from dcslam.stages.reproduce import ReproduceConfig
 from dcslam.stages.slam import SlamStageConfig
 from dcslam.workspace import Workspace
 
@@ -78,12 +79,25 @@ def test_slurm_is_not_a_command_line_option(cli):
     assert result.exit_code == 2
 
 
-def test_tasks_know_their_kind_and_name_drive_and_seed(tmp_path):
-    ws = Workspace(tmp_path)
+@pytest.mark.parametrize("table", ["5.2", "beams"])
+def test_every_stage_of_an_experiment_declares_its_kind(tmp_path, table):
+    from dcslam.stages.experiments import experiment
+    from dcslam.stages.experiments.beams import run_table
+    from dcslam.stages.reproduce_plan import planned_stages
+
     kinds = {train.run: "train", predict.run: "predict", filter_stage.run: "filter", slam.run: "slam",
-             score.run_tables: "score", synth.run: "other"}
-    for run, kind in kinds.items():
-        assert Task("x", run, None, ws).kind == kind
+             score.run_tables: "score", run_table: "score", synth.run: "other", prepare.run: "other"}
+    stages = planned_stages(Workspace(tmp_path), experiment(table).profile("smoke"), table)
+    assert {s.run for s in stages} <= set(kinds)
+    assert [s.kind for s in stages] == [kinds[s.run] for s in stages]
+
+
+def test_tasks_carry_the_kind_they_are_given_and_name_drive_and_seed(tmp_path):
+    ws = Workspace(tmp_path)
+    assert Task("x", slam.run, None, ws).kind == "other"  # a kind is declared, never guessed from the function
+    assert Task("x", synth.run, None, ws, kind="slam").kind == "slam"
+    with pytest.raises(DcslamError, match="task x: unknown kind 'gpu'; expected one of train, predict"):
+        Task("x", train.run, None, ws, kind="gpu")
     assert Task("s", slam.run, SlamStageConfig(drive=["d1"]), ws).labels() == ["drive d1"]
     assert Task("t", train.run, train.TrainStageConfig(seed=3), ws).labels() == ["seed 3"]
     assert Task("o", synth.run, None, ws).labels() == []
@@ -92,13 +106,13 @@ def test_tasks_know_their_kind_and_name_drive_and_seed(tmp_path):
 def test_gpus_follow_the_device_and_the_processes_of_a_training(tmp_path):
     ws = Workspace(tmp_path)
     res = DEFAULT_RESOURCES["train"]
-    assert res.gpus_for(Task("t", train.run, train.TrainStageConfig(device="cuda", nproc=2), ws)) == 2
-    assert res.gpus_for(Task("t", train.run, train.TrainStageConfig(device="cpu"), ws)) == 0
-    assert res.gpus_for(Task("t", train.run, train.TrainStageConfig(), ws)) == 0  # auto: no GPU asked
+    assert res.gpus_for(Task("t", train.run, train.TrainStageConfig(device="cuda", nproc=2), ws, "train")) == 2
+    assert res.gpus_for(Task("t", train.run, train.TrainStageConfig(device="cpu"), ws, "train")) == 0
+    assert res.gpus_for(Task("t", train.run, train.TrainStageConfig(), ws, "train")) == 0  # auto: no GPU asked
     assert DEFAULT_RESOURCES["predict"].gpus_for(Task("p", predict.run, predict.PredictConfig(run="r", device="cuda"),
-                                                      ws)) == 1
-    assert DEFAULT_RESOURCES["slam"].gpus_for(Task("s", slam.run, SlamStageConfig(), ws)) == 0
-    assert Resources(gpus=3).gpus_for(Task("s", slam.run, SlamStageConfig(), ws)) == 3
+                                                      ws, "predict")) == 1
+    assert DEFAULT_RESOURCES["slam"].gpus_for(Task("s", slam.run, SlamStageConfig(), ws, "slam")) == 0
+    assert Resources(gpus=3).gpus_for(Task("s", slam.run, SlamStageConfig(), ws, "slam")) == 3
 
 
 def test_slurm_executor_without_submitit_is_one_line(cli, tmp_path, monkeypatch):
@@ -166,8 +180,8 @@ class _Scripted:
 def test_run_all_stamps_what_finished_and_names_the_failed_job(tmp_path):
     ws = Workspace(tmp_path)
     made = [tmp_path / "a.txt", tmp_path / "b.txt"]
-    stages = [Stage("slam-a", slam.run, SlamStageConfig(drive=["drive_a"]), outputs=lambda: [made[0]]),
-              Stage("train-b", train.run, train.TrainStageConfig(seed=4), outputs=lambda: [made[1]])]
+    stages = [Stage("slam-a", slam.run, SlamStageConfig(drive=["drive_a"]), outputs=lambda: [made[0]], kind="slam"),
+              Stage("train-b", train.run, train.TrainStageConfig(seed=4), outputs=lambda: [made[1]], kind="train")]
     executor = _Scripted()
     lines = []
     pipe = Pipeline(ws, log=lines.append, executor=executor)
@@ -175,7 +189,8 @@ def test_run_all_stamps_what_finished_and_names_the_failed_job(tmp_path):
         pipe.run_all(stages, jobs=1)  # an executor that is not in-process runs even one job's worth of stages
     assert str(failed.value) == ("stage train-b failed (no luck); seed 4; Slurm job 7_1, log /logs/7_1_0_log.err; "
                                  "fix it and rerun: finished stages will be skipped")
-    assert [t.name for t in executor.given] == ["slam-a", "train-b"] and executor.closed
+    assert [(t.name, t.kind) for t in executor.given] == [("slam-a", "slam"), ("train-b", "train")]
+    assert executor.closed
     stamps = {name: json.loads((tmp_path / ".reproduce" / f"{name}.json").read_text()) for name in ("slam-a",
                                                                                                    "train-b")}
     assert stamps["slam-a"]["complete"] and stamps["slam-a"]["seconds"] == 1.5

@@ -1,5 +1,5 @@
-"""The examples of docs/extending.md, run as written: a completer, a filter and a dataset, one module each,
-registered by one line each, then used through the stages."""
+"""The examples of docs/extending.md, run as written: a completer, a filter, a dataset and an experiment, one module
+each, registered by one line each, then used through the stages."""
 import re
 import sys
 from pathlib import Path
@@ -77,3 +77,45 @@ def test_the_three_examples_work_through_the_stages(registered, tmp_path):
     assert result.out_dir == ws.filtered / "nearest-fill+far"
     far = read_layer(result.layers[0]).depth[0]
     assert far.max() <= 30 and np.array_equal(far[filled <= 30], filled[filled <= 30])
+
+
+def test_the_experiment_example_runs_skips_and_rebuilds_its_table(registered, tmp_path, monkeypatch):
+    """The page's experiment through ``reproduce`` (synth and prepare-kitti replaced by the tiny drives of the stage
+    tests), a rerun that skips every stage, and ``score tables --table fill``."""
+    from dcslam.stages.experiments import EXPERIMENTS, experiment
+    from dcslam.workspace import Workspace
+    from tests.fixtures import depth as depth_fixtures
+
+    def synth(ws, config, *, force=False):
+        ws.kitti.mkdir(parents=True, exist_ok=True)
+        (ws.kitti / "SYNTHETIC").write_text("tiny drives of the extending test\n")
+
+    monkeypatch.setattr("dcslam.stages.synth.run", synth)
+    monkeypatch.setattr("dcslam.stages.prepare.run",
+                        lambda ws, config, *, force=False: depth_fixtures.write_workspace(ws.root, n=6))
+    saved = dict(EXPERIMENTS)
+    exec(compile(_blocks()["register an experiment"], "docs/extending.md experiment block", "exec"), {})
+    try:
+        _run_the_experiment(Workspace(tmp_path / "ws"), experiment("fill").profile("smoke"))
+    finally:  # the registry as it was
+        EXPERIMENTS.clear()
+        EXPERIMENTS.update(saved)
+
+
+def _run_the_experiment(ws, profile) -> None:
+    from dcslam.stages.reproduce import reproduce
+    from dcslam.stages.score import ScoreTablesConfig, run_tables
+
+    lines = []
+    table = reproduce(ws, profile, table="fill", log=lines.append)
+    assert table == ws.results / "table_fill.md"
+    text = table.read_text()
+    assert "ip-basic-fast" in text and "nearest-fill" in text and "MAE (mm)" in text
+    assert (ws.predictions / "nearest-fill" / "drive_d.h5").exists()
+    assert any(line.startswith("[run]  score-fill") for line in lines)
+    lines.clear()
+    reproduce(ws, profile, table="fill", log=lines.append)
+    assert lines and all(line.startswith("[skip]") for line in lines), lines
+    table.unlink()
+    report = run_tables(ws, ScoreTablesConfig(table="fill"))
+    assert report.written == [table] and table.read_text() == text

@@ -21,7 +21,7 @@ import h5py
 import numpy as np
 import pytest
 
-from dcslam.stages.reproduce import PROFILES
+from dcslam.stages.experiments.table_5_2 import PROFILES
 from tests.fixtures.kitti import write_tiny_drive
 
 pytestmark = [pytest.mark.faults, pytest.mark.slow]  # a whole reproduction, then one per stage

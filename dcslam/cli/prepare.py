@@ -6,7 +6,7 @@ import typer
 
 from dcslam.cli.app import app, summary
 from dcslam.cli.options import stage_command
-from dcslam.stages.datasets import DATASETS, dataset
+from dcslam.stages.datasets import DATASETS, dataset, installed
 
 
 def report_prepared(result) -> None:
@@ -32,3 +32,17 @@ for _name in DATASETS:
     _module = dataset(_name)
     stage_command(app, f"prepare-{_name}", _module.CONFIG, _module.run, report_prepared, help=_module.HELP,
                   examples=EXAMPLES.get(_name, ()))
+
+# installed packages' datasets (dcslam.plugins) are imported here, to make their options; a broken one costs its own
+# command only, said in one line on stderr
+for _name in installed():
+    try:
+        _module = dataset(_name)
+        stage_command(app, f"prepare-{_name}", _module.CONFIG, _module.run, report_prepared, help=_module.HELP)
+    except Exception as _error:  # whatever a third-party module does wrong
+        from dcslam.errors import DcslamError
+        from dcslam.plugins import DATASETS as _GROUP, reason, refuse
+
+        if not isinstance(_error, DcslamError):
+            _error = refuse(_GROUP, _name, f"is no dataset ({reason(_error)})")
+        typer.echo(f"warning: {_error} (dcslam prepare-{_name} is not available)", err=True)

@@ -1,4 +1,4 @@
-"""`dcslam reproduce`: the whole experiment in one command (options: dcslam.stages.reproduce)."""
+"""`dcslam reproduce`: a registered experiment end to end in one command (options: dcslam.stages.reproduce)."""
 from __future__ import annotations
 
 import time

@@ -1,4 +1,5 @@
-"""`dcslam score`: depth errors, trajectory errors, map chamfer, and the thesis's Tables 5.1 / 5.2."""
+"""`dcslam score`: depth errors, trajectory errors, map chamfer, and the tables of the experiments (Tables 5.1 / 5.2,
+the beams table)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,7 +10,8 @@ from dcslam.cli.app import app, summary
 from dcslam.cli.options import stage_command
 from dcslam.stages import score
 
-score_app = typer.Typer(help="Score depth layers, trajectories and maps; build Tables 5.1 and 5.2 under results/.",
+score_app = typer.Typer(help="Score depth layers, trajectories and maps; build the experiments' tables (Tables 5.1 "
+                             "and 5.2, the beams table) under results/.",
                         no_args_is_help=True)
 app.add_typer(score_app, name="score")
 
@@ -61,13 +63,20 @@ def report(result) -> None:
     summary(f"wrote {result.out}")
 
 
+#: The tables of ``score tables`` printed, by the report's attribute → the file stem they are written to: Tables 5.1
+#: to 5.3 (:class:`dcslam.report.scores.Report`) and the beams table (:class:`dcslam.report.table_beams.BeamsReport`).
+SHOWN = {"table_5_1": "table_5_1", "table_5_2": "table_5_2", "table_5_2_long": "table_5_2_long",
+         "table_5_2_correlation": "table_5_2_correlation", "table_5_3": "table_5_3", "table": "table_beams",
+         "correlation": "table_beams_correlation"}
+
+
 def report_tables(report) -> None:
     written = {p.stem: p for p in report.written if p.suffix == ".md"}
-    for name in ("table_5_1", "table_5_2", "table_5_2_long", "table_5_2_correlation", "table_5_3"):
+    for name, stem in SHOWN.items():
         table = getattr(report, name, None)
         if table is None:
             continue
-        full = written.get(name, name + ".md")
+        full = written.get(stem, stem + ".md")
         print_table(compact(table, COMPACT[name], str(full)) if name in COMPACT else table)
     if not report.written:
         return
@@ -106,8 +115,11 @@ stage_command(score_app, "tables", score.ScoreTablesConfig, score.run_tables, re
                    "whole drives (dcslam reproduce), Table 5.2 over whole drives too. Table 5.2's rows carry surface "
                    "errors of 5 frames per drive, and table_5_2_correlation says which depth metric (MAE, RMSE, "
                    "normal error, point-to-plane, flying share) orders the rows' localisation best (Spearman's rho "
-                   "over rows x drives, bootstrap interval).",
-              examples=("dcslam score tables", "dcslam score tables --force    # after rerunning a stage"))
+                   "over rows x drives, bootstrap interval). With --table NAME, the tables of that experiment of "
+                   "`dcslam reproduce` instead (beams: the beams table, its per-drive table, correlation and plot).",
+              examples=("dcslam score tables", "dcslam score tables --force    # after rerunning a stage",
+                        "dcslam score tables --table beams --force    # the beams tables of dcslam reproduce "
+                        "--table beams"))
 
 
 def report_page(result) -> None:

@@ -26,7 +26,7 @@ from dcslam.filters.range import RangeFilter
 
 __all__ = ["FILTERS", "PRESETS", "BilateralFilter", "ConfidenceFilter", "DiscontinuityFilter", "FilterChain",
            "HiddenPointFilter", "RangeFilter", "StatisticalOutlierFilter", "backproject", "filter_drives",
-           "filter_frames", "filter_help", "parse_filter"]
+           "filter_class", "filter_frames", "filter_help", "parse_filter"]
 
 #: Filter names (of the command line and configuration files) → filter classes: the one place they are mapped.
 FILTERS = {"range": RangeFilter, "bilateral": BilateralFilter, "outlier": StatisticalOutlierFilter,
@@ -50,8 +50,12 @@ def filter_help() -> str:
                       for name, cls in FILTERS.items())
     presets = ", ".join(f"{name} ({', '.join(f'{k}={v}' for k, v in list(p.describe().items())[1:])})"
                         for name, p in PRESETS.items())
-    return (f"A filter, repeatable and applied in order: NAME or NAME:key=value,... with NAME one of {names}, or "
-            f"a preset: {presets}. Example: --filter range:min=1,max=60 --filter bilateral:d=5,sigma_color=2")
+    from dcslam import plugins
+
+    installed = ", ".join(plugins.targets(plugins.FILTERS, FILTERS))  # names only: a plugin is imported when used
+    return (f"A filter, repeatable and applied in order: NAME or NAME:key=value,... with NAME one of {names}"
+            + (f", from installed packages {installed}" if installed else "") + f", or a preset: {presets}. "
+            "Example: --filter range:min=1,max=60 --filter bilateral:d=5,sigma_color=2")
 
 
 def _convert(text: str, default):
@@ -66,6 +70,26 @@ def _convert(text: str, default):
     return int(text) if isinstance(default, int) else float(text)
 
 
+def filter_class(name: str):
+    """The filter class called ``name``: :data:`FILTERS`'s, else an installed package's (an entry point of
+    ``dcslam.filters``, :mod:`dcslam.plugins`), imported here and checked to be a filter."""
+    import dataclasses
+
+    from dcslam import plugins
+
+    if name in FILTERS:
+        return FILTERS[name]
+    if plugins.find(plugins.FILTERS, name) is None:
+        known = [*FILTERS, *PRESETS, *plugins.targets(plugins.FILTERS, FILTERS)]
+        raise DcslamError(f"unknown filter {name!r}; expected one of {', '.join(known)}")
+    cls = plugins.load(plugins.FILTERS, name)
+    if not (isinstance(cls, type) and dataclasses.is_dataclass(cls) and callable(getattr(cls, "apply", None))
+            and callable(getattr(cls, "describe", None))):
+        raise plugins.refuse(plugins.FILTERS, name, "is not a filter (a dataclass with apply(depth_m, K) and "
+                             "describe())")
+    return cls
+
+
 def parse_filter(spec: str):
     """``NAME`` or ``NAME:key=value,...`` (or a preset name) → a filter object. Raises :class:`DcslamError`."""
     import dataclasses
@@ -73,9 +97,8 @@ def parse_filter(spec: str):
     if spec in PRESETS:
         return PRESETS[spec]
     name, _, args = spec.partition(":")
-    if name not in FILTERS:
-        raise DcslamError(f"unknown filter {name!r}; expected one of {', '.join([*FILTERS, *PRESETS])}")
-    fields = {f.name: f.default for f in dataclasses.fields(FILTERS[name])}
+    cls = filter_class(name)
+    fields = {f.name: f.default for f in dataclasses.fields(cls)}
     kwargs = {}
     for item in filter(None, args.split(",")):
         key, eq, value = item.partition("=")
@@ -87,6 +110,6 @@ def parse_filter(spec: str):
         except ValueError as exc:
             raise DcslamError(f"{spec!r}: {key}: {exc}") from None
     try:
-        return FILTERS[name](**kwargs)
+        return cls(**kwargs)
     except DcslamError as exc:
         raise DcslamError(f"{spec!r}: {exc}") from None

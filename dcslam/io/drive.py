@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.io.atomic import atomic_output
+from dcslam.io.atomic import WriteSink, atomic_output
 
 DRIVE_SCHEMA = "dcslam.drive/1"
 LAYER_SCHEMA = "dcslam.layer/1"
@@ -136,6 +136,9 @@ def _check_frame(frame: DriveFrame, height: int, width: int, extra: tuple[str, .
 
 class DriveWriter:
     """Write a drive file frame by frame, atomically (the file appears under its name only when closed cleanly).
+    A write that fails (a full disk, an I/O error) ends in one :class:`DcslamError` line naming the file and the
+    reason, with the partial file removed (HDF5 writes through a :class:`~dcslam.io.atomic.WriteSink`, so a failed
+    write never leaves a file that cannot be closed).
 
     >>> with DriveWriter(path, K, height, width, source="synthetic", date="2011_09_26", drive="...") as w:
     ...     for frame in frames:
@@ -170,8 +173,10 @@ class DriveWriter:
 
         self._atomic = atomic_output(self.path, force=self.force)
         tmp = self._atomic.__enter__()
+        self._h5 = self._sink = None
         try:
-            self._h5 = h5py.File(tmp, "w")
+            self._sink = WriteSink(tmp)
+            self._h5 = h5py.File(self._sink, "w")
             h, w = self.height, self.width
             self._rgb = self._h5.create_dataset("rgb", (0, h, w, 3), np.uint8, maxshape=(None, h, w, 3),
                                                 chunks=(1, h, w, 3), **_COMPRESSION)
@@ -187,9 +192,19 @@ class DriveWriter:
                     dataset.attrs["synthetic_only"] = True
                 self._depth[kind] = dataset
         except BaseException as exc:
+            self._discard()
             self._atomic.__exit__(type(exc), exc, exc.__traceback__)
             raise
         return self
+
+    def _discard(self) -> None:
+        """Close the HDF5 file and its sink whatever state a failure left them in (the file is removed next)."""
+        for part in (self._h5, self._sink):
+            if part is not None:
+                try:
+                    part.close()
+                except Exception:  # noqa: BLE001  (the file is being thrown away; the first error is raised)
+                    pass
 
     def append(self, frame: DriveFrame) -> None:
         _check_frame(frame, self.height, self.width, self.extra)
@@ -201,6 +216,7 @@ class DriveWriter:
             depth = frame.extra[kind] if kind in self.extra else getattr(frame, kind)
             self._depth[kind][n] = np.asarray(depth, dtype=np.float32)
         self._frames.append((np.asarray(frame.T_world_cam, np.float64), float(frame.timestamp), int(frame.frame_id)))
+        self._sink.raise_error(self.path)  # stop at the first failed write, not after the whole drive
 
     def __exit__(self, exc_type, exc, tb) -> None:
         try:
@@ -213,11 +229,14 @@ class DriveWriter:
                 self._h5.create_dataset("frame_ids", data=np.array([f[2] for f in self._frames], np.int64))
                 for key, value in self.attrs.items():
                     self._h5.attrs[key] = value
-        except BaseException as error:
             self._h5.close()
+            self._sink.close()
+            if exc_type is None:
+                self._sink.raise_error(self.path)
+        except BaseException as error:
+            self._discard()
             self._atomic.__exit__(type(error), error, error.__traceback__)
             raise
-        self._h5.close()
         self._atomic.__exit__(exc_type, exc, tb)
 
 
@@ -421,7 +440,8 @@ def _check_confidence(confidence: np.ndarray, shape: tuple, where: str) -> None:
 
 
 def write_layer(path: Path | str, layer: Layer, force: bool = False) -> Path:
-    """Write a layer file atomically. Raises :class:`DcslamError` on NaN/negative depth or an existing file."""
+    """Write a layer file atomically. Raises :class:`DcslamError` on NaN/negative depth or an existing file, and
+    for a failed write (one line naming the file and the reason; the partial file removed)."""
     import h5py
 
     depth = np.asarray(layer.depth)
@@ -436,16 +456,20 @@ def write_layer(path: Path | str, layer: Layer, force: bool = False) -> Path:
     frame_ids = None if layer.frame_ids is None else np.asarray(layer.frame_ids, np.int64)
     if frame_ids is not None and frame_ids.shape != (n,):
         raise DcslamError(f"layer frame_ids have shape {frame_ids.shape}, expected ({n},) like its depth")
-    with atomic_output(path, force=force) as tmp, h5py.File(tmp, "w") as h5:
-        h5.create_dataset("depth", data=depth.astype(np.float32), chunks=(1, h, w), **_COMPRESSION)
-        if confidence is not None:
-            h5.create_dataset("confidence", data=confidence.astype(np.float32), chunks=(1, h, w), **_COMPRESSION)
-        if frame_ids is not None:
-            h5.create_dataset("frame_ids", data=frame_ids)
-        h5.attrs["schema"] = LAYER_SCHEMA
-        h5.attrs["drive"] = layer.drive
-        h5.attrs["made_by"] = layer.made_by
-        h5.attrs["config"] = json.dumps(layer.config, default=str)
+    with atomic_output(path, force=force) as tmp, WriteSink(tmp) as sink:
+        with h5py.File(sink, "w") as h5:
+            h5.create_dataset("depth", data=depth.astype(np.float32), chunks=(1, h, w), **_COMPRESSION)
+            if confidence is not None:
+                h5.create_dataset("confidence", data=confidence.astype(np.float32), chunks=(1, h, w),
+                                  **_COMPRESSION)
+            if frame_ids is not None:
+                h5.create_dataset("frame_ids", data=frame_ids)
+            h5.attrs["schema"] = LAYER_SCHEMA
+            h5.attrs["drive"] = layer.drive
+            h5.attrs["made_by"] = layer.made_by
+            h5.attrs["config"] = json.dumps(layer.config, default=str)
+        sink.close()
+        sink.raise_error(path)
     return Path(path)
 
 

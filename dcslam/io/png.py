@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
+from dcslam.io.atomic import write_bytes_atomic
 
 
 def _imread(path: Path, what: str, kind: str) -> np.ndarray:
@@ -39,20 +40,27 @@ def read_depth_png(path: Path | str, scale: float) -> np.ndarray:
     return image.astype(np.float32) / np.float32(scale)
 
 
-def write_depth_png(path: Path | str, depth_m: np.ndarray, scale: float) -> Path:
-    """(H, W) metres → 16-bit PNG, value = round(``scale`` · metres). Depth that does not fit (negative, beyond
-    65535 / ``scale``: 256 m for KITTI, 13.1 m for TUM) and non-finite depth become 0 (no value)."""
+def _write_png(path: Path | str, image: np.ndarray, params: list[int]) -> Path:
+    """Encode ``image`` as PNG in memory, then write the bytes atomically: ``cv2.imwrite`` only returns False (and
+    libpng prints to stderr), where a file write names the reason ("no space left on device")."""
     import cv2
 
+    ok, encoded = cv2.imencode(".png", image, params)
+    if not ok:
+        raise DcslamError(f"could not encode {path} as PNG (image of shape {image.shape}, {image.dtype})")
+    return write_bytes_atomic(path, encoded.tobytes())
+
+
+def write_depth_png(path: Path | str, depth_m: np.ndarray, scale: float) -> Path:
+    """(H, W) metres → 16-bit PNG, value = round(``scale`` · metres). Depth that does not fit (negative, beyond
+    65535 / ``scale``: 256 m for KITTI, 13.1 m for TUM) and non-finite depth become 0 (no value). Written
+    atomically; a failed write is one :class:`DcslamError` line naming the file and the reason."""
     depth_m = np.asarray(depth_m, dtype=np.float64)
     if depth_m.ndim != 2:
         raise DcslamError(f"depth has shape {depth_m.shape}, expected (H, W)")
     value = np.rint(np.nan_to_num(depth_m, nan=0.0, posinf=0.0, neginf=0.0) * scale)
     value[(value < 0) | (value > 65535)] = 0
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(path), value.astype(np.uint16)):
-        raise DcslamError(f"could not write {path}")
-    return Path(path)
+    return _write_png(path, value.astype(np.uint16), [])
 
 
 def read_rgb_png(path: Path | str) -> np.ndarray:
@@ -72,14 +80,11 @@ def read_rgb_png(path: Path | str) -> np.ndarray:
 
 def write_rgb_png(path: Path | str, rgb: np.ndarray, compression: int | None = None) -> Path:
     """(H, W, 3) uint8 RGB → PNG; ``compression`` 0-9 (default OpenCV's, 1 is fast) changes the bytes, not the
-    pixels."""
+    pixels. Written atomically; a failed write is one :class:`DcslamError` line naming the file and the reason."""
     import cv2
 
     rgb = np.asarray(rgb)
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
         raise DcslamError(f"image has shape {rgb.shape} and dtype {rgb.dtype}, expected (H, W, 3) uint8")
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
     params = [] if compression is None else [cv2.IMWRITE_PNG_COMPRESSION, int(compression)]
-    if not cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), params):
-        raise DcslamError(f"could not write {path}")
-    return Path(path)
+    return _write_png(path, cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), params)

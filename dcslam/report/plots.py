@@ -13,7 +13,8 @@ from dcslam.errors import DcslamError
 from dcslam.io.atomic import atomic_output
 
 
-def _pyplot():
+def pyplot():
+    """matplotlib's pyplot on the Agg backend (files only, no display)."""
     import matplotlib
 
     matplotlib.use("Agg", force=True)
@@ -49,7 +50,7 @@ def plot_trajectories(path: Path | str, T_gt: np.ndarray, estimates: dict[str, n
     T_gt = np.asarray(T_gt)
     if T_gt.ndim != 3 or T_gt.shape[1:] != (4, 4):
         raise DcslamError(f"ground-truth poses have shape {T_gt.shape}, expected (N, 4, 4)")
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6, 6))
     ax.plot(T_gt[0, 0, 3], T_gt[0, 2, 3], "ko", ms=4, zorder=1)  # the start, beneath everything
     ax.plot(T_gt[:, 0, 3], T_gt[:, 2, 3], "k--", lw=2, label="ground truth", zorder=2)
@@ -94,7 +95,7 @@ def plot_depth_examples(path: Path | str, rows: list[tuple[str, np.ndarray, np.n
     """
     if not rows:
         raise DcslamError("no depth examples to plot")
-    plt = _pyplot()
+    plt = pyplot()
     extra = rgb is not None
     fig, axes = plt.subplots(len(rows) + extra, 4, figsize=(16, 1.6 * (len(rows) + extra) + 0.6), squeeze=False)
     vmax = max_depth_m or float(max(np.max(r[3]) for r in rows) or 1.0)
@@ -126,7 +127,7 @@ def plot_training_curves(path: Path | str, metrics_path: Path | str) -> Path:
     """A training run's curves from its ``metrics.jsonl``, one quantity family per panel (so no legend covers
     another's curves): the training loss per step; the validation RMSE and MAE (mm); the validation MSE (m², the
     checkpoint criterion of MSE runs) and chamfer (m², that of chamfer runs), each on its own axis."""
-    plt = _pyplot()
+    plt = pyplot()
     rows = [json.loads(line) for line in Path(metrics_path).read_text().splitlines() if line.strip()]
     train = [(r["step"], r["loss"]) for r in rows if r["kind"] == "train"]
     val = [r for r in rows if r["kind"] == "val"]

@@ -16,7 +16,8 @@ from dcslam.eval.depth import METRICS, mean_errors
 from dcslam.report.layers import (TrajectoryPair, drive_file, resolve_layer, score_layer_depth,
                                   score_layer_surface)
 from dcslam.eval.maps import MapScores
-from dcslam.report.table_5_2 import FAILURE_THRESHOLD, LayerResult, table_5_2, table_5_2_results
+from dcslam.report.results import FAILURE_THRESHOLD, LayerResult, seed_layer, surface_note
+from dcslam.report.table_5_2 import table_5_2, table_5_2_results
 from dcslam.report.table_5_2_long import table_5_2_long, table_5_2_long_results
 from dcslam.report.tables import Column, Table, list_runs, table_5_1, table_5_3, thesis_figures
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
@@ -129,15 +130,9 @@ def per_drive_table(results: list) -> Table:
     behind the layer, empty for layers without one; ``results/table_5_2_per_drive.csv``)."""
     columns = [Column("method", "method"), Column("layer", "layer"), Column("seed", "seed"),
                Column("drive", "drive")] + [Column(k, k) for k in PER_DRIVE_KEYS]
-    rows = [{"method": r.label, "layer": _seed_layer(r, seed), "seed": seed, "drive": drive, **values}
+    rows = [{"method": r.label, "layer": seed_layer(r, seed), "seed": seed, "drive": drive, **values}
             for r in results for seed, drive, values in r.per_drive_rows()]
     return Table("Table 5.2 per drive", columns, rows)
-
-
-def _seed_layer(result, seed) -> str:
-    """The layer of ``result``'s run of training seed ``seed`` (a row over seeds has one per seed)."""
-    members = getattr(result, "members", None)
-    return next(m.layer for m in members if m.seed == seed) if members else result.layer
 
 
 def _depth_example_rows(ws: Workspace, results: list[LayerResult], drive: str):
@@ -162,7 +157,6 @@ def table_5_2_correlation(results: list, drives: list[str], failure_threshold: f
     """The rank correlation of each depth metric with localisation over every (row, drive) pair of Table 5.2
     (:func:`dcslam.report.correlation_table.correlation_table`)."""
     from dcslam.report.correlation_table import correlation_table
-    from dcslam.report.table_5_2 import surface_note
 
     return correlation_table(
         [(f"{r.label} ({r.layer})", r) for r in results],

@@ -27,7 +27,8 @@ from dcslam.errors import DcslamError
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
 from dcslam.report.seeds import paired
 from dcslam.report.spread import TWO_LEVEL_METHOD
-from dcslam.report.table_5_2 import FAILURE_THRESHOLD, LayerResult, score_layer
+from dcslam.report.results import (FAILURE_THRESHOLD, LayerResult, SeedResults, csv_suffixes, score_layer, seed_layer,
+                                   seeded, surface_note, with_seed_columns)
 from dcslam.report.tables import Column, Table
 from dcslam.workspace import Workspace
 
@@ -141,14 +142,13 @@ def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_d
                   jobs: int = 1, inputs: list[str] | None = None) -> dict:
     """Scores of every (beam count, input): ``{(beams, label): result}``, beam counts from the largest; the
     beam-independent inputs last, under ``(None, label)``. A trained completer with runs of several seeds
-    (:func:`seed_runs`) gives a :class:`dcslam.report.table_5_2.SeedResults` over them, other inputs a
+    (:func:`seed_runs`) gives a :class:`dcslam.report.results.SeedResults` over them, other inputs a
     :class:`LayerResult`: the depth errors of the input's layer, the localisation of its SLAM runs
     (:func:`slam_name`). Missing inputs are recorded in each result (see
-    :func:`dcslam.report.table_5_2.score_layer`); the inputs that need exact depth (:attr:`BeamsInput.needs_exact`)
+    :func:`dcslam.report.results.score_layer`); the inputs that need exact depth (:attr:`BeamsInput.needs_exact`)
     are left out when a test drive has none (real KITTI). ``jobs`` > 1 scores the layers in that many worker
     processes. ``inputs``: the labels of the rows to score (None: every input), e.g. a study of a few of them."""
     from dcslam.report.layers import surface_target
-    from dcslam.report.table_5_2 import SeedResults
 
     check_inputs(inputs)
     exact = surface_target(ws, drives) == "exact"
@@ -294,21 +294,22 @@ def _gap_closed(result: LayerResult, sparse: LayerResult | None, exact: LayerRes
     return None if gap <= 0 else (sparse.localisation - result.localisation) / gap
 
 
+def csv_columns(seeds: bool) -> list[Column]:
+    """The beams table's CSV columns: every figure's mean, spread and median (with ``seeds``: its seed-to-seed std)."""
+    return [Column(k, k) for k in ("beams", "input", "layer", "sources", "drives", *(("seeds",) if seeds else ()),
+                                   "failures", "vs_sparse", "gap_closed")] + [
+        Column(f"{k}{s}", "") for k in FIGURES for s in csv_suffixes(seeds)] + [Column("missing", "")]
+
+
 def table_beams(results: dict[tuple[int | None, str], LayerResult], beams: list[int], drives: list[str]) -> Table:
     """The beams table: one row per (beam count, input), then the beam-independent rows (compared with the 64-beam
     sparse input, or the largest beam count's). Refuses rows made with different SLAM settings."""
-    from dcslam.report.table_5_2 import csv_suffixes, seeded, surface_note, with_seed_columns
-
     settings = common_settings(results)
     frames = {p.T_est.shape[0] for r in results.values() for p in r.pairs.values()}
     seeds = seeded(list(results.values()))
     table = Table(f"The beams experiment — {len(drives)} test drive(s) ({', '.join(drives)})",
                   with_seed_columns(COLUMNS, seeds))
-    table.csv_columns = [Column(k, k) for k in ("beams", "input", "layer", "sources", "drives",
-                                                *(("seeds",) if seeds else ()),
-                                                "failures", "vs_sparse", "gap_closed")] + [
-        Column(f"{k}{s}", "") for k in FIGURES for s in csv_suffixes(seeds)] + [
-        Column("missing", "")]
+    table.csv_columns = csv_columns(seeds)
     exact = results.get((None, "exact"))
     top = max(beams)
     for key, result in results.items():
@@ -403,7 +404,6 @@ def correlation(results: dict[tuple[int | None, str], LayerResult], drives: list
     measured-source row has the depth metrics of its layer's depth row and another SLAM, so it would count each
     layer twice, once for a question the metrics do not ask."""
     from dcslam.report.correlation_table import correlation_table
-    from dcslam.report.table_5_2 import surface_note
 
     threshold = next(iter(results.values())).failure_threshold if results else FAILURE_THRESHOLD
     depth_mode = {i.label for i in INPUTS if i.sources != MEASURED}
@@ -421,11 +421,9 @@ def per_drive_table(results: dict[tuple[int | None, str], LayerResult]) -> Table
     """Every figure of every row on every test drive (``results/table_beams_per_drive.csv``)."""
     from dcslam.report.scores import PER_DRIVE_KEYS
 
-    from dcslam.report.scores import _seed_layer
-
     columns = [Column("beams", "beams"), Column("input", "input"), Column("layer", "layer"), Column("seed", "seed"),
                Column("drive", "drive")] + [Column(k, k) for k in PER_DRIVE_KEYS]
-    rows = [{"beams": b if b is not None else "any", "input": label, "layer": _seed_layer(r, seed), "seed": seed,
+    rows = [{"beams": b if b is not None else "any", "input": label, "layer": seed_layer(r, seed), "seed": seed,
              "drive": drive, **values}
             for (b, label), r in results.items() for seed, drive, values in r.per_drive_rows()]
     return Table("The beams experiment per drive", columns, rows)
@@ -436,9 +434,9 @@ def plot_localisation_vs_beams(path: Path | str, results: dict[tuple[int | None,
     """Localisation (mean over drives, bars: 95 % half-width, clipped above zero) against beam count, one line per
     input; the beam-independent inputs as horizontal lines with their interval as a band. Log-log axes."""
     from dcslam.io.atomic import atomic_output
-    from dcslam.report.plots import _pyplot
+    from dcslam.report.plots import pyplot
 
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 5))
     xs = sorted(beams)
     per_beam = [item for item in INPUTS if item.per_beam]

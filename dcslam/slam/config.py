@@ -9,12 +9,13 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
+from dcslam.constants import FIRST_STEP_PRIORS
+
 ODOMETRIES = ("gt", "icp", "gradicp")
 MAPPERS = ("pointfusion", "icpslam")
 SOLVERS = ("gn", "lm")
 ASSOCIATIONS = ("projective", "nn")
 KERNELS = ("none", "gm")
-FIRST_STEP_PRIORS = ("none", "drive-motion")
 
 
 @dataclass(frozen=True)

@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import torch
 
+from dcslam.constants import FIRST_STEP_PRIORS
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_depth
 from dcslam.geometry.motion import relative_motion
-from dcslam.slam.config import FIRST_STEP_PRIORS
 from dcslam.slam.fusion import PointFusion
 from dcslam.slam.frame import Frame, FrameSettings, prepare_frame, valid_points
 from dcslam.slam.health import HealthRules, assess, summarise
@@ -201,7 +201,7 @@ class SLAM:
                    source_frame: Frame | None = None) -> StepReport:
         """Process one frame already made by ``prepare_frame(depth, K, rgb, self.frame_settings, weight)``, which
         depends on the frame alone: a caller may prepare the next frame on another thread while this one is
-        aligned and fused (:func:`dcslam.stages.slam.run_drive` does). ``start``: the ``time.perf_counter()`` the
+        aligned and fused (:func:`dcslam.slam.drive.run_drive` does). ``start``: the ``time.perf_counter()`` the
         report's seconds count from (default: now).
 
         ``source_frame``: another frame of the same camera and instant whose points the odometry aligns instead of

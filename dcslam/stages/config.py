@@ -103,27 +103,43 @@ def from_mapping(cls, values: dict, source: str = "configuration"):
 def read_config_file(path: Path | str) -> dict:
     """The table of a ``.toml`` (or, with PyYAML installed, ``.yaml`` / ``.yml``) configuration file."""
     path = Path(path)
-    if not path.is_file():
-        raise DcslamError(f"configuration file {path} not found")
+    text = _config_text(path)
     if path.suffix in (".yaml", ".yml"):
         try:
             import yaml
         except ImportError:
             raise DcslamError(f"{path}: YAML needs PyYAML (pip install pyyaml); or write the file as TOML") from None
         try:
-            values = yaml.safe_load(path.read_text()) or {}
+            values = yaml.safe_load(text) or {}
         except yaml.YAMLError as exc:
             raise DcslamError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
     else:
         import tomllib
 
         try:
-            values = tomllib.loads(path.read_text())
+            values = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise DcslamError(f"{path}: not valid TOML ({exc}); expected key = value lines") from None
     if not isinstance(values, dict):
         raise DcslamError(f"{path}: expected a table of key = value, got {type(values).__name__}")
     return values
+
+
+def _config_text(path: Path) -> str:
+    """The text of a configuration file, or one line naming the file: missing, a directory, unreadable, not UTF-8."""
+    if path.is_dir():
+        raise DcslamError(f"configuration file {path} is a directory; give a .toml or .yaml file")
+    if not path.exists():
+        raise DcslamError(f"configuration file {path} not found")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise DcslamError(f"could not read configuration file {path}: {exc.strerror or exc}") from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise DcslamError(f"configuration file {path} is not UTF-8 text (byte {exc.start}: {data[exc.start]:#04x}); "
+                          "save it as UTF-8") from None
 
 
 def to_dict(config) -> dict:
@@ -180,7 +196,7 @@ def to_toml(config, title: str | None = None) -> str:
 
 def code_version() -> str:
     """dcslam's version and a hash of its Python sources: changes when the code that makes outputs changes."""
-    from dcslam import __version__
+    from dcslam.version import __version__
 
     root = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()

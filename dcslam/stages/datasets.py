@@ -18,7 +18,26 @@ DATASETS = {
 
 
 def dataset(name: str) -> ModuleType:
-    """The stage module of dataset ``name``."""
-    if name not in DATASETS:
-        raise DcslamError(f"unknown dataset {name!r}; expected one of {', '.join(DATASETS)}")
-    return importlib.import_module(DATASETS[name])
+    """The stage module of dataset ``name``: :data:`DATASETS`'s, else an installed package's (an entry point of
+    ``dcslam.datasets``, :mod:`dcslam.plugins`), imported here and checked to hold ``CONFIG``, ``HELP`` and
+    ``run``."""
+    from dcslam import plugins
+
+    if name in DATASETS:
+        return importlib.import_module(DATASETS[name])
+    if plugins.find(plugins.DATASETS, name) is None:
+        known = [*DATASETS, *plugins.targets(plugins.DATASETS, DATASETS)]
+        raise DcslamError(f"unknown dataset {name!r}; expected one of {', '.join(known)}")
+    module = plugins.load(plugins.DATASETS, name)
+    missing = [attr for attr in ("CONFIG", "HELP", "run") if not hasattr(module, attr)]
+    if missing:
+        raise plugins.refuse(plugins.DATASETS, name, f"lacks {', '.join(missing)} (a dataset module holds CONFIG, "
+                             "HELP and run)")
+    return module
+
+
+def installed() -> tuple[str, ...]:
+    """The datasets of installed packages (entry points of ``dcslam.datasets``) whose names dcslam's own lack."""
+    from dcslam import plugins
+
+    return tuple(plugins.targets(plugins.DATASETS, DATASETS))

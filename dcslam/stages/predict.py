@@ -48,6 +48,7 @@ class PredictResult:
     out_dir: Path
     layers: list[Path]
     made_by: str
+    empty_share: float | None = None  # share of all the layers' pixels left without depth
 
 
 def run_predictor(run_dir: Path | str, device):
@@ -77,7 +78,8 @@ def predict_drive(predictor, drive_path: Path | str, out_path: Path | str, force
 
     The layer holds ``depth`` (N, H, W) float32 metres, the same frames as the drive (and ``confidence`` when the
     completer gives one); its configuration records the input kind and its LiDAR beams (``input``,
-    ``input_beams``).
+    ``input_beams``), and ``empty_share``, the share of its pixels left without depth (completers that leave a
+    pixel empty rather than guess say how much they left).
     """
     from dcslam.io.drive import DriveFile, Layer, input_beams, write_layer
     from dcslam.progress import track
@@ -100,7 +102,7 @@ def predict_drive(predictor, drive_path: Path | str, out_path: Path | str, force
         layer = Layer(depth=depth, confidence=confidence, drive=drive.path.name, frame_ids=drive.frame_ids,
                       made_by=predictor.made_by,
                       config={**predictor.config, "drive_file": str(drive.path), "input": input,
-                              "input_beams": input_beams(input)})
+                              "input_beams": input_beams(input), "empty_share": float((depth == 0).mean())})
     return write_layer(out_path, layer, force=force)
 
 
@@ -147,9 +149,11 @@ def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> Predict
         with DriveFile(path) as drive:
             if len(drive):
                 drive.depth(kind, 0)  # a kind the drive lacks: one line naming it and how to write it
+    empty, pixels = 0.0, 0
     with new_folder(out_dir), AtomicSet() as files:  # the layers appear together: Ctrl-C or a bad drive leaves none
         for path, out in zip(paths, outputs):
-            predict_drive(chosen, path, files.stage(out), force=True, input=kind)
+            share, size = _empty_share(predict_drive(chosen, path, files.stage(out), force=True, input=kind))
+            empty, pixels = empty + share * size, pixels + size
     from dcslam.stages.config import to_dict
     from dcslam.io.atomic import write_json_atomic
     from dcslam.workspace import stage_config
@@ -157,4 +161,14 @@ def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> Predict
     write_json_atomic(out_dir / "config.json", stage_config("predict", {**to_dict(config), "made_by": chosen.made_by,
                                                                       "input": kind}),
                       force=True)
-    return PredictResult(out_dir, outputs, chosen.made_by)
+    return PredictResult(out_dir, outputs, chosen.made_by, empty / pixels if pixels else None)
+
+
+def _empty_share(layer_path: Path) -> tuple[float, int]:
+    """The ``empty_share`` a layer's configuration records and its pixel count, without reading its depth."""
+    import json
+
+    import h5py
+
+    with h5py.File(layer_path, "r") as h5:
+        return float(json.loads(h5.attrs["config"])["empty_share"]), int(np.prod(h5["depth"].shape))

@@ -173,7 +173,7 @@ class Estimate:
 
 
 def estimate(stages: list, drives: DriveFrames, costs: UnitCosts) -> Estimate:
-    """The :class:`Estimate` of ``stages`` (:class:`dcslam.stages.reproduce.Stage`) over ``drives``."""
+    """The :class:`Estimate` of ``stages`` (:class:`dcslam.stages.pipeline.Stage`) over ``drives``."""
     from dcslam.stages.config import to_dict
 
     slam_runs = sum(s.name.startswith("slam-") for s in stages)
@@ -212,8 +212,8 @@ def _hours(seconds: float | None) -> str:
 def plan_text(ws, config) -> str:
     """What ``dcslam reproduce`` with ``config`` will run in ``ws`` (stages per kind, those up to date, seeds and
     drives) and its estimated cost per stage kind; reads the workspace, writes nothing."""
-    from dcslam.stages.reproduce import Pipeline, profile_of, seeds_of
-    from dcslam.stages.reproduce_plan import planned_splits, planned_stages
+    from dcslam.stages.pipeline import Pipeline
+    from dcslam.stages.reproduce_plan import planned_splits, planned_stages, profile_of, seeds_of
 
     profile, seeds = profile_of(config), seeds_of(config)
     splits = planned_splits(ws, profile, config.kitti)

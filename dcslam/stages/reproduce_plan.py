@@ -4,9 +4,20 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from dcslam.stages.reproduce import (Pipeline, Profile, ReproduceConfig, Stage, compose, generated_names,
-                                     split_by_counts)
+from dcslam.stages.experiments import experiment
+from dcslam.stages.experiments.common import generated_names, split_by_counts
+from dcslam.stages.pipeline import Pipeline, Stage
 from dcslam.workspace import Workspace
+
+
+def profile_of(config):
+    """The profile a :class:`dcslam.stages.reproduce.ReproduceConfig` names, of the experiment it names."""
+    return experiment(config.table).profile(config.profile)
+
+
+def seeds_of(config) -> int:
+    """Training seeds per trained run: ``--seeds``, else the profile's."""
+    return config.seeds if config.seeds is not None else profile_of(config).seeds
 
 
 class _Listing(Pipeline):
@@ -26,10 +37,11 @@ class _Listing(Pipeline):
         self.stages += stages
 
 
-def planned_splits(ws: Workspace, profile: Profile, kitti_root: Path | None = None) -> dict[str, list[str]]:
+def planned_splits(ws: Workspace, profile, kitti_root: Path | None = None) -> dict[str, list[str]]:
     """The split ``prepare-kitti`` will write: for generated drives (made here, or a generated root given as the
     KITTI root) their names split as the profile says (or in the thesis's proportion); for a real KITTI root the
-    workspace's ``splits.json`` if there is one, else the thesis's."""
+    workspace's ``splits.json`` if there is one, else the thesis's. ``profile``: any experiment's (its ``drives``
+    and ``split``)."""
     from dcslam.io.drive import read_splits
     from dcslam.stages.prepare import THESIS_SPLITS, proportional_splits
     from dcslam.synth.street.generate import drive_name
@@ -43,28 +55,23 @@ def planned_splits(ws: Workspace, profile: Profile, kitti_root: Path | None = No
     return proportional_splits(names) if profile.split is None else split_by_counts(names, profile.split)
 
 
-def planned_stages(workspace: Workspace, profile: Profile, table: str = "5.2", kitti_root: Path | None = None,
+def planned_stages(workspace: Workspace, profile, table: str = "5.2", kitti_root: Path | None = None,
                    seed: int = 0, seeds: int = 1) -> list[Stage]:
-    """The stages :func:`dcslam.stages.reproduce.reproduce` would run, in order, with their configurations (test
-    drives from :func:`planned_splits`; ``seeds`` training seeds per trained run, each stage's ``seed`` that of the
-    run it trains or uses); nothing is run or written."""
+    """The stages experiment ``table`` (:data:`~dcslam.stages.experiments.EXPERIMENTS`) would run at ``profile``
+    (one of its profiles), in order, with their configurations (test drives from :func:`planned_splits`; ``seeds``
+    training seeds per trained run, each stage's ``seed`` that of the run it trains or uses); nothing is run or
+    written."""
     pipe = _Listing(workspace, planned_splits(workspace, profile, kitti_root))
-    if table == "beams":  # ``profile`` is then a :class:`dcslam.stages.reproduce_beams.BeamsProfile`
-        from dcslam.stages import reproduce_beams
-
-        reproduce_beams.compose(pipe, profile, kitti_root, seed, seeds=seeds)
-    else:
-        compose(pipe, profile, table, kitti_root, seed, seeds=seeds)
+    experiment(table).compose(pipe, profile, kitti_root, seed, 1, seeds)
     return pipe.stages
 
 
-def stage_configs_toml(workspace: Workspace, config: ReproduceConfig) -> str:
+def stage_configs_toml(workspace: Workspace, config) -> str:
     """Every stage's configuration as TOML tables ``[stages."<stage>"]``, in the order they run, each line commented
     out (``#>`` + the TOML line), so that what ``--print-config`` prints stays a ``--config`` file of ``dcslam
-    reproduce``; :func:`read_stage_configs` reads them back."""
+    reproduce`` (``config``: its :class:`~dcslam.stages.reproduce.ReproduceConfig`); :func:`read_stage_configs`
+    reads them back."""
     from dcslam.stages.config import to_toml
-
-    from dcslam.stages.reproduce import profile_of, seeds_of
 
     stages = planned_stages(workspace, profile_of(config), config.table, config.kitti, config.seed, seeds_of(config))
     lines = [f"# the {len(stages)} stages this runs, in order, with their configurations (informative: a stage is "

@@ -1,4 +1,5 @@
-"""``dcslam score``: depth errors, trajectory errors, map chamfer of layers, and the thesis's Tables 5.1 / 5.2.
+"""``dcslam score``: depth errors, trajectory errors, map chamfer of layers, and the tables of every experiment of
+``dcslam reproduce`` (Tables 5.1 / 5.2, the beams table; ``score tables --table NAME``).
 
 Four stages, one per ``dcslam score`` subcommand; each returns the table(s) it wrote (a CSV file, or the report).
 """
@@ -10,7 +11,9 @@ from pathlib import Path
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import DEPARTURES_TEXT
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
+from dcslam.report.results import FAILURE_THRESHOLD
 from dcslam.stages.config import option
+from dcslam.stages.experiments import EXPERIMENTS
 from dcslam.workspace import Workspace
 
 DRIVE_HELP = "Drive name (repeatable); default: the test split of splits.json."
@@ -165,10 +168,26 @@ class ScoreTablesConfig:
                                   help="Output folder (default: <workspace>/results).")
     devkit_exact: bool = option(False, flags=("--devkit-exact",), help=DEPARTURES_TEXT)
     max_time_diff: float = option(EVO_MAX_TIME_DIFF_S, min=0.0, help=MAX_TIME_DIFF_HELP)
-    failure_threshold: float = option(1.0, min=0.0, help=FAILURE_HELP)
+    failure_threshold: float = option(FAILURE_THRESHOLD, min=0.0, help=FAILURE_HELP)
+    table: str = option("5.2", choices=tuple(EXPERIMENTS), help="Experiment whose tables to build from the "
+                        "workspace's outputs (those of `dcslam reproduce --table NAME`): 5.2 and 5.1 build both "
+                        "Tables 5.1 and 5.2; beams the beams table, its per-drive table, correlation and plot.")
+
+    def __post_init__(self) -> None:
+        if self.table not in EXPERIMENTS:
+            raise DcslamError(f"unknown table {self.table!r}; expected one of {', '.join(EXPERIMENTS)}")
 
 
 def run_tables(ws: Workspace, config: ScoreTablesConfig, *, force: bool = False):
+    """The tables of experiment ``config.table`` from the workspace's outputs: its own table builder
+    (:attr:`dcslam.stages.pipeline.Experiment.tables`) for every experiment but Tables 5.1 / 5.2, which are
+    :func:`run_thesis_tables`."""
+    from dcslam.stages.experiments import experiment
+
+    return experiment(config.table).tables(ws, config, force=force)
+
+
+def run_thesis_tables(ws: Workspace, config: ScoreTablesConfig, *, force: bool = False):
     """Tables 5.1 and 5.2 with their plots; returns the :class:`dcslam.report.scores.Report` and writes the
     configuration beside them (``score-tables.json``)."""
     from dcslam.report.scores import build_report

@@ -12,14 +12,12 @@ The configuration extends :class:`dcslam.slam.config.SlamSettings`, so a field a
 from __future__ import annotations
 
 import contextlib
-import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from pathlib import Path
-
-import numpy as np
 
 from dcslam.errors import DcslamError
 from dcslam.slam.config import SlamSettings
+from dcslam.slam.drive import ConfidenceUse, DriveRun, check_timestamps, run_drive
 from dcslam.stages.config import option
 from dcslam.workspace import Workspace
 
@@ -31,27 +29,6 @@ EVIDENCE_USES = ("auto", "none")
 CONFIDENCE_USES = ("weights", "mask", "ignore")
 #: Which points the odometry aligns (``--sources``): the depth input's own, or the measured LiDAR pixels behind it.
 SOURCES = ("depth", "measured")
-
-
-@dataclass(frozen=True)
-class ConfidenceUse:
-    """What SLAM does with a layer's confidence: ``mode`` one of :data:`CONFIDENCE_USES`, pixels below ``minimum``
-    dropped (weights, mask)."""
-
-    mode: str = "weights"
-    minimum: float = 0.0
-
-    def apply(self, depth: np.ndarray, confidence: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
-        """(depth with the dropped pixels at 0, per-pixel weight or None). Shape: (H, W) each."""
-        if confidence is None or self.mode == "ignore":
-            return depth, None
-        kept = np.where(confidence >= self.minimum, depth, 0).astype(np.float32)
-        return kept, (np.where(kept > 0, confidence, 0).astype(np.float32) if self.mode == "weights" else None)
-
-    def record(self, has_confidence: bool) -> dict:
-        """What the summary says was done: ``mode`` is ``none`` for a layer without a confidence."""
-        return {"mode": self.mode if has_confidence else "none", "min_confidence": self.minimum,
-                "layer_has_confidence": has_confidence}
 
 
 @dataclass(frozen=True)
@@ -119,7 +96,7 @@ class SlamStageConfig(SlamSettings):
                 raise DcslamError(f"--measured {self.measured!r} is not a drive depth kind (e.g. sparse, "
                                   "sparse@16)")
 
-    def confidence_use(self) -> "ConfidenceUse":
+    def confidence_use(self) -> ConfidenceUse:
         return ConfidenceUse(self.confidence, self.min_confidence)
 
     def settings(self) -> SlamSettings:
@@ -129,7 +106,7 @@ class SlamStageConfig(SlamSettings):
 
 @dataclass
 class SlamDriveResult:
-    """One drive: its summary (:meth:`DriveRun.summary`) and the files written."""
+    """One drive: its summary (:meth:`dcslam.slam.drive.DriveRun.summary`) and the files written."""
 
     drive: str
     summary: dict
@@ -166,10 +143,9 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
     fix_mmap_threshold()
     with torch_threads(config.threads):
         for path, source, measured in jobs:
-            slam = build_slam(config.settings())
-            drive_run = run_drive(path, source, slam, config.frames or None, config.device,
-                                  settings={**to_dict(config), "source": str(source)},
-                                  confidence=config.confidence_use(), sources_kind=measured)
+            drive_run = run_drive_file(path, source, build_slam(config.settings()), config.frames or None,
+                                       config.device, settings={**to_dict(config), "source": str(source)},
+                                       confidence=config.confidence_use(), sources_kind=measured)
             drive_run.name = path.stem
             drive_run.evidence = companion_evidence(path, source, drive_run, config, measured)
             written = write_outputs(drive_run, out_dir, force)
@@ -228,144 +204,30 @@ def torch_threads(threads: int):
         torch.set_num_threads(before)
 
 
-@dataclass
-class DriveRun:
-    """Outputs of one drive. Shape: T_world_cam (N, 4, 4) float64, timestamps (N,), T_gt (N, 4, 4)."""
+def run_drive_file(drive_path: Path, source: str | Path, slam, frames: int | None = None, device: str = "cpu",
+                   description: str | None = None, **options) -> DriveRun:
+    """:func:`dcslam.slam.drive.run_drive` over the first ``frames`` frames (all if None) of the drive file
+    ``drive_path`` with depth from ``source`` (a depth kind of the drive or a layer file), read as they are used
+    (:func:`dcslam.io.drive_frames.drive_frames`); ``options``: run_drive's (``sources_kind``: the drive depth kind
+    whose pixels the odometry aligns, e.g. ``sparse@16``)."""
+    from dcslam.io.drive_frames import drive_frames
 
-    name: str
-    T_world_cam: np.ndarray
-    timestamps: np.ndarray
-    T_gt: np.ndarray
-    map: object                 # dcslam.slam.pointmap.PointMap
-    reports: list               # dcslam.slam.pipeline.StepReport per frame
-    seconds: float
-    settings: dict = field(default_factory=dict)
-    confidence: dict = field(default_factory=dict)  # ConfidenceUse.record() plus the fraction of pixels kept
-    effective_settings: dict = field(default_factory=dict)  # SLAM.effective_settings(): after the scene scale
-    health_rules: object = None  # the HealthRules the steps were judged by (None: the defaults); the run is too
-    sources: dict = field(default_factory=lambda: {"mode": "depth"})  # the ICP sources used: mode, measured kind
-    evidence: dict | None = None  # dcslam.slam.evidence.judge / unavailable (None: not asked, as before it existed)
-
-    def __post_init__(self) -> None:
-        from dcslam.geometry.rotations import nearest_rotation
-
-        # poses composed in float32 leave SO(3) by ~1e-4 over a drive: written and scored as the nearest rotations
-        T = np.array(self.T_world_cam, dtype=np.float64)
-        T[:, :3, :3] = nearest_rotation(T[:, :3, :3])
-        self.T_world_cam = T
-
-    def summary(self) -> dict:
-        import torch
-
-        from dcslam.geometry.se3 import pose_error
-        from dcslam.slam.health import summarise
-
-        dt, dr = pose_error(torch.from_numpy(self.T_gt), torch.from_numpy(self.T_world_cam))
-        n = len(self.reports)
-        health = summarise(self.reports, *([self.health_rules] if self.health_rules is not None else []))
-        if self.evidence is not None:
-            from dcslam.slam.evidence import merge
-
-            health = merge(health, self.evidence)
-        return {
-            "drive": self.name, "frames": n, "points": len(self.map),
-            "seconds": round(self.seconds, 3), "seconds_per_frame": round(self.seconds / max(n, 1), 4),
-            "map_megabytes": round(self.map.nbytes() / 2 ** 20, 2),
-            "rejected_steps": [{"frame": r.index, "reason": r.reason} for r in self.reports if not r.accepted],
-            "health": health,
-            "translation_error_m": {"final": float(dt[-1]), "max": float(dt.max()), "mean": float(dt.mean())},
-            "rotation_error_deg": {"final": float(dr[-1]) * 180 / np.pi, "max": float(dr.max()) * 180 / np.pi},
-            "confidence": self.confidence,
-            "sources": self.sources,
-            "settings": self.settings,
-            "effective_settings": self.effective_settings,
-        }
-
-
-def run_drive(drive_path: Path, depth_source: str | Path, slam, frames: int | None = None,
-              device: str = "cpu", description: str | None = None, settings: dict | None = None,
-              confidence: ConfidenceUse = ConfidenceUse(), sources_kind: str | None = None) -> DriveRun:
-    """SLAM (a :class:`dcslam.slam.pipeline.SLAM`) over the first ``frames`` frames (all if None) of a drive, with
-    depth from ``sparse``, ``dense`` or a layer file, whose confidence (if it has one) is used as ``confidence``
-    says. ``sources_kind``: a drive depth kind (e.g. ``sparse@16``) whose pixels the odometry aligns instead of the
-    depth's own, against the map fused from the depth (:meth:`~dcslam.slam.pipeline.SLAM.step_frame`'s
-    ``source_frame``); None: the depth's own."""
-    import torch
-
-    from dcslam.io.drive import DriveFile, load_depth_and_confidence
-    from dcslam.progress import Bar
-    from dcslam.slam.frame import prepare_frame
-    from dcslam.workers import cores_shared
-
-    with DriveFile(drive_path) as drive:
-        n = len(drive) if not frames else min(frames, len(drive))
-        if n < 1:
-            raise DcslamError(f"{drive_path}: no frames")
-        check_timestamps(drive.timestamps[:n], str(drive_path))  # before any work, not after it
-        depth_all, confidence_all = load_depth_and_confidence(drive, depth_source)
-        depth_all = depth_all[:n]
-        if confidence_all is not None:
-            confidence_all = confidence_all[:n]
-        # the depth input already is the measured kind (sparse@16 with --measured sparse@16): its frames serve both
-        separate = sources_kind is not None and not (isinstance(depth_source, str) and depth_source == sources_kind)
-        sources_all = np.stack([drive.depth(sources_kind, i) for i in range(n)]) if separate else None
-        measured = kept = 0
-        K = torch.from_numpy(drive.K).float().to(device)
-        T_gt = drive.poses[:n]
-        slam.T_world_cam0 = torch.from_numpy(T_gt[0]).float()
-        slam.reset()
-        def prepare(i: int):
-            """Frame i made ready for SLAM (it depends on that frame alone), with its measured and kept pixels."""
-            depth_np, weight_np = confidence.apply(depth_all[i], None if confidence_all is None
-                                                   else confidence_all[i])
-            depth = torch.from_numpy(np.ascontiguousarray(depth_np)).to(device)[None, None]
-            weight = None if weight_np is None else torch.from_numpy(weight_np).to(device)[None, None]
-            rgb = torch.from_numpy(drive.rgb(i)).to(device).permute(2, 0, 1)[None].float() / 255
-            frame = prepare_frame(depth, K, rgb, slam.frame_settings, weight)
-            source_frame = None
-            if sources_all is not None:
-                # no weights: the measured pixels are the evidence (a completer's confidence is about its fill)
-                sparse = torch.from_numpy(np.ascontiguousarray(sources_all[i])).to(device)[None, None]
-                source_frame = prepare_frame(sparse, K, None, slam.frame_settings)
-            slam.precompute(frame, source_frame)
-            return frame, source_frame, int((depth_all[i] > 0).sum()), int((depth_np > 0).sum())
-
-        start = time.perf_counter()
-        # the next frame is read and prepared (normals, colours, ICP sources, surfels) on a second thread while this
-        # one is aligned and fused: the same operations on the same values, so the same poses, in less wall time
-        # (not in a pool worker: its siblings already keep every core busy, and a second thread only slows them)
-        with Bar(description or drive.name, total=n) as bar, prefetcher(not cores_shared()) as submit:
-            pending = submit(prepare, 0)
-            for i in range(n):
-                frame, source_frame, m, k = pending.result()
-                measured, kept = measured + m, kept + k
-                if i + 1 < n:
-                    pending = submit(prepare, i + 1)
-                report = slam.step_frame(frame, torch.from_numpy(T_gt[i]).float().to(device),
-                                         source_frame=source_frame)
-                bar.advance(status=f"{report.points} points" + ("" if report.accepted else " (step rejected)"))
-        seconds = time.perf_counter() - start
-        poses = slam.trajectory().detach().cpu().double().numpy()
-        global_map = slam.mapper.global_map().detach().to("cpu")
-        used = {**confidence.record(confidence_all is not None),
-                "kept_fraction": round(kept / measured, 4) if measured else 0.0}
-        sources = {"mode": "depth"} if sources_kind is None else {"mode": "measured", "kind": sources_kind}
-        return DriveRun(drive.name, poses, drive.timestamps[:n].copy(), T_gt.copy(), global_map,
-                        list(slam.reports), seconds, dict(settings or {}), used, slam.effective_settings(),
-                        slam.health, sources)
+    with drive_frames(drive_path, source, frames, options.get("sources_kind")) as drive:
+        return run_drive(drive, slam, device, description, **options)
 
 
 def companion_evidence(drive_path: Path, source: str | Path, main: DriveRun, config: SlamStageConfig,
                        sources_kind: str | None = None) -> dict:
-    """The evidence verdict of ``main`` (a run over ``source`` on ``drive_path``): :func:`dcslam.slam.evidence.judge`
-    against a companion run with the same settings and frames on the measured depth kind behind ``source``
-    (:func:`dcslam.io.drive.measured_kind`; with measured ICP sources, ``sources_kind``, the kind they came from, so
-    that exact depth aligned by 16-beam points is checked against 16-beam SLAM); ``own`` for a sparse input,
-    ``off`` with ``--evidence none``, ``unavailable`` when no measured kind can be named or the drive lacks it."""
+    """The evidence verdict of ``main`` (a run over ``source`` on ``drive_path``):
+    :func:`dcslam.slam.drive.companion_verdict` against a companion run with the same settings and frames on the
+    measured depth kind behind ``source`` (:func:`dcslam.io.drive.measured_kind`; with measured ICP sources,
+    ``sources_kind``, the kind they came from, so that exact depth aligned by 16-beam points is checked against
+    16-beam SLAM); ``own`` for a sparse input, ``off`` with ``--evidence none``, ``unavailable`` when no measured
+    kind can be named or the drive lacks it."""
     from dcslam.io.drive import DriveFile, is_depth_kind, measured_kind
     from dcslam.slam.config import build_slam
-    from dcslam.slam.evidence import judge, unavailable
-    from dcslam.slam.health import summarise
+    from dcslam.slam.drive import companion_verdict
+    from dcslam.slam.evidence import unavailable
 
     named = None if isinstance(source, Path) else str(source)
     if named is not None and is_depth_kind(named) and measured_kind(named) == named:
@@ -379,46 +241,9 @@ def companion_evidence(drive_path: Path, source: str | Path, main: DriveRun, con
         has_kind = kind in drive.kinds
     if not has_kind:
         return unavailable(f"{drive_path.name} holds no {kind} depth")
-    slam = build_slam(config.settings())
-    companion = run_drive(drive_path, kind, slam, config.frames or None, config.device,
-                          description=f"{drive_path.stem} companion {kind}")
-    verdict = judge(main.T_world_cam, companion.T_world_cam,
-                    summarise(companion.reports, *([companion.health_rules] if companion.health_rules else [])),
-                    kind)
-    final = np.linalg.norm(companion.T_world_cam[-1, :3, 3] - companion.T_gt[-1, :3, 3])
-    return {**verdict, "companion_final_error_m": round(float(final), 4),
-            "companion_seconds": round(companion.seconds, 3)}
-
-
-@contextlib.contextmanager
-def prefetcher(enabled: bool = True):
-    """A one-thread pool for work ahead of the frame loop, as ``submit(fn, *args) -> Future``. The thread runs torch
-    with the caller's thread count (a new thread would otherwise get torch's default), so its results are those
-    the caller would compute. On leaving, work not yet started is cancelled and the running one waited for.
-    Not ``enabled`` (e.g. in a pool worker whose siblings keep the other cores busy): ``submit`` runs the work at
-    once, in the caller's thread."""
-    import concurrent.futures
-
-    import torch
-
-    if not enabled:
-        def submit(fn, *args):
-            future = concurrent.futures.Future()
-            try:
-                future.set_result(fn(*args))
-            except BaseException as exc:              # delivered by future.result(), as from the pool
-                future.set_exception(exc)
-            return future
-
-        yield submit
-        return
-    pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="dcslam-prefetch",
-                                                 initializer=torch.set_num_threads,
-                                                 initargs=(torch.get_num_threads(),))
-    try:
-        yield pool.submit
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+    companion = run_drive_file(drive_path, kind, build_slam(config.settings()), config.frames or None,
+                               config.device, description=f"{drive_path.stem} companion {kind}")
+    return companion_verdict(main, companion, kind)
 
 
 def output_paths(out_dir: Path, name: str) -> dict[str, Path]:
@@ -431,27 +256,6 @@ def check_outputs(out_dir: Path, name: str, force: bool) -> None:
     for path in output_paths(out_dir, name).values():
         if path.exists() and not force:
             raise DcslamError(f"{path} exists; pass --force to overwrite it")
-
-
-def check_timestamps(timestamps: np.ndarray, where: str) -> np.ndarray:
-    """``timestamps`` (N,) as float64 seconds, or a :class:`DcslamError` when they are not finite and strictly
-    increasing: a trajectory is paired with its reference by time, so invented stamps would pair the wrong poses."""
-    t = np.asarray(timestamps, dtype=np.float64)
-    if t.ndim != 1:
-        raise DcslamError(f"{where}: timestamps of shape {t.shape}, expected (N,)")
-    bad = np.flatnonzero(~np.isfinite(t))
-    if len(bad):
-        raise DcslamError(f"{where}: timestamp of frame {bad[0]} is not finite; rebuild the drive file "
-                          "(dcslam prepare-kitti --force)")
-    steps = np.flatnonzero(np.diff(t) <= 0)
-    if len(steps):
-        i = int(steps[0]) + 1
-        raise DcslamError(f"{where}: timestamps are not strictly increasing (frame {i} at {t[i]:.6f} s after frame "
-                          f"{i - 1} at {t[i - 1]:.6f} s{f', and {len(steps) - 1} more' if len(steps) > 1 else ''}); "
-                          "the trajectory could not be paired with its reference by time: fix the source's "
-                          "timestamps (image_02/timestamps.txt for KITTI) and rebuild the drive file "
-                          "(dcslam prepare-kitti --force)")
-    return t
 
 
 def write_outputs(run: DriveRun, out_dir: Path, force: bool = False) -> dict[str, Path]:

@@ -346,3 +346,49 @@ def test_tables_print_compactly_and_name_every_file_written(cli, ws):
     written = sorted(p for p in (ws / "results").iterdir())
     assert written and all(f"  {p.name}" in lines for p in written)
     assert f"wrote {len(written)} file(s) in {ws / 'results'}:" in result.stdout.replace("\n", "")
+
+
+@pytest.fixture
+def beams_ws(tmp_path):
+    """A workspace whose drive files hold 64- and 16-beam sparse depth, with SLAM runs of both sparse inputs over
+    the test drive (the other rows of the beams table left unmade)."""
+    from dcslam.stages import slam
+    from dcslam.workspace import Workspace
+    from tests.fixtures.depth import write_workspace
+
+    ws = Workspace(write_workspace(tmp_path / "ws", n=6, extra=True))
+    for depth in ("sparse", "sparse@16"):
+        slam.run(ws, slam.SlamStageConfig(odometry="gt", frames=2, depth=depth, drive=["drive_d"]))
+    return ws.root
+
+
+def test_score_tables_of_the_beams_experiment_rebuild_its_table(cli, beams_ws):
+    """``score tables --table beams`` writes the beams tables from the SLAM runs there are, at the beam counts the
+    drive files hold, or those the experiment's scoring stage last ran with; it overwrites them only with --force."""
+    results = beams_ws / "results"
+    result = cli("score", "tables", "--table", "beams", "-w", beams_ws)
+    assert result.exit_code == 0, result.output
+    for name in ("table_beams.md", "table_beams.csv", "table_beams_per_drive.csv", "table_beams.json"):
+        assert (results / name).stat().st_size > 0, name
+    assert "The beams experiment" in result.stdout and "table_beams.md" in result.stdout
+    with open(results / "table_beams.csv") as f:
+        rows = {(r["beams"], r["input"]): r for r in csv.DictReader(f)}
+    assert {b for b, _ in rows} == {"64", "16", "any"}
+    assert rows[("64", "sparse")]["localisation"] and rows[("16", "sparse")]["localisation"]
+    assert not (results / "table_5_2.md").exists()
+    assert json.loads((results / "table_beams.json").read_text())["settings"]["beams"] == [64, 16]
+
+    again = cli("score", "tables", "--table", "beams", "-w", beams_ws)
+    assert again.exit_code == 1 and "table_beams" in again.stderr
+    stamp = beams_ws / ".reproduce" / "score-beams.json"
+    stamp.parent.mkdir()
+    stamp.write_text(json.dumps({"config": {"beams": [64], "drive": ["drive_d"]}, "complete": True}))
+    again = cli("score", "tables", "--table", "beams", "-w", beams_ws, "--force")
+    assert again.exit_code == 0, again.output
+    with open(results / "table_beams.csv") as f:
+        assert {r["beams"] for r in csv.DictReader(f)} == {"64", "any"}
+
+
+def test_score_tables_refuses_an_unknown_experiment(cli, beams_ws):
+    result = cli("score", "tables", "--table", "9.9", "-w", beams_ws)
+    assert result.exit_code == 2 and "9.9" in result.stderr

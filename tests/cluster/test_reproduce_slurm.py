@@ -21,7 +21,7 @@ import pytest
 from dcslam.errors import DcslamError
 from dcslam.executor import SlurmExecutor, SlurmSettings
 from dcslam.stages import slam, train
-from dcslam.stages.reproduce import Pipeline, Stage
+from dcslam.stages.pipeline import Pipeline, Stage
 from dcslam.workspace import Workspace
 from tests.fixtures.kitti import write_tiny_drive
 
@@ -132,9 +132,9 @@ def test_a_failed_job_names_its_stage_drive_seed_and_log(runs, tmp_path):
     ws = Workspace(tmp_path)
     pipe = Pipeline(ws, executor=SlurmExecutor(tmp_path / "logs", SlurmSettings.from_table(SETTINGS)))
     broken_train = Stage("train-broken", train.run, train.TrainStageConfig(name="broken", init="absent", seed=5),
-                         outputs=lambda: [tmp_path / "runs" / "broken" / "model.pt"])
+                         outputs=lambda: [tmp_path / "runs" / "broken" / "model.pt"], kind="train")
     broken_slam = Stage("slam-broken", slam.run, slam.SlamStageConfig(drive=["absent_drive"], frames=2),
-                        outputs=lambda: [tmp_path / "slam" / "dense" / "absent_drive.json"])
+                        outputs=lambda: [tmp_path / "slam" / "dense" / "absent_drive.json"], kind="slam")
     for stage, label in ((broken_train, "seed 5"), (broken_slam, "drive absent_drive")):
         with pytest.raises(DcslamError) as failed:
             pipe.run_all([stage])
@@ -150,7 +150,7 @@ def test_a_job_that_can_never_start_is_a_failure_not_a_wait(runs, tmp_path):
     table = {**SETTINGS, "slam": {"cpus": 4096}}  # more CPUs than any node of the partition
     pipe = Pipeline(Workspace(tmp_path), executor=SlurmExecutor(tmp_path / "logs", SlurmSettings.from_table(table)))
     stage = Stage("slam-huge", slam.run, slam.SlamStageConfig(drive=["absent_drive"], frames=2),
-                  outputs=lambda: [tmp_path / "slam" / "dense" / "absent_drive.json"])
+                  outputs=lambda: [tmp_path / "slam" / "dense" / "absent_drive.json"], kind="slam")
     with pytest.raises(DcslamError, match=r"stage slam-huge failed \(job \S+ can never start: Slurm says \w+ "
                                           r"\(it asks 4096 CPUs|sbatch refused the slam jobs"):
         pipe.run_all([stage])

@@ -13,7 +13,7 @@ from dcslam.eval.depth import DepthErrors
 from dcslam.eval.surface import SurfaceErrors
 from dcslam.report.correlation_table import METRICS, correlation_table
 from dcslam.report.layers import TrajectoryPair, surface_frames
-from dcslam.report.table_5_2 import LayerResult
+from dcslam.report.results import LayerResult
 
 DRIVES = ["d0", "d1", "d2", "d3"]
 

@@ -14,7 +14,7 @@ def test_training_curves_plot_validation_mse_in_its_own_panel(tmp_path, monkeypa
     metrics = tmp_path / "metrics.jsonl"
     metrics.write_text("".join(json.dumps(r) + "\n" for r in rows))
     figures = []
-    plt = plots._pyplot()
+    plt = plots.pyplot()
     monkeypatch.setattr(plt, "close", figures.append)
     out = plots.plot_training_curves(tmp_path / "curves.png", metrics)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -32,7 +32,7 @@ def test_depth_examples_dilate_the_input_and_share_the_error_range(tmp_path, mon
     sparse[10, 15] = 10.0
     rows = [("small", sparse, gt + 0.1, gt), ("large", sparse, gt + 3.0, gt)]
     figures = []
-    plt = plots._pyplot()
+    plt = plots.pyplot()
     monkeypatch.setattr(plt, "close", figures.append)
     plots.plot_depth_examples(tmp_path / "ex.png", rows)
     images = [ax.images[0] for ax in figures[0].axes if ax.images]

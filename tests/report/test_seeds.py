@@ -12,7 +12,8 @@ from dcslam.report.layers import TrajectoryPair
 from dcslam.report.scores import per_drive_table
 from dcslam.report.seeds import paired, seed_base, seed_groups, seed_run_name
 from dcslam.report.spread import two_level_interval
-from dcslam.report.table_5_2 import LayerResult, SeedResults, table_5_2
+from dcslam.report.results import LayerResult, SeedResults
+from dcslam.report.table_5_2 import table_5_2
 
 DRIVES = ["d1", "d2", "d3"]
 FRAMES = 11  # a straight drive of 1 m per frame: an estimate `scale` times too long errs (scale − 1) · i m at frame i

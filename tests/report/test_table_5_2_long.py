@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dcslam.report.layers import TrajectoryPair
-from dcslam.report.table_5_2 import LayerResult
+from dcslam.report.results import LayerResult
 from dcslam.report.table_5_2_long import layer_label, long_layers, table_5_2_long
 from dcslam.report.tables import RunSummary
 

@@ -9,7 +9,7 @@ import pytest
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import DepthErrors
 from dcslam.report.layers import TrajectoryPair
-from dcslam.report.table_5_2 import LayerResult
+from dcslam.report.results import LayerResult
 from dcslam.report.table_beams import (INPUTS, MEASURED, layer_name, per_drive_table, plot_localisation_vs_beams,
                                        slam_name, sparse_kind, table_beams)
 
@@ -208,7 +208,7 @@ def test_a_measured_row_reads_its_own_slam_folder_and_the_layer_s_depth(tmp_path
 
     from dcslam.io.drive import DriveFile
     from dcslam.io.tum import write_tum
-    from dcslam.report.table_5_2 import score_layer
+    from dcslam.report.results import score_layer
     from dcslam.workspace import Workspace
     from tests.fixtures import depth as depth_fixtures
 
@@ -246,7 +246,7 @@ def test_a_measured_row_over_training_seeds_reads_each_seed_s_slam_folder(tmp_pa
 
     from dcslam.io.drive import DriveFile
     from dcslam.io.tum import write_tum
-    from dcslam.report.table_5_2 import SeedResults
+    from dcslam.report.results import SeedResults
     from dcslam.report.table_beams import beams_results
     from dcslam.workspace import Workspace
     from tests.fixtures import depth as depth_fixtures

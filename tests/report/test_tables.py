@@ -1,7 +1,8 @@
 """The report package: the thesis's figures ship as package data, and run folders are read into Table 5.1."""
 import json
 
-from dcslam.report.table_5_2 import LayerResult, table_5_2
+from dcslam.report.results import LayerResult
+from dcslam.report.table_5_2 import table_5_2
 from dcslam.report.tables import RECIPES, THESIS_FIGURES, list_runs, recipe_of, table_5_1, table_5_3, thesis_figures
 from dcslam.workspace import Workspace
 

@@ -38,3 +38,20 @@ def test_build_slam_turns_settings_into_objects():
 def test_defaults_round_trip_through_dict():
     s = SlamSettings()
     assert SlamSettings(**s.to_dict()) == s
+
+
+def test_the_settings_and_the_loop_do_not_import_each_other():
+    """config builds the SLAM of pipeline, so pipeline imports nothing of config, at the top or in a function."""
+    import ast
+    from pathlib import Path
+
+    import dcslam.slam.pipeline as pipeline
+
+    imported = set()
+    for node in ast.walk(ast.parse(Path(pipeline.__file__).read_text())):
+        if isinstance(node, ast.ImportFrom):
+            imported.add(node.module)
+        elif isinstance(node, ast.Import):
+            imported.update(alias.name for alias in node.names)
+    assert "dcslam.slam" in {m.rsplit(".", 1)[0] for m in imported if m}  # the walk sees its imports
+    assert "dcslam.slam.config" not in imported

@@ -8,7 +8,9 @@ import pytest
 from dcslam.errors import DcslamError
 from dcslam import __version__
 from dcslam.stages.config import code_version
-from dcslam.stages.reproduce import PROFILES, Pipeline, Profile, Stage, reproduce
+from dcslam.stages.experiments.table_5_2 import PROFILES, Profile
+from dcslam.stages.pipeline import Pipeline, Stage
+from dcslam.stages.reproduce import reproduce
 from dcslam.stages.reproduce_plan import planned_stages, read_stage_configs
 from dcslam.stages.slam import SlamStageConfig
 from dcslam.workspace import Workspace
@@ -49,7 +51,7 @@ def test_stage_runs_once_then_is_skipped_until_its_inputs_config_or_code_change(
     pipe.run(Stage("demo", fake, SlamStageConfig(frames=4), outputs=lambda: [made], inputs=lambda: [source]))
     assert len(calls) == 3  # another configuration: rerun
 
-    monkeypatch.setattr("dcslam.stages.reproduce.code_version", lambda: "0.0.0+other")
+    monkeypatch.setattr("dcslam.stages.pipeline.code_version", lambda: "0.0.0+other")
     pipe.run(Stage("demo", fake, SlamStageConfig(frames=4), outputs=lambda: [made], inputs=lambda: [source]))
     assert len(calls) == 4  # other dcslam code: rerun
     monkeypatch.undo()
@@ -233,7 +235,7 @@ def test_two_seeds_at_smoke_scale_write_the_seed_and_interval_columns(cli, tmp_p
     with its interval and seed-to-seed spread, the per-drive CSV a seed column, Table 5.1 a row per seed."""
     import csv
 
-    from dcslam.stages import reproduce as module
+    from dcslam.stages.experiments import table_5_2 as module
 
     monkeypatch.setattr(module, "RECIPES", {"mse-sparse": module.RECIPES["mse-sparse"]})
     monkeypatch.setattr(module, "POSE_RECIPES", {})

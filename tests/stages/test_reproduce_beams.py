@@ -8,8 +8,8 @@ import json
 import pytest
 
 from dcslam.errors import DcslamError
-from dcslam.stages import reproduce_beams
-from dcslam.stages.reproduce_beams import PROFILES, BeamsProfile
+from dcslam.stages.experiments import beams as reproduce_beams
+from dcslam.stages.experiments.beams import PROFILES, BeamsProfile
 from tests.fixtures import depth as depth_fixtures
 
 ARGS = ["reproduce", "--table", "beams", "--profile", "smoke"]

@@ -4,7 +4,8 @@ import json
 import pytest
 
 from dcslam.errors import DcslamError
-from dcslam.stages.reproduce import PROFILES, ReproduceConfig
+from dcslam.stages.experiments.table_5_2 import PROFILES
+from dcslam.stages.reproduce import ReproduceConfig
 from dcslam.stages.reproduce_cost import (DriveFrames, estimate, measure, plan_text, planned_drives, shipped_costs,
                                           stage_work, unit_costs)
 from dcslam.stages.reproduce_plan import planned_splits, planned_stages

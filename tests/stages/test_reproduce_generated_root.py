@@ -5,7 +5,9 @@ from __future__ import annotations
 import json
 
 from dcslam.stages.prepare import THESIS_SPLITS
-from dcslam.stages.reproduce import PROFILES, Pipeline, generated_names, make_drives
+from dcslam.stages.experiments.common import generated_names, make_drives
+from dcslam.stages.experiments.table_5_2 import PROFILES
+from dcslam.stages.pipeline import Pipeline
 from dcslam.stages.reproduce_plan import planned_splits
 from dcslam.workspace import Workspace
 from tests.fixtures.kitti import write_tiny_drive

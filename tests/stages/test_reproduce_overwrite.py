@@ -6,7 +6,8 @@ import os
 import pytest
 
 from dcslam.errors import DcslamError
-from dcslam.stages.reproduce import Pipeline, ReproduceConfig, Stage
+from dcslam.stages.pipeline import Pipeline, Stage
+from dcslam.stages.reproduce import ReproduceConfig
 from dcslam.stages.slam import SlamStageConfig
 from dcslam.workspace import Workspace
 

@@ -3,9 +3,10 @@ made (at import), and every profile builds every stage configuration it will run
 import pytest
 
 from dcslam.errors import DcslamError
-from dcslam.stages import reproduce, reproduce_beams
-from dcslam.stages.reproduce import POSE_RECIPES, PROFILES, RECIPES, Profile
-from dcslam.stages.reproduce_beams import BeamsProfile
+from dcslam.stages.experiments import beams as reproduce_beams
+from dcslam.stages.experiments.beams import BeamsProfile
+from dcslam.stages.experiments.common import train_options
+from dcslam.stages.experiments.table_5_2 import POSE_RECIPES, PROFILES, RECIPES, Profile
 from dcslam.stages.train import TrainStageConfig
 
 
@@ -32,7 +33,7 @@ def test_recipes_are_options_of_dcslam_train():
     for recipe in {**RECIPES, **POSE_RECIPES}.values():
         assert recipe.config is TrainStageConfig
     with pytest.raises(DcslamError, match="no option 'maks'; did you mean 'mask'"):
-        reproduce.train_options(loss="mse", maks="sparse")
+        train_options(loss="mse", maks="sparse")
 
 
 @pytest.mark.parametrize("name", list(PROFILES))

@@ -23,7 +23,8 @@ def test_depth_trajectory_and_tables(ws):
     assert (ws.results / "table_5_2.md").exists()
     record = json.loads((ws.results / "score-tables.json").read_text())
     assert record["stage"] == "score-tables" and record["settings"] == {
-        "drive": [], "out_dir": None, "devkit_exact": False, "max_time_diff": 0.01, "failure_threshold": 1.0}
+        "drive": [], "out_dir": None, "devkit_exact": False, "max_time_diff": 0.01, "failure_threshold": 1.0,
+        "table": "5.2"}
     assert any(row["layer"] == "dense" for row in report.table_5_2.rows)
     assert (ws.results / "table_5_2_correlation.csv").exists() and report.table_5_2_correlation.rows
 

@@ -78,14 +78,14 @@ class TestConfidenceUse:
     confidence = np.array([[0.9, 0.2, 0.0], [0.5, 0.0, 1.0]], np.float32)
 
     def test_weights_drop_below_the_minimum_and_weight_the_rest(self):
-        from dcslam.stages.slam import ConfidenceUse
+        from dcslam.slam.drive import ConfidenceUse
 
         depth, weight = ConfidenceUse("weights", 0.3).apply(self.depth, self.confidence)
         assert depth.tolist() == [[5, 0, 0], [7, 0, 9]]
         assert weight.tolist() == [[np.float32(0.9), 0, 0], [0.5, 0, 1]]
 
     def test_mask_and_ignore(self):
-        from dcslam.stages.slam import ConfidenceUse
+        from dcslam.slam.drive import ConfidenceUse
 
         depth, weight = ConfidenceUse("mask", 0.3).apply(self.depth, self.confidence)
         assert depth.tolist() == [[5, 0, 0], [7, 0, 9]] and weight is None

@@ -6,7 +6,7 @@ import torch
 from dcslam.io.drive import DriveFrame, DriveWriter
 from dcslam.slam.config import SlamSettings, build_slam
 from dcslam.slam.scene import kitti_K, lidar_mask, street_trajectory, StreetScene
-from dcslam.stages.slam import run_drive, write_outputs
+from dcslam.stages.slam import run_drive_file, write_outputs
 from tests.fixtures.street import write_analytic_street
 
 H, W, N = 48, 160, 4
@@ -17,14 +17,14 @@ def _write_drive(path, frames=N):
 
 
 def test_prefetched_frames_give_the_poses_of_a_plain_loop(tmp_path):
-    """run_drive prepares the next frame on a second thread: the poses, the map and the step reports are those of
+    """run_drive_file prepares the next frame on a second thread: the poses, the map and the step reports are those of
     SLAM.step over the same frames, bit for bit."""
     from dcslam.io.drive import DriveFile, load_depth
 
     path = tmp_path / "street.h5"
     K, poses = _write_drive(path, frames=5)
     for depth in ("sparse", "dense"):
-        run = run_drive(path, depth, build_slam(SlamSettings()))
+        run = run_drive_file(path, depth, build_slam(SlamSettings()))
         slam = build_slam(SlamSettings())
         slam.T_world_cam0 = poses[0].float()
         slam.reset()
@@ -47,7 +47,7 @@ def test_prefetch_errors_reach_the_caller():
     import pytest
 
     from dcslam.errors import DcslamError
-    from dcslam.stages.slam import prefetcher
+    from dcslam.slam.drive import prefetcher
 
     def fail():
         raise DcslamError("frame 3 unreadable")
@@ -88,7 +88,7 @@ def test_summary_carries_health_and_the_whole_map(tmp_path):
             writer.append(DriveFrame(np.zeros((H, W, 3), np.uint8), dense * lidar_mask(H, W).numpy(), dense,
                                 poses[i].numpy(), 0.1 * i, i))
     slam = build_slam(SlamSettings(local_map_frames=1))
-    run = run_drive(path, "dense", slam)
+    run = run_drive_file(path, "dense", slam)
     assert len(run.map) > len(slam.map)                      # archived points are in the written map
     summary = run.summary()
     health = summary["health"]
@@ -104,7 +104,7 @@ def test_float32_drift_off_so3_is_projected_before_writing(tmp_path):
     rotations: the KITTI pose file, which checks orthonormality, accepts it."""
     from dcslam.io.kitti_poses import read_kitti_poses
     from dcslam.slam.pointmap import PointMap
-    from dcslam.stages.slam import DriveRun
+    from dcslam.slam.drive import DriveRun
 
     T = street_trajectory(N, step=0.5).double().numpy()
     T[-1, :3, :3] *= 1.0001
@@ -121,7 +121,7 @@ def test_non_increasing_timestamps_fail_before_anything_is_written(tmp_path):
 
     from dcslam.errors import DcslamError
     from dcslam.slam.pointmap import PointMap
-    from dcslam.stages.slam import DriveRun, check_timestamps
+    from dcslam.slam.drive import DriveRun, check_timestamps
 
     T = street_trajectory(N, step=0.5).double().numpy()
     stamps = np.array([0.0, 0.1, 0.1, 0.3])
@@ -141,13 +141,13 @@ def test_non_increasing_timestamps_fail_before_anything_is_written(tmp_path):
             writer.append(DriveFrame(np.zeros((H, W, 3), np.uint8), np.zeros((H, W), np.float32),
                                      np.ones((H, W), np.float32), T[i], t, i))
     with pytest.raises(DcslamError, match="backwards.h5: timestamps are not strictly increasing"):
-        run_drive(path, "dense", build_slam(SlamSettings()))
+        run_drive_file(path, "dense", build_slam(SlamSettings()))
 
 
 def test_real_timestamps_are_written_to_the_tum_file(tmp_path):
     from dcslam.io.tum import read_tum
     from dcslam.slam.pointmap import PointMap
-    from dcslam.stages.slam import DriveRun
+    from dcslam.slam.drive import DriveRun
 
     T = street_trajectory(N, step=0.5).double().numpy()
     stamps = 1317000000.0 + np.array([0.0, 0.103, 0.207, 0.31])  # KITTI-like: not exactly 10 Hz

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dcslam.errors import DcslamError
-from dcslam.stages.slam import SlamStageConfig, run, run_drive
+from dcslam.stages.slam import SlamStageConfig, run, run_drive_file
 
 
 def test_option_checks():
@@ -71,11 +71,11 @@ def test_the_sparse_input_as_its_own_measured_sources_gives_the_poses_of_depth_m
         layer = write_layer(tmp_path / "copy" / "street.h5", Layer(
             np.stack([drive.depth("sparse", i) for i in range(len(drive))]), drive=drive.name, made_by="copy",
             config={"input": "sparse"}, frame_ids=drive.frame_ids))
-    plain = run_drive(path, "sparse", build_slam(SlamSettings()))
+    plain = run_drive_file(path, "sparse", build_slam(SlamSettings()))
     assert plain.summary()["sources"] == {"mode": "depth"}
     assert all(r.accepted for r in plain.reports) and sum(r.iterations for r in plain.reports) > 0
     for source in ("sparse", layer):
-        measured = run_drive(path, source, build_slam(SlamSettings()), sources_kind="sparse")
+        measured = run_drive_file(path, source, build_slam(SlamSettings()), sources_kind="sparse")
         assert np.array_equal(measured.T_world_cam, plain.T_world_cam), source
         assert [(r.sources, r.inliers, r.iterations) for r in measured.reports] == \
             [(r.sources, r.inliers, r.iterations) for r in plain.reports]
@@ -104,8 +104,8 @@ def test_measured_sources_against_an_exact_map_localise_better_than_sparse_slam(
 
     for seed in (1, 2):
         path = write_generated_drive(tmp_path / f"drive_{seed}.h5", seed, frames=10, scale=0.5, beams=16)
-        sparse = run_drive(path, "sparse@16", build_slam(SlamSettings()))
-        measured = run_drive(path, "exact", build_slam(SlamSettings()), sources_kind="sparse@16")
+        sparse = run_drive_file(path, "sparse@16", build_slam(SlamSettings()))
+        measured = run_drive_file(path, "exact", build_slam(SlamSettings()), sources_kind="sparse@16")
         on_sparse = localisation_accuracy(sparse.T_gt, sparse.T_world_cam)
         on_exact = localisation_accuracy(measured.T_gt, measured.T_world_cam)
         assert on_exact < 0.6 * on_sparse, (seed, on_exact, on_sparse)

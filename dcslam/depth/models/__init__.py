@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from dcslam import plugins as _plugins
 from dcslam.errors import DcslamError
 from dcslam.io.atomic import atomic_output
 
@@ -25,9 +26,14 @@ ARCHITECTURES = {  # trainable network name → "module:class" (the class takes 
 CLASSICAL = {  # completer that needs no training → "module:factory" (called with no argument)
     "ip-basic-fast": "dcslam.depth.models.ip_basic:fast",
     "ip-basic-multiscale": "dcslam.depth.models.ip_basic:multiscale",
+    "scanline": "dcslam.depth.models.scanline:scanline",
+    "planefit": "dcslam.depth.models.planefit:planefit",
 }
 ALIASES = {"ip-basic": "ip-basic-fast"}  # other names of registered completers
 IP_BASIC_NAMES = tuple(name for name in CLASSICAL if name.startswith("ip-basic"))
+# installed packages' completers (entry points of dcslam.completers, dcslam/plugins.py): names only, imported when built
+_FROM_PACKAGES = _plugins.targets(_plugins.COMPLETERS, {**ARCHITECTURES, **CLASSICAL, **ALIASES})
+CLASSICAL.update(_FROM_PACKAGES)
 
 
 def _load(target: str):
@@ -62,7 +68,20 @@ def build_classical(name: str):
     registered = classical_name(name)
     if registered is None:
         raise DcslamError(f"unknown completer {name!r}; expected one of {', '.join([*CLASSICAL, *ALIASES])}")
-    return _load(CLASSICAL[registered])()
+    if registered not in _FROM_PACKAGES:
+        return _load(CLASSICAL[registered])()
+    # a plugin's failure is its package's, reported in one line; dcslam's own completers keep their tracebacks
+    factory = _plugins.load(_plugins.COMPLETERS, registered, CLASSICAL[registered])
+    if not callable(factory):
+        raise _plugins.refuse(_plugins.COMPLETERS, registered, f"is a {type(factory).__name__}, not a factory")
+    try:
+        completer = factory()
+    except Exception as exc:
+        raise _plugins.refuse(_plugins.COMPLETERS, registered, f"failed to build ({_plugins.reason(exc)})") from None
+    if not callable(completer):
+        raise _plugins.refuse(_plugins.COMPLETERS, registered, f"built a {type(completer).__name__}, not a "
+                              "completer (a callable from (H, W) sparse metres to dense)")
+    return completer
 
 
 def build_model(arch: str, **hparams):

@@ -1,8 +1,8 @@
 """``dcslam reproduce --table beams`` (``make reproduce-beams``): does completed depth help SLAM when the LiDAR has
 fewer beams? (RESULTS.md, "Beams")
 
-The experiment composes the other stages as :mod:`dcslam.stages.reproduce` does (same stamps, same skipping of
-finished stages, same ``jobs``)::
+The experiment composes the other stages through the stage engine (:mod:`dcslam.stages.pipeline`: the same stamps,
+the same skipping of finished stages, the same ``jobs``) as Table 5.2 does::
 
     synth (unless a KITTI root is given) → prepare-kitti --beams 32,16,8 (plus depth/exact on generated drives)
     → train SparseConvNet (against annotated depth, exact depth, exact depth + geometry losses; the last two only on
@@ -11,7 +11,7 @@ finished stages, same ``jobs``)::
     → filter nconv's predictions by confidence ("masked") → slam over every (input, beam count, test drive), the
       completions and exact depth again with measured ICP sources (the B-beam pixels against the completed map)
     → score: the beams table, its per-drive CSV, the rank correlation of its depth metrics with localisation
-      and a plot of localisation against beam count
+      and a plot of localisation against beam count (``dcslam score tables --table beams`` rebuilds them)
 
 The trainings (those fine-tuned from another run after the others), the predictions and the SLAM runs are each
 independent of one another, so ``jobs`` > 1 runs each group in that many worker processes (one torch thread each). A
@@ -19,20 +19,21 @@ profile sets the scale; its ``train`` is the one dict of training options (run n
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from dcslam.errors import DcslamError
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
-from dcslam.report.table_5_2 import FAILURE_THRESHOLD
+from dcslam.report.results import FAILURE_THRESHOLD
 from dcslam.report.table_beams import (FULL_BEAMS, INPUTS, IP_BASIC_RUN, MEASURED, TRAINED, layer_name,
                                        prediction_name, slam_name, sparse_kind)
 from dcslam.stages import filter as filter_stage
 from dcslam.stages import predict, prepare, slam, train
 from dcslam.stages.config import option
 from dcslam.report.seeds import seed_run_name
-from dcslam.stages.reproduce import Pipeline, Stage, make_drives, profile_options, train_options, training_rounds
+from dcslam.stages.experiments.common import make_drives, train_options, training_rounds
+from dcslam.stages.pipeline import Experiment, Pipeline, Stage, profile_options
 from dcslam.workspace import Workspace
 
 
@@ -209,14 +210,6 @@ def _have_exact(drives: list[Path]) -> bool:
     return True
 
 
-def reproduce(ws: Workspace, profile: BeamsProfile, kitti_root: Path | None = None, seed: int = 0,
-              log: Callable[[str], None] = lambda line: None, force: bool = False, jobs: int = 1,
-              seeds: int = 1, executor=None) -> Path:
-    """Run the beams experiment at ``profile``'s scale; return the Markdown file of its table (``force``, ``jobs``,
-    ``seeds``, ``executor``: as :func:`dcslam.stages.reproduce.reproduce`)."""
-    return compose(Pipeline(ws, log, force=force, executor=executor), profile, kitti_root, seed, jobs, seeds)
-
-
 def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = None, seed: int = 0,
             jobs: int = 1, seeds: int = 1) -> Path:
     """Hand every stage of the beams experiment to ``pipe`` in order; return the Markdown file of its table. Every
@@ -232,7 +225,24 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
     if not exact and not pipe.planning:
         pipe.log("[note] the drives have no exact depth (real KITTI): the rows that need it (exact, "
                  f"{', '.join(sorted(_NEEDS_EXACT))}) are left out")
+    _train(pipe, profile, learn, exact, seed, jobs, seeds)
     made_runs = [run for run in TRAINED if exact or run not in _NEEDS_EXACT]
+    _predict(pipe, profile, test, made_runs, seed, jobs, seeds)
+    _mask(pipe, profile, test, seed, jobs, seeds)
+    slam_stages = _slam_stages(ws, profile, test, exact, seed, seeds)
+    pipe.run_all(slam_stages, jobs)
+    slam_outputs = [path for stage in slam_stages for path in stage.outputs()]
+    table = BeamsTableConfig(beams=list(profile.beams), drive=[p.stem for p in test], jobs=jobs)
+    pipe.run(Stage("score-beams", run_table, table, outputs=lambda: [ws.results / "table_beams.md",
+                                                                      ws.results / "table_beams_correlation.md"],
+                   inputs=lambda: slam_outputs, kind="score"))
+    return ws.results / "table_beams.md"
+
+
+def _train(pipe: Pipeline, profile: BeamsProfile, learn: list[Path], exact: bool, seed: int, jobs: int,
+           seeds: int) -> None:
+    """Train every learned completer ``seeds`` times, in rounds (those fine-tuned from another run after it)."""
+    ws = pipe.ws
     for runs in profile.stages_of_training(exact):
         stages = []
         for k in range(seeds):
@@ -242,8 +252,14 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
                                     outputs=lambda r=config.name: [ws.runs / r / "model.pt",
                                                                    ws.runs / r / "metrics.jsonl"],
                                     inputs=lambda c=config: learn + _init_model(ws, {"init": c.init}),
-                                    seed=seed + k))
+                                    seed=seed + k, kind="train"))
         pipe.run_all(stages, jobs)
+
+
+def _predict(pipe: Pipeline, profile: BeamsProfile, test: list[Path], made_runs: list[str], seed: int, jobs: int,
+             seeds: int) -> None:
+    """Predict the test drives at every beam count with IP-Basic and every trained run."""
+    ws = pipe.ws
     completers = [(IP_BASIC_RUN, None)] + [(seed_run_name(run, k), seed + k) for k in range(seeds) for run in made_runs]
     predictions = []
     for b in profile.beams:
@@ -255,8 +271,13 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
                       predict.PredictConfig(run=completer, input=sparse_kind(b), output=out))
             needs = [] if completer == IP_BASIC_RUN else [ws.runs / completer / "model.pt"]
             predictions.append(Stage(f"predict-{out.name}", predict.run, config, outputs=lambda m=made: m,
-                                     inputs=lambda n=needs: [*n, *test], seed=run_seed))
+                                     inputs=lambda n=needs: [*n, *test], seed=run_seed, kind="predict"))
     pipe.run_all(predictions, jobs)
+
+
+def _mask(pipe: Pipeline, profile: BeamsProfile, test: list[Path], seed: int, jobs: int, seeds: int) -> None:
+    """Keep the most confident pixels of the predictions of every masked input (its "masked" rows)."""
+    ws = pipe.ws
     masked = []
     for item in (i for i in INPUTS if i.masked):
         for k in range(seeds):
@@ -268,10 +289,14 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
                                                    depth="predicted", run=source, name=name)
                 masked.append(Stage(f"filter-{name}", filter_stage.run, config, outputs=lambda m=made: m,
                                     inputs=lambda s=source: [ws.predictions / s / p.name for p in test],
-                                    seed=seed + k))
+                                    seed=seed + k, kind="filter"))
     pipe.run_all(masked, jobs)
 
-    slam_stages, slam_outputs = [], []
+
+def _slam_stages(ws: Workspace, profile: BeamsProfile, test: list[Path], exact: bool, seed: int,
+                 seeds: int) -> list[Stage]:
+    """The SLAM runs of every input (each training seed of a trained one), beam count and test drive."""
+    stages = []
     for item in INPUTS:
         if item.needs_exact and not exact:
             continue
@@ -282,22 +307,54 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
                 layer, name = layer_name(item, b, run), slam_name(item, b, run)
                 folder = None if item.completer in (None, "") else (ws.filtered if item.masked else ws.predictions)
                 reference = layer if folder is None else f"{'filtered' if item.masked else 'predicted'}/{layer}"
-                # measured: the B-beam sparse pixels are the ICP sources, named (not left to the layer's record)
+                # measured: the B-beam pixels are the ICP sources, named (not left to the layer's record)
                 # so that exact, which has no beam count of its own, takes each one
                 mode = ({"sources": MEASURED, "measured": sparse_kind(b), "out": ws.slam / name}
                         if item.sources == MEASURED else {})
                 for drive in test:
                     made = [ws.slam / name / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt")]
-                    slam_outputs += made
                     config = slam.SlamStageConfig(**{"odometry": "icp", **profile.slam}, depth=reference,
                                                   drive=[drive.stem], frames=profile.slam_frames, **mode)
                     source = [] if folder is None else [folder / layer / drive.name]
-                    slam_stages.append(Stage(f"slam-{name}-{drive.stem}", slam.run, config,
-                                             outputs=lambda m=made: m, inputs=lambda d=drive, s=source: [d, *s],
-                                             seed=seed + k if trained else None))
-    pipe.run_all(slam_stages, jobs)
-    table = BeamsTableConfig(beams=list(profile.beams), drive=[p.stem for p in test], jobs=jobs)
-    pipe.run(Stage("score-beams", run_table, table, outputs=lambda: [ws.results / "table_beams.md",
-                                                                      ws.results / "table_beams_correlation.md"],
-                   inputs=lambda: slam_outputs))
-    return ws.results / "table_beams.md"
+                    stages.append(Stage(f"slam-{name}-{drive.stem}", slam.run, config,
+                                        outputs=lambda m=made: m, inputs=lambda d=drive, s=source: [d, *s],
+                                        seed=seed + k if trained else None, kind="slam"))
+    return stages
+
+
+def workspace_beams(ws: Workspace, drives: list[str]) -> list[int]:
+    """The beam counts of a workspace's beams table: those the experiment's scoring stage last ran with (its stamp in
+    ``.reproduce/``), else those the drive files hold (64, their own sparse depth, and every ``sparse@B`` that
+    ``prepare-kitti --beams`` added), most beams first."""
+    import json
+
+    from dcslam.io.drive import DriveFile
+    from dcslam.workspace import drive_file
+
+    stamp = ws.root / ".reproduce" / "score-beams.json"
+    try:
+        beams = json.loads(stamp.read_text())["config"]["beams"] if stamp.exists() else None
+    except (json.JSONDecodeError, KeyError, TypeError):
+        beams = None  # a broken stamp: the drive files say
+    if isinstance(beams, list) and beams and all(isinstance(b, int) for b in beams):
+        return beams
+    with DriveFile(drive_file(ws, drives[0])) as drive:
+        kinds = drive.kinds
+    extra = {int(k.partition("@")[2]) for k in kinds if k.startswith("sparse@") and k.partition("@")[2].isdigit()}
+    return sorted({FULL_BEAMS} | extra, reverse=True)
+
+
+def rebuild_tables(ws: Workspace, config, *, force: bool = False):
+    """``dcslam score tables --table beams``: the beams table, its per-drive table, correlation and plot from the
+    workspace's SLAM runs (``config``: a :class:`dcslam.stages.score.ScoreTablesConfig`; the beam counts those the
+    drive files hold, :func:`workspace_beams`)."""
+    from dcslam.workspace import select_drives
+
+    drives = select_drives(ws, config.drive)
+    table = BeamsTableConfig(beams=workspace_beams(ws, drives), drive=list(drives), out_dir=config.out_dir,
+                             max_time_diff=config.max_time_diff, failure_threshold=config.failure_threshold)
+    return run_table(ws, table, force=force)
+
+
+BEAMS = Experiment("beams", "the beams experiment: every input at 64/32/16/8 LiDAR beams", PROFILES, compose,
+                   rebuild_tables)
