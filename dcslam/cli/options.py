@@ -98,6 +98,47 @@ def _plain(value):
     return value
 
 
+def _given_values(ctx: typer.Context, fields: list, kwargs: dict) -> tuple[dict, str]:
+    """(the configuration's values, where they come from): the ``--config`` file's, overridden by the options given
+    on the command line (under their own flag or an alias, not both)."""
+    from dcslam.stages.config import config_key, read_config_file
+
+    values = {}
+    source = "the command line"
+    if kwargs.get("config_file") is not None:
+        source = str(kwargs["config_file"])
+        values.update(read_config_file(kwargs["config_file"]))
+    for field in fields:
+        given = ctx.get_parameter_source(field.name)
+        if given is not None and given.name != "DEFAULT":
+            values[config_key(field)] = _plain(kwargs[field.name])
+        if kwargs.get(field.name + ALIAS_SUFFIX) is not None:
+            flag = field.metadata.get("flags", (f"--{field.name.replace('_', '-')}",))[0]
+            if given is not None and given.name != "DEFAULT":
+                raise typer.BadParameter(f"give {flag} once (also spelt {', '.join(field.metadata['aliases'])})",
+                                         param_hint=flag)
+            values[config_key(field)] = _plain(kwargs[field.name + ALIAS_SUFFIX])
+    return values, source
+
+
+def _command_parameters(config_cls, fields: list, force: bool) -> list[inspect.Parameter]:
+    """The command's signature: the context, one option per field (and per alias), then ``--workspace``,
+    ``--config``, ``--print-config`` and, with ``force``, ``--force``."""
+    parameters = [inspect.Parameter("ctx", inspect.Parameter.POSITIONAL_OR_KEYWORD, annotation=typer.Context)]
+    parameters += [_parameter(config_cls, f) for f in fields]
+    parameters += [_alias_parameter(config_cls, f) for f in fields if f.metadata.get("aliases")]
+    parameters += [inspect.Parameter("workspace", inspect.Parameter.KEYWORD_ONLY, default=None,
+                                     annotation=WorkspaceOption),
+                   inspect.Parameter("config_file", inspect.Parameter.KEYWORD_ONLY, default=None,
+                                     annotation=ConfigOption),
+                   inspect.Parameter("print_config", inspect.Parameter.KEYWORD_ONLY, default=False,
+                                     annotation=PrintConfigOption)]
+    if force:
+        parameters.append(inspect.Parameter("force", inspect.Parameter.KEYWORD_ONLY, default=False,
+                                            annotation=ForceOption))
+    return parameters
+
+
 def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, report: Callable[[object], None],
                   *, help: str, force: bool = True, prepare: Callable | None = None,
                   examples: tuple[str, ...] = (), describe: Callable | None = None) -> Callable:
@@ -112,24 +153,10 @@ def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, rep
     fields = [f for f in options_of(config_cls) if not f.metadata.get("file_only")]  # the command's options
 
     def command(ctx: typer.Context, **kwargs):
-        from dcslam.stages.config import config_key, from_mapping, read_config_file, to_toml
+        from dcslam.stages.config import from_mapping, to_toml
         from dcslam.workspace import Workspace
 
-        values = {}
-        source = "the command line"
-        if kwargs.get("config_file") is not None:
-            source = str(kwargs["config_file"])
-            values.update(read_config_file(kwargs["config_file"]))
-        for field in fields:
-            given = ctx.get_parameter_source(field.name)
-            if given is not None and given.name != "DEFAULT":
-                values[config_key(field)] = _plain(kwargs[field.name])
-            if kwargs.get(field.name + ALIAS_SUFFIX) is not None:
-                flag = field.metadata.get("flags", (f"--{field.name.replace('_', '-')}",))[0]
-                if given is not None and given.name != "DEFAULT":
-                    raise typer.BadParameter(f"give {flag} once (also spelt {', '.join(field.metadata['aliases'])})",
-                                             param_hint=flag)
-                values[config_key(field)] = _plain(kwargs[field.name + ALIAS_SUFFIX])
+        values, source = _given_values(ctx, fields, kwargs)
         config = from_mapping(config_cls, values, source)
         ws = Workspace.resolve(kwargs.get("workspace"))
         if prepare is not None:
@@ -142,18 +169,7 @@ def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, rep
         report(result)
         return result
 
-    parameters = [inspect.Parameter("ctx", inspect.Parameter.POSITIONAL_OR_KEYWORD, annotation=typer.Context)]
-    parameters += [_parameter(config_cls, f) for f in fields]
-    parameters += [_alias_parameter(config_cls, f) for f in fields if f.metadata.get("aliases")]
-    parameters += [inspect.Parameter("workspace", inspect.Parameter.KEYWORD_ONLY, default=None,
-                                     annotation=WorkspaceOption),
-                   inspect.Parameter("config_file", inspect.Parameter.KEYWORD_ONLY, default=None,
-                                     annotation=ConfigOption),
-                   inspect.Parameter("print_config", inspect.Parameter.KEYWORD_ONLY, default=False,
-                                     annotation=PrintConfigOption)]
-    if force:
-        parameters.append(inspect.Parameter("force", inspect.Parameter.KEYWORD_ONLY, default=False,
-                                            annotation=ForceOption))
+    parameters = _command_parameters(config_cls, fields, force)
     wrapped = known_errors(command)
     wrapped.__signature__ = inspect.Signature(parameters)
     wrapped.__annotations__ = {p.name: p.annotation for p in parameters}

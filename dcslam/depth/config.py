@@ -48,7 +48,7 @@ def check_at_least_one(config, *names: str) -> None:
 
 
 def device_option():
-    """The ``--device`` option of both training loops (read by :func:`dcslam.depth.train.resolve_device`)."""
+    """The ``--device`` option of both training loops (read by :func:`dcslam.device.resolve_device`)."""
     return option("auto", help="auto (a GPU if there is one), cpu or cuda.")
 
 

@@ -16,7 +16,10 @@ against the training target, logged and validated beside the loss).
 
 :func:`train_loop` writes into a run folder ``metrics.jsonl`` (one JSON object per training step and per validation),
 ``model.pt`` (best validation) and ``last.pt`` (resume state, written after every drive); the run folder itself (its
-``config.json``, ``curves.png``, overwriting and resuming) is :func:`dcslam.stages.train.train`'s.
+``config.json``, ``curves.png``, overwriting and resuming) is :func:`dcslam.stages.train.train`'s. The loop itself
+only takes the steps; the schedule, the metrics file, validation and selection, checkpoints and any added behaviour
+(a writer, early stopping) are hooks (:mod:`dcslam.depth.hooks`); the objective and the validation pass are in
+:mod:`dcslam.depth.objective`.
 Distributed training (DistributedDataParallel) is used when ``torch.distributed`` is initialised: the chunks of
 frames of each epoch are dealt out round-robin to the ranks (each rank the same number), rank 0 validates and
 writes every file.
@@ -24,7 +27,6 @@ writes every file.
 from __future__ import annotations
 
 import json
-import math
 import random
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,25 +36,12 @@ import torch
 
 from dcslam.depth.config import TrainConfig
 from dcslam.depth.data import DriveFrames, frame_windows
-from dcslam.depth.losses import GeometryTerms, MaskedMSE, batch_depth_errors
-from dcslam.depth.maps import MapChamfer
-from dcslam.depth.recipes import LR_SCHEDULES, map_frames_of, selection_key
-from dcslam.depth.train_pose import pose_loss_of, run_model_with_confidence, validate_pose
-from dcslam.depth.models import build_model, model_record, save_model
+from dcslam.depth.forward import run_model, run_model_with_confidence
+from dcslam.depth.hooks import Hook, TrainState, default_hooks
+from dcslam.depth.models import build_model
+from dcslam.depth.objective import Objective
 from dcslam.errors import DcslamError
 from dcslam.progress import Bar
-from dcslam.io.atomic import atomic_output
-
-
-
-def lr_factor(schedule: str, step: int, total: int) -> float:
-    """The learning rate of optimisation step ``step`` of ``total``, as a fraction of ``--lr``: ``constant`` 1;
-    ``cosine`` 0.5 · (1 + cos(π · step / total)), from 1 down to (almost) 0 at the last step."""
-    if schedule == "constant":
-        return 1.0
-    if schedule == "cosine":
-        return 0.5 * (1.0 + math.cos(math.pi * min(step, total) / max(total, 1)))
-    raise DcslamError(f"unknown lr schedule {schedule!r}; expected one of {', '.join(LR_SCHEDULES)}")
 
 
 @dataclass
@@ -63,19 +52,6 @@ class TrainResult:
     best: dict | None
     last_val: dict | None
     model: object = None
-
-
-def resolve_device(device: str) -> torch.device:
-    """``auto`` → the first GPU if there is one, else the CPU."""
-    if device == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    try:
-        resolved = torch.device(device)
-    except RuntimeError:
-        raise DcslamError(f"unknown device {device!r}; expected auto, cpu or cuda") from None
-    if resolved.type == "cuda" and not torch.cuda.is_available():
-        raise DcslamError("--device cuda, but no GPU is available")
-    return resolved
 
 
 def rank_and_world() -> tuple[int, int]:
@@ -100,85 +76,6 @@ def seed_all(seed: int) -> None:
     torch.manual_seed(seed)
 
 
-def run_model(model, batch):
-    """The network's prediction (B, 1, h, w) for a batch: ``model(sparse, mask)``, with ``batch.rgb`` as a third
-    argument when the batch carries the colour image (guided networks)."""
-    mask = (batch.sparse > 0).to(batch.sparse.dtype)
-    return model(batch.sparse, mask) if batch.rgb is None else model(batch.sparse, mask, batch.rgb)
-
-
-class Objective:
-    """The training loss of a configuration: ``objective(pred, batch)`` → scalar; :attr:`parts` holds the terms of
-    the last call (pose loss: ``pose``, its mean ``pose_translation_m`` and ``pose_rotation_rad`` per step, and
-    ``mse`` / ``chamfer`` when weighted in; with geometry terms (``normal_weight``, ``plane_weight``,
-    ``edge_weight``): those of them weighted in, ``normal`` / ``plane`` / ``edge``, beside the loss's own term,
-    ``mse`` or ``chamfer``, which they are added to)."""
-
-    def __init__(self, config: TrainConfig, map_builder=None):
-        self.loss = config.loss
-        self.mse = MaskedMSE(config.mask, config.l1_weight)
-        self.chamfer = MapChamfer(config.map_frames, map_builder, config.chamfer_distance)
-        self.pose = pose_loss_of(config) if config.loss == "pose" else None
-        self.geometry = GeometryTerms(config.normal_weight, config.plane_weight, config.edge_weight)
-        self.weights = {"pose": config.pose_weight, "mse": config.mse_weight, "chamfer": config.chamfer_weight}
-        self.parts: dict = {}
-
-    def __call__(self, pred, batch, confidence=None):
-        """``confidence`` (B, 1, h, w) or None: per-pixel ICP weights of the pose loss."""
-        geometry = self.geometry(pred, batch.dense, batch.K)
-        if self.loss in ("mse", "chamfer"):
-            own = self.mse(pred, batch.sparse, batch.dense) if self.loss == "mse" else \
-                self.chamfer(pred, batch.dense, batch.K, batch.T_world_cam)
-            if geometry:
-                self.parts = {k: float(v.detach()) for k, v in {self.loss: own, **geometry}.items()}
-            return own + self.geometry.weighted(geometry)
-        pose, details = self.pose(pred, batch.K, batch.T_world_cam, confidence)
-        terms = {"pose": pose}
-        if self.weights["mse"] > 0:
-            terms["mse"] = self.mse(pred, batch.sparse, batch.dense)
-        if self.weights["chamfer"] > 0:
-            terms["chamfer"] = self.chamfer(pred, batch.dense, batch.K, batch.T_world_cam)
-        self.parts = {**{k: float(v.detach()) for k, v in {**terms, **geometry}.items()},
-                      "pose_translation_m": float(details["translation_m"].mean()),
-                      "pose_rotation_rad": float(details["rotation_rad"].mean()), "pose_rejected": details["rejected"]}
-        return sum(self.weights[k] * v for k, v in terms.items()) + self.geometry.weighted(geometry)
-
-
-def validate(model, drives: list[DriveFrames], map_frames: int, device, map_builder=None,
-             geometry: GeometryTerms | None = None) -> dict:
-    """The validation pass: no back-propagation, metrics per drive averaged over the drives.
-
-    Returns ``{"chamfer": m², "mse": m², "mae_mm": mm, "rmse_mm": mm}``, and the mean over the windows of each of the
-    ``geometry`` terms (``normal``, ``plane``, ``edge``) weighted in; chamfer uses maps of ``map_frames`` frames.
-    """
-    chamfer = MapChamfer(map_frames, map_builder)
-    geometry = geometry or GeometryTerms()
-    per_drive = []
-    model.eval()
-    with torch.no_grad():
-        for frames in drives:
-            sq, ab, n, chamfers, terms = 0.0, 0.0, 0, [], {t: [] for t in geometry.weights}
-            for window in frame_windows(len(frames), map_frames):
-                batch = frames.load(window).to(device)
-                pred = run_model(model, batch)
-                chamfers.append(float(chamfer(pred, batch.dense, batch.K, batch.T_world_cam)))
-                for term, value in geometry(pred, batch.dense, batch.K).items():
-                    terms[term].append(float(value))
-                e = batch_depth_errors(pred, batch.dense)
-                if e["pixels"]:
-                    sq += e["mse"] * e["pixels"]
-                    ab += e["mae_mm"] * e["pixels"]
-                    n += e["pixels"]
-            if n == 0:
-                raise DcslamError(f"validation drive {frames.name} has no ground-truth depth")
-            mse = sq / n
-            per_drive.append({"chamfer": float(np.mean(chamfers)), "mse": mse, "mae_mm": ab / n,
-                              "rmse_mm": math.sqrt(mse) * 1000.0, **{t: float(np.mean(v)) for t, v in terms.items()}})
-    model.train()
-    return {key: float(np.mean([d[key] for d in per_drive]))
-            for key in ("chamfer", "mse", "mae_mm", "rmse_mm", *geometry.weights)}
-
-
 def initial_model(config: TrainConfig):
     """A new network of ``config.model``, or, with ``config.init_model``, the network of that model file (which must
     be of the same architecture; its hyperparameters come with it)."""
@@ -201,7 +98,7 @@ def _chunks(drives: list[DriveFrames], chunk: int) -> list[tuple[int, range]]:
     return [(d, window) for d, frames in enumerate(drives) for window in frame_windows(len(frames), chunk)]
 
 
-def _read_last(path: Path, model, optimizer) -> dict:
+def read_checkpoint(path: Path, model, optimizer) -> dict:
     """The resume checkpoint ``path``, loaded into ``model`` and ``optimizer``; any broken file is a DcslamError."""
     from dcslam.depth.models import read_torch_file
 
@@ -220,109 +117,115 @@ def _read_last(path: Path, model, optimizer) -> dict:
     return state
 
 
-def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[DriveFrames],
-               val_frames: list[DriveFrames],
-               resume: bool = False, map_builder=None, rank: int = 0, world: int = 1, on_epoch=None) -> TrainResult:
-    """The training of one run (see the module docstring) on opened drives; ``run_dir`` exists.
+def _continue(state: TrainState, checkpoint: dict) -> None:
+    """Continue from a resume checkpoint (:func:`read_checkpoint`): its epoch, step, best row and metrics rows."""
+    state.epoch, state.start, state.step = checkpoint["epoch"], checkpoint["next_chunk"], checkpoint["step"]
+    state.best = json.loads(checkpoint["best"]) if checkpoint["best"] else None
+    state.resumed_lines = checkpoint["metrics_lines"]
 
-    Writes ``metrics.jsonl``, ``last.pt`` (after every drive and epoch) and ``model.pt`` (best validation) on rank 0,
-    and calls ``on_epoch()`` there after each epoch. With ``resume``, continues from ``last.pt``.
-    """
-    model = initial_model(config).to(device)
-    optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    metrics_path = run_dir / "metrics.jsonl"
-    epoch, next_chunk, step, best, last_val = 0, 0, 0, None, None
-    if resume:
-        state = _read_last(run_dir / "last.pt", model, optimizer)
-        epoch, next_chunk, step = state["epoch"], state["next_chunk"], state["step"]
-        best = json.loads(state["best"]) if state["best"] else None
-        if rank == 0:  # drop log lines written after the checkpoint
-            lines = metrics_path.read_text().splitlines(keepends=True) if metrics_path.exists() else []
-            metrics_path.write_text("".join(lines[:state["metrics_lines"]]))
-    elif rank == 0:
-        metrics_path.write_text("")
 
-    wrapped = model
-    if world > 1:
-        from torch.nn.parallel import DistributedDataParallel
+def _uses_confidence(config: TrainConfig, model) -> bool:
+    """Whether the pose loss weights its ICP by the network's confidence (nconv networks with --pose-weights
+    confidence)."""
+    return config.loss == "pose" and config.pose_weights == "confidence" and hasattr(model, "forward_with_confidence")
 
-        wrapped = DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
-    objective = Objective(config, map_builder)
-    use_confidence = config.loss == "pose" and config.pose_weights == "confidence" and \
-        hasattr(model, "forward_with_confidence")
-    if use_confidence and world > 1:
-        raise DcslamError("the pose loss with confidence weights runs in one process; pass --pose-weights none or "
-                          "--nproc 1")
+
+def _my_chunks(config: TrainConfig, train_frames: list[DriveFrames], rank: int, world: int) -> list[tuple[int, range]]:
+    """This rank's steps of every epoch: the epoch's chunks dealt out round-robin, the same number to each rank."""
     chunks = _chunks(train_frames, config.chunk)
     if config.loss == "pose":  # a pose window needs a frame pair
         chunks = [(d, window) for d, window in chunks if len(window) >= 2]
     per_rank = len(chunks) // world
     if per_rank == 0:
         raise DcslamError(f"{len(chunks)} training steps per epoch cannot be shared by {world} processes")
-    mine = chunks[rank::world][:per_rank]
-    map_frames_val = map_frames_of(config.loss, config.map_frames)
+    return chunks[rank::world][:per_rank]
+
+
+def _forward(state: TrainState, wrapped, batch) -> torch.Tensor:
+    """The step's loss: through the network's confidence for pose runs with confidence weights (one process only:
+    not through DistributedDataParallel), else through ``wrapped`` (the network or its DDP wrapper)."""
+    if _uses_confidence(state.config, state.model):
+        pred, confidence = run_model_with_confidence(state.model, batch)
+        return state.objective(pred, batch, confidence)
+    return state.objective(run_model(wrapped, batch), batch)
+
+
+def _train_step(state: TrainState, wrapped) -> None:
+    """One optimisation step on chunk ``state.position``; logs its ``train`` row."""
+    d, window = state.chunks[state.position]
+    frames = state.train_frames[d]
+    batch = frames.load(window, state.epoch).to(state.device)
+    for hook in state.hooks:
+        hook.before_step(state)
+    loss = _forward(state, wrapped, batch)
+    if not torch.isfinite(loss):
+        raise DcslamError(f"training loss became {float(loss)} at step {state.step} ({frames.name})")
+    state.optimizer.zero_grad(set_to_none=True)
+    if loss.requires_grad:  # a pose window whose every ICP step was rejected has no gradient
+        loss.backward()
+        state.optimizer.step()
+    state.loss = float(loss.detach())
+    state.log({"kind": "train", "epoch": state.epoch, "step": state.step, "drive": frames.name, "loss": state.loss,
+               "lr": state.optimizer.param_groups[0]["lr"], **state.objective.parts})
+    state.step += 1
+
+
+def _stop_agreed(state: TrainState) -> bool:
+    """Rank 0's :attr:`TrainState.stop` on every rank (the hooks that may stop a run run on rank 0)."""
+    import torch.distributed as dist
+
+    if not (dist.is_available() and dist.is_initialized()):
+        return state.stop
+    flag = torch.tensor([int(state.stop)], device=state.device)
+    dist.broadcast(flag, src=0)
+    return bool(flag.item())
+
+
+def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[DriveFrames],
+               val_frames: list[DriveFrames], resume: bool = False, map_builder=None, rank: int = 0, world: int = 1,
+               on_epoch=None, hooks: list[Hook] | tuple[Hook, ...] = ()) -> TrainResult:
+    """The training of one run (see the module docstring) on opened drives; ``run_dir`` exists.
+
+    Runs the steps of every epoch and, around them, :func:`dcslam.depth.hooks.default_hooks` (``metrics.jsonl``,
+    ``last.pt`` after every drive and epoch, ``model.pt`` by validation, ``on_epoch()`` after each epoch: all on rank
+    0) followed by ``hooks`` (rank 0 only). With ``resume``, continues from ``last.pt``.
+    """
+    model = initial_model(config).to(device)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    checkpoint = read_checkpoint(run_dir / "last.pt", model, optimizer) if resume else None
+    if _uses_confidence(config, model) and world > 1:
+        raise DcslamError("the pose loss with confidence weights runs in one process; pass --pose-weights none or "
+                          "--nproc 1")
+    state = TrainState(run_dir, config, device, model, optimizer, Objective(config, map_builder), train_frames,
+                       val_frames, _my_chunks(config, train_frames, rank, world), rank)
+    if checkpoint is not None:
+        _continue(state, checkpoint)
+    state.hooks = default_hooks(rank, bool(val_frames), map_builder, on_epoch) + (list(hooks) if rank == 0 else [])
+    wrapped = model
+    if world > 1:
+        from torch.nn.parallel import DistributedDataParallel
+
+        wrapped = DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda" else None)
     model.train()
-
-    def checkpoint(epoch_, next_chunk_):
-        if rank != 0:
-            return
-        state = {"model": model_record(model), "optimizer": optimizer.state_dict(), "epoch": epoch_,
-                 "next_chunk": next_chunk_, "step": step, "best": json.dumps(best) if best else "",
-                 "rng": torch.get_rng_state(), "metrics_lines": len(metrics_path.read_text().splitlines())}
-        with atomic_output(run_dir / "last.pt", force=True) as tmp:
-            torch.save(state, tmp)
-
-    total = (config.epochs - epoch) * per_rank - next_chunk
-    with Bar(f"train {run_dir.name}", total=max(total, 0)) as bar, open(metrics_path, "a") as log:
-        def write(row):
-            if rank == 0:
-                log.write(json.dumps(row) + "\n")
-                log.flush()
-
-        while epoch < config.epochs:
-            for position in range(next_chunk, per_rank):
-                d, window = mine[position]
-                batch = train_frames[d].load(window, epoch).to(device)
-                for group in optimizer.param_groups:
-                    group["lr"] = config.lr * lr_factor(config.lr_schedule, step, config.epochs * per_rank)
-                if use_confidence:  # (not through DistributedDataParallel: refused above)
-                    pred, confidence = run_model_with_confidence(model, batch)
-                    loss = objective(pred, batch, confidence)
-                else:
-                    loss = objective(run_model(wrapped, batch), batch)
-                if not torch.isfinite(loss):
-                    raise DcslamError(f"training loss became {float(loss)} at step {step} ({train_frames[d].name})")
-                optimizer.zero_grad(set_to_none=True)
-                if loss.requires_grad:  # a pose window whose every ICP step was rejected has no gradient
-                    loss.backward()
-                    optimizer.step()
-                write({"kind": "train", "epoch": epoch, "step": step, "drive": train_frames[d].name,
-                       "loss": float(loss.detach()), "lr": optimizer.param_groups[0]["lr"], **objective.parts})
-                step += 1
-                bar.advance(status=f"epoch {epoch} loss {float(loss.detach()):.4g}")
-                last_of_drive = position + 1 == per_rank or mine[position + 1][0] != d
-                if last_of_drive and position + 1 < per_rank:
-                    checkpoint(epoch, position + 1)
-            if rank == 0 and val_frames:
-                last_val = validate(model, val_frames, map_frames_val, device, map_builder, objective.geometry)
-                if objective.pose is not None:
-                    last_val.update(validate_pose(model, val_frames, objective.pose, config.pose_frames, device,
-                                                  config.pose_weights == "confidence"))
-                write({"kind": "val", "epoch": epoch, "step": step, **last_val})
-                key = selection_key(config.loss)
-                if best is None or last_val[key] < best[key]:
-                    best = {**last_val, "epoch": epoch, "step": step}
-                    save_model(run_dir / "model.pt", model, meta={"run": run_dir.name, "epoch": epoch, "step": step,
-                                                                  "selected_by": key, **last_val,
-                                                                  "scale": config.scale, "crop": config.crop})
-            elif rank == 0:  # no validation drives: keep the latest weights as the model
-                save_model(run_dir / "model.pt", model, meta={"run": run_dir.name, "epoch": epoch, "step": step,
-                                                              "selected_by": "last", "scale": config.scale,
-                                                              "crop": config.crop})
-            epoch, next_chunk = epoch + 1, 0
-            checkpoint(epoch, 0)
-            if rank == 0 and on_epoch is not None:
-                on_epoch()
-            barrier()
-    return TrainResult(run_dir=run_dir, steps=step, epochs=epoch, best=best, last_val=last_val, model=model)
-
+    total = (config.epochs - state.epoch) * len(state.chunks) - state.start
+    with Bar(f"train {run_dir.name}", total=max(total, 0)) as bar:
+        for hook in state.hooks:
+            hook.before_train(state)
+        try:
+            while state.epoch < config.epochs and not state.stop:
+                for position in range(state.start, len(state.chunks)):
+                    state.position = position
+                    _train_step(state, wrapped)
+                    bar.advance(status=f"epoch {state.epoch} loss {state.loss:.4g}")
+                    for hook in state.hooks:
+                        hook.after_step(state)
+                for hook in state.hooks:
+                    hook.after_epoch(state)
+                state.epoch, state.start = state.epoch + 1, 0
+                barrier()
+                state.stop = _stop_agreed(state)
+        finally:
+            for hook in reversed(state.hooks):
+                hook.after_train(state)
+    return TrainResult(run_dir=run_dir, steps=state.step, epochs=state.epoch, best=state.best,
+                       last_val=state.last_val, model=model)

@@ -1,6 +1,8 @@
 """The pose loss inside training (docs/training.md, "The pose loss"): the :class:`dcslam.depth.pose.PoseLoss` of a
-training configuration, a network's prediction with its confidence (the pose loss's per-pixel ICP weights), and the
-validation pass of the pose loss. :mod:`dcslam.depth.train` composes them into its objective and its validation.
+training configuration and the validation pass of the pose loss; the network's prediction with its confidence (the
+pose loss's per-pixel ICP weights) is :func:`dcslam.depth.forward.run_model_with_confidence`.
+:mod:`dcslam.depth.objective` composes them into the training objective and :mod:`dcslam.depth.hooks` into the
+validation; nothing here imports the training loop.
 """
 from __future__ import annotations
 
@@ -10,23 +12,11 @@ import numpy as np
 import torch
 
 from dcslam.depth.data import DriveFrames, frame_windows
+from dcslam.depth.forward import run_model_with_confidence
 from dcslam.errors import DcslamError
 
 if TYPE_CHECKING:
-    from dcslam.depth.train import TrainConfig
-
-
-def run_model_with_confidence(model, batch, use_confidence: bool = True):
-    """(prediction (B, 1, h, w), confidence (B, 1, h, w) in [0, 1] or None): the confidence of networks that give
-    one (``forward_with_confidence``, e.g. nconv) when ``use_confidence``, else None."""
-    if not use_confidence or not hasattr(model, "forward_with_confidence"):
-        from dcslam.depth.train import run_model
-
-        return run_model(model, batch), None
-    mask = (batch.sparse > 0).to(batch.sparse.dtype)
-    args = (batch.sparse, mask) if batch.rgb is None else (batch.sparse, mask, batch.rgb)
-    pred, confidence = model.forward_with_confidence(*args)
-    return pred, confidence.clamp(0.0, 1.0)
+    from dcslam.depth.config import TrainConfig
 
 
 def pose_loss_of(config: TrainConfig):

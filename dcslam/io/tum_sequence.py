@@ -175,26 +175,7 @@ def index_sequence(folder: Path | str, *, intrinsics: np.ndarray | None = None, 
     if not folder.is_dir():
         raise DcslamError(f"sequence folder {folder} not found")
     notes: list[str] = []
-    if (folder / "associations.txt").is_file():
-        fmt = ICL
-        depth_t, depth_n, _, rgb_n = read_associations(folder / "associations.txt")
-    elif (folder / "rgb.txt").is_file() and (folder / "depth.txt").is_file():
-        fmt = TUM
-        rgb_t, rgb_all = read_list(folder / "rgb.txt")
-        depth_all_t, depth_all = read_list(folder / "depth.txt")
-        i_rgb, i_depth = associate(rgb_t, depth_all_t, max_difference)
-        if len(i_rgb) < len(depth_all_t):
-            notes.append(f"{len(depth_all_t) - len(i_rgb)} of {len(depth_all_t)} depth images have no colour image "
-                         f"within {max_difference} s, skipped")
-        depth_t = depth_all_t[i_depth]
-        depth_n = [depth_all[j] for j in i_depth]
-        rgb_n = [rgb_all[i] for i in i_rgb]
-    else:
-        raise DcslamError(f"{folder}: no associations.txt, nor rgb.txt and depth.txt; not a TUM RGB-D or ICL-NUIM "
-                          f"sequence")
-    if len(depth_t) == 0:
-        raise DcslamError(f"{folder}: no colour and depth images within {max_difference} s of each other")
-
+    fmt, depth_t, depth_n, rgb_n = _associated_images(folder, max_difference, notes)
     rgb_paths = tuple(folder / n for n in rgb_n)
     depth_paths = tuple(folder / n for n in depth_n)
     for paths, listed in ((depth_paths, "depth.txt"), (rgb_paths, "rgb.txt")):
@@ -217,20 +198,51 @@ def index_sequence(folder: Path | str, *, intrinsics: np.ndarray | None = None, 
                           f"{format_time(depth_t[0])}..{format_time(depth_t[-1])} vs "
                           f"{format_time(gt_times[0])}..{format_time(gt_times[-1])})")
 
-    if intrinsics is not None:
-        K = np.asarray(intrinsics, dtype=np.float64)
-        if K.shape != (3, 3):
-            raise DcslamError(f"intrinsics have shape {K.shape}, expected (3, 3)")
-    elif (folder / INTRINSICS_FILE).is_file():
-        K = read_intrinsics(folder / INTRINSICS_FILE)
-    else:
-        K = ICL_K.copy() if fmt == ICL else TUM_K.copy()
+    K = _sequence_intrinsics(folder, fmt, intrinsics)
     keep = np.flatnonzero(found)
     sequence = Sequence(root=folder, name=folder.name, format=fmt, K=K, groundtruth=Path(groundtruth),
                         rgb_paths=rgb_paths, depth_paths=depth_paths, timestamps=depth_t, T_world_cam=T,
                         frame_ids=np.arange(len(depth_t), dtype=np.int64), depth_scale=depth_scale,
                         notes=tuple(notes))
     return sequence.select(keep)
+
+
+def _associated_images(folder: Path, max_difference: float, notes: list[str]):
+    """(format, depth timestamps (N,), depth image names, colour image names) of a sequence folder: its
+    ``associations.txt`` (ICL-NUIM), else ``rgb.txt`` and ``depth.txt`` associated by timestamp (TUM; depth images
+    without a colour image are skipped and noted). No pair at all is a DcslamError."""
+    if (folder / "associations.txt").is_file():
+        fmt = ICL
+        depth_t, depth_n, _, rgb_n = read_associations(folder / "associations.txt")
+    elif (folder / "rgb.txt").is_file() and (folder / "depth.txt").is_file():
+        fmt = TUM
+        rgb_t, rgb_all = read_list(folder / "rgb.txt")
+        depth_all_t, depth_all = read_list(folder / "depth.txt")
+        i_rgb, i_depth = associate(rgb_t, depth_all_t, max_difference)
+        if len(i_rgb) < len(depth_all_t):
+            notes.append(f"{len(depth_all_t) - len(i_rgb)} of {len(depth_all_t)} depth images have no colour image "
+                         f"within {max_difference} s, skipped")
+        depth_t = depth_all_t[i_depth]
+        depth_n = [depth_all[j] for j in i_depth]
+        rgb_n = [rgb_all[i] for i in i_rgb]
+    else:
+        raise DcslamError(f"{folder}: no associations.txt, nor rgb.txt and depth.txt; not a TUM RGB-D or ICL-NUIM "
+                          f"sequence")
+    if len(depth_t) == 0:
+        raise DcslamError(f"{folder}: no colour and depth images within {max_difference} s of each other")
+    return fmt, depth_t, depth_n, rgb_n
+
+
+def _sequence_intrinsics(folder: Path, fmt: str, intrinsics: np.ndarray | None) -> np.ndarray:
+    """K (3, 3): ``intrinsics`` if given, else the folder's ``intrinsics.txt``, else the format's default."""
+    if intrinsics is not None:
+        K = np.asarray(intrinsics, dtype=np.float64)
+        if K.shape != (3, 3):
+            raise DcslamError(f"intrinsics have shape {K.shape}, expected (3, 3)")
+        return K
+    if (folder / INTRINSICS_FILE).is_file():
+        return read_intrinsics(folder / INTRINSICS_FILE)
+    return ICL_K.copy() if fmt == ICL else TUM_K.copy()
 
 
 def check_image_size(sequence: Sequence, width: int, height: int, intrinsics_given: bool) -> None:

@@ -53,7 +53,7 @@ def run_denoising(out_dir: Path | str, config, *, force: bool = False,
 
     from dcslam.depth.denoise import DepthDenoiser, pointfusion_builder, split_frames, train_denoiser
     from dcslam.depth.models import build_model, save_model
-    from dcslam.depth.train import resolve_device
+    from dcslam.device import resolve_device
     from dcslam.report.denoising import evaluate, plot_denoising, results_table
     from dcslam.report.scores import check_outputs
 

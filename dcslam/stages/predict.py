@@ -110,7 +110,7 @@ def predictor(ws: Workspace, config: PredictConfig):
     """The :class:`dcslam.depth.predict.Predictor` of ``config`` (a classical completer, or a run's best model)."""
     from dcslam.depth.models import classical_name
     from dcslam.depth.predict import classical_predictor
-    from dcslam.depth.train import resolve_device
+    from dcslam.device import resolve_device
     from dcslam.workspace import require
 
     name = config.model or config.run

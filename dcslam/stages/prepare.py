@@ -144,6 +144,35 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
     them (and no ``splits.json``) and a rerun starts clean.
     """
     kitti_root, out_dir = Path(kitti_root), Path(out_dir)
+    _check_arguments(kitti_root, out_dir, max_frames)
+    beams = tuple(sorted({int(b) for b in beams}, reverse=True))
+    for b in beams:
+        check_beams(b)
+    notes: list[str] = []
+    found = _complete_drives(kitti_root, notes)
+    source = found[0].source
+    chosen, label = _chosen_drives(kitti_root, found, splits_file, include_unsplit, notes)
+
+    splits_path = out_dir / "splits.json"
+    targets = [out_dir / f"{drive.name}.h5" for drive, _ in chosen]
+    if not force:
+        for path in (*targets, splits_path):
+            if path.exists():
+                raise DcslamError(f"{path} exists; pass --force to overwrite it")
+    indexes: list[DriveIndex] = [index_drive(drive).head(max_frames) for drive, _ in chosen]
+    written = _write_drive_files(chosen, indexes, targets, beams, source)
+
+    out_splits = {split: [d.name for d in written if d.split == split] for split in SPLIT_NAMES}
+    write_json_atomic(splits_path, out_splits, force=True)
+    config_path = write_json_atomic(out_dir / "prepare-kitti.json", stage_config("prepare-kitti", {
+        "kitti_root": str(kitti_root), "out_dir": str(out_dir), "source": source, "splits": label,
+        "max_frames": max_frames, "include_unsplit": include_unsplit, "beams": list(beams),
+        "drives": {d.name: {"split": d.split, "frames": d.frames, "exact": d.exact} for d in written}}),
+        force=True)
+    return PrepareResult(source, tuple(written), out_splits, splits_path, config_path, tuple(notes))
+
+
+def _check_arguments(kitti_root: Path, out_dir: Path, max_frames: int | None) -> None:
     if max_frames is not None and max_frames < 1:
         raise DcslamError(f"--max-frames is {max_frames}, expected at least 1")
     if not kitti_root.is_dir():
@@ -152,17 +181,17 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
                           "depth_completion/), or run `dcslam synth` to generate one")
     if out_dir.exists() and not out_dir.is_dir():
         raise DcslamError(f"--out {out_dir} is a file; pass a folder for the drive files")
-    beams = tuple(sorted({int(b) for b in beams}, reverse=True))
-    for b in beams:
-        check_beams(b)
+
+
+def _complete_drives(kitti_root: Path, notes: list[str]) -> list:
+    """The drives under ``kitti_root`` that have both raw and depth-completion folders (at least one, else a
+    DcslamError); the others are named in ``notes``."""
     all_drives = find_drives(kitti_root)
     found = [d for d in all_drives if d.has_raw and d.depth_dir is not None]
     if not found:
         raise DcslamError(f"no KITTI drives under {kitti_root} (looked for raw/<date>/<date>_drive_NNNN_sync with "
                           f"depth_completion/{{train,val}}/<date>_drive_NNNN_sync); run `dcslam synth` to generate a "
                           f"KITTI-format dataset there, or pass --kitti DIR")
-    source = found[0].source
-    notes: list[str] = []
     raw_only = [d.name for d in all_drives if d.has_raw and d.depth_dir is None]
     depth_only = [d.name for d in all_drives if not d.has_raw and d.depth_dir is not None]
     if raw_only:
@@ -170,10 +199,17 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
     if depth_only:
         notes.append(f"{len(depth_only)} depth-completion drive(s) without raw folders, skipped: "
                      f"{_listing(depth_only)}")
+    return found
 
+
+def _chosen_drives(kitti_root: Path, found: list, splits_file: Path | str | None, include_unsplit: bool,
+                   notes: list[str]) -> tuple[list, str]:
+    """((drive, split) to convert, the split's label): by ``splits_file``, else the thesis split for real KITTI and
+    :func:`proportional_splits` for generated data. None chosen, or a split file whose test drives are all absent,
+    is a DcslamError."""
     if splits_file is not None:
         splits, label = read_splits(splits_file), str(splits_file)
-    elif source == "kitti":
+    elif found[0].source == "kitti":
         splits, label = THESIS_SPLITS, "the thesis split"
     else:
         splits, label = proportional_splits([d.name for d in found]), "the proportional split"
@@ -187,15 +223,12 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
         raise DcslamError(f"--splits {splits_file}: none of its test drive(s) ({_listing(wanted)}) is under "
                           f"{kitti_root}, so the test split would be empty; fix the names (drives found: "
                           f"{_listing(sorted(d.name for d in found))})")
+    return chosen, label
 
-    splits_path = out_dir / "splits.json"
-    targets = [out_dir / f"{drive.name}.h5" for drive, _ in chosen]
-    if not force:
-        for path in (*targets, splits_path):
-            if path.exists():
-                raise DcslamError(f"{path} exists; pass --force to overwrite it")
-    indexes: list[DriveIndex] = [index_drive(drive).head(max_frames) for drive, _ in chosen]
 
+def _write_drive_files(chosen: list, indexes: list[DriveIndex], targets: list[Path], beams: tuple[int, ...],
+                       source: str) -> list[PreparedDrive]:
+    """Write one drive file per chosen drive, all of them or (on any failure) none."""
     written = []
     with AtomicSet() as files:  # every drive read cleanly, or none of them appears
         for (drive, split), index, path in zip(chosen, indexes, targets):
@@ -209,15 +242,7 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
                 for frame in frames:
                     writer.append(frame)
             written.append(PreparedDrive(drive.name, split, path, len(index), drive.has_exact))
-
-    out_splits = {split: [d.name for d in written if d.split == split] for split in SPLIT_NAMES}
-    write_json_atomic(splits_path, out_splits, force=True)
-    config_path = write_json_atomic(out_dir / "prepare-kitti.json", stage_config("prepare-kitti", {
-        "kitti_root": str(kitti_root), "out_dir": str(out_dir), "source": source, "splits": label,
-        "max_frames": max_frames, "include_unsplit": include_unsplit, "beams": list(beams),
-        "drives": {d.name: {"split": d.split, "frames": d.frames, "exact": d.exact} for d in written}}),
-        force=True)
-    return PrepareResult(source, tuple(written), out_splits, splits_path, config_path, tuple(notes))
+    return written
 
 
 HELP = ("Convert KITTI raw + depth-completion drives (real, or from `dcslam synth`) into one HDF5 drive file each, "

@@ -99,12 +99,9 @@ def prepare_tum(src: Path | str, out_dir: Path | str, *, intrinsics: np.ndarray 
     Returns a :class:`dcslam.stages.prepare.PrepareResult` with ``source = "tum"``.
     """
     out_dir = Path(out_dir)
-    if max_frames is not None and max_frames < 1:
-        raise DcslamError(f"--max-frames is {max_frames}, expected at least 1")
-    if stride < 1:
-        raise DcslamError(f"--stride is {stride}, expected at least 1")
-    if sparse_stride < 1:
-        raise DcslamError(f"--sparse-stride is {sparse_stride}, expected at least 1")
+    for value, name in ((max_frames, "--max-frames"), (stride, "--stride"), (sparse_stride, "--sparse-stride")):
+        if value is not None and value < 1:
+            raise DcslamError(f"{name} is {value}, expected at least 1")
     folders = find_sequences(src)
     notes: list[str] = []
     names = [f.name for f in folders]
@@ -120,29 +117,9 @@ def prepare_tum(src: Path | str, out_dir: Path | str, *, intrinsics: np.ndarray 
         for path in (*targets, splits_path):
             if path.exists():
                 raise DcslamError(f"{path} exists; pass --force to overwrite it")
-
-    sequences = []
-    for folder in chosen:
-        sequence = index_sequence(folder, intrinsics=intrinsics).subsample(stride, max_frames)
-        height, width = read_depth_png(sequence.depth_paths[0], sequence.depth_scale).shape
-        check_image_size(sequence, width, height, intrinsics is not None)
-        notes += [f"{sequence.name}: {note}" for note in sequence.notes]
-        sequences.append(sequence)
-
-    written = []
-    for sequence, path in zip(sequences, targets):
-        frames = track(_frames(sequence, sparse_stride), sequence.name, total=len(sequence))
-        first = next(frames)
-        height, width = first.rgb.shape[:2]
-        attrs = {"format": sequence.format, "sparse_stride": sparse_stride, "frame_stride": stride,
-                 "sparse_depth": f"every {sparse_stride}th row and column of depth/dense (LiDAR-like subsample)",
-                 "sequence": str(sequence.root), "groundtruth": str(sequence.groundtruth)}
-        with DriveWriter(path, sequence.K, height, width, source="tum", date="", drive=sequence.name,
-                         split=split_of[sequence.name], force=force, attrs=attrs) as writer:
-            writer.append(first)
-            for frame in frames:
-                writer.append(frame)
-        written.append(PreparedDrive(sequence.name, split_of[sequence.name], path, len(sequence)))
+    sequences = [_indexed(folder, intrinsics, stride, max_frames, notes) for folder in chosen]
+    written = [_write_sequence(sequence, path, split_of[sequence.name], sparse_stride, stride, force)
+               for sequence, path in zip(sequences, targets)]
 
     out_splits = {split: [d.name for d in written if d.split == split] for split in SPLIT_NAMES}
     write_json_atomic(splits_path, out_splits, force=True)
@@ -152,6 +129,33 @@ def prepare_tum(src: Path | str, out_dir: Path | str, *, intrinsics: np.ndarray 
         "drives": {d.name: {"split": d.split, "frames": d.frames, "format": s.format, "K": s.K.tolist()}
                    for d, s in zip(written, sequences)}}), force=True)
     return PrepareResult("tum", tuple(written), out_splits, splits_path, config_path, tuple(notes))
+
+
+def _indexed(folder: Path, intrinsics: np.ndarray | None, stride: int, max_frames: int | None,
+             notes: list[str]) -> Sequence:
+    """The checked sequence of ``folder`` cut to ``stride`` and ``max_frames``; its notes are added to ``notes``."""
+    sequence = index_sequence(folder, intrinsics=intrinsics).subsample(stride, max_frames)
+    height, width = read_depth_png(sequence.depth_paths[0], sequence.depth_scale).shape
+    check_image_size(sequence, width, height, intrinsics is not None)
+    notes += [f"{sequence.name}: {note}" for note in sequence.notes]
+    return sequence
+
+
+def _write_sequence(sequence: Sequence, path: Path, split: str, sparse_stride: int, stride: int,
+                    force: bool) -> PreparedDrive:
+    """Write the drive file of one sequence (atomically, by :class:`dcslam.io.drive.DriveWriter`)."""
+    frames = track(_frames(sequence, sparse_stride), sequence.name, total=len(sequence))
+    first = next(frames)
+    height, width = first.rgb.shape[:2]
+    attrs = {"format": sequence.format, "sparse_stride": sparse_stride, "frame_stride": stride,
+             "sparse_depth": f"every {sparse_stride}th row and column of depth/dense (LiDAR-like subsample)",
+             "sequence": str(sequence.root), "groundtruth": str(sequence.groundtruth)}
+    with DriveWriter(path, sequence.K, height, width, source="tum", date="", drive=sequence.name, split=split,
+                     force=force, attrs=attrs) as writer:
+        writer.append(first)
+        for frame in frames:
+            writer.append(frame)
+    return PreparedDrive(sequence.name, split, path, len(sequence))
 
 
 HELP = (

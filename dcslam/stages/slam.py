@@ -125,7 +125,7 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
     layer = resolve_layer(ws, layer_reference(config.depth, config.run))
     out_dir = config.out if config.out is not None else ws.slam / layer.name
     output_folder(out_dir, "--out")
-    from dcslam.depth.train import resolve_device
+    from dcslam.device import resolve_device
 
     resolve_device(config.device)  # a GPU asked for on a CPU-only torch: one line, before any work
     jobs = []

@@ -204,7 +204,36 @@ def _record_resume(run_dir: Path, config) -> None:
     write_json_atomic(path, record)
 
 
-def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resume: bool = False, map_builder=None):
+def _open_frames(config: TrainConfig, paths: list[Path], opened: list) -> list:
+    """The :class:`dcslam.depth.data.DriveFrames` of ``paths`` as ``config`` views them, each appended to ``opened``
+    as it opens (the caller closes them)."""
+    from dcslam.depth.data import DriveFrames
+    from dcslam.depth.models import is_guided
+
+    guided = is_guided(config.model)
+    frames = []
+    for path in paths:
+        frames.append(DriveFrames(path, config.max_frames, config.stride, config.scale, config.crop, config.input,
+                                  config.target, rgb=guided, mix=config.input_mix))
+        opened.append(frames[-1])
+    return frames
+
+
+def _write_run_config(run_dir: Path, config: TrainConfig, device, world: int) -> None:
+    """``config.json`` of a new run: its settings, the resolved device, the world size and the input's beams."""
+    from dcslam.io.drive import input_beams
+
+    settings = settings_record(config, run_dir)
+    settings["resolved_device"] = str(device)
+    settings["world_size"] = world
+    settings["input_beams"] = input_beams(config.input)
+    if config.input_mix:
+        settings["input_beams"] = [input_beams(kind) for kind in config.input_mix]
+    write_json_atomic(run_dir / "config.json", {**stage_config("train", settings), **RELATIVE_PATHS})
+
+
+def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resume: bool = False, map_builder=None,
+          hooks=()):
     """Train one run (a :class:`dcslam.depth.config.TrainConfig`) into ``run_dir`` and return its
     :class:`dcslam.depth.train.TrainResult`.
 
@@ -212,14 +241,12 @@ def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resu
     holding ``run_dir``, see :func:`settings_record`), ``curves.png`` (after every epoch) and what
     :func:`dcslam.depth.train.train_loop` writes. An existing run fails without ``force`` (which removes its files
     first); ``resume`` continues it from ``last.pt`` with its own settings (only the number of epochs and the device
-    are taken from ``config``).
+    are taken from ``config``). ``hooks``: :class:`dcslam.depth.hooks.Hook` objects added to the loop's own.
     """
     import torch
 
-    from dcslam.depth.data import DriveFrames
-    from dcslam.depth.models import is_guided
-    from dcslam.io.drive import input_beams
-    from dcslam.depth.train import barrier, rank_and_world, resolve_device, seed_all, train_loop
+    from dcslam.depth.train import barrier, rank_and_world, seed_all, train_loop
+    from dcslam.device import resolve_device
     from dcslam.report.plots import plot_training_curves
 
     run_dir = Path(run_dir)
@@ -239,23 +266,13 @@ def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resu
 
     open_drives = []
     try:
-        guided = is_guided(config.model)
-        train_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop, config.input,
-                                    config.target, rgb=guided, mix=config.input_mix) for p in config.train_drives]
-        open_drives += train_frames
-        val_frames = [DriveFrames(p, config.max_frames, config.stride, config.scale, config.crop, config.input,
-                                  config.target, rgb=guided, mix=config.input_mix) for p in config.val_drives]
-        open_drives += val_frames
+        train_frames = _open_frames(config, config.train_drives, open_drives)
+        val_frames = _open_frames(config, config.val_drives, open_drives)
         if rank == 0 and not resume:
-            settings = settings_record(config, run_dir)
-            settings["resolved_device"] = str(device)
-            settings["world_size"] = world
-            settings["input_beams"] = input_beams(config.input)
-            if config.input_mix:
-                settings["input_beams"] = [input_beams(kind) for kind in config.input_mix]
-            write_json_atomic(run_dir / "config.json", {**stage_config("train", settings), **RELATIVE_PATHS})
+            _write_run_config(run_dir, config, device, world)
         result = train_loop(run_dir, config, device, train_frames, val_frames, resume, map_builder, rank, world,
-                            on_epoch=lambda: plot_training_curves(run_dir / "curves.png", run_dir / "metrics.jsonl"))
+                            on_epoch=lambda: plot_training_curves(run_dir / "curves.png", run_dir / "metrics.jsonl"),
+                            hooks=hooks)
         if resume and rank == 0:  # only once the epochs are trained
             _record_resume(run_dir, config)
         return result
@@ -313,7 +330,7 @@ def run(ws: Workspace, config: TrainStageConfig, *, force: bool = False):
             raise DcslamError(f"distributed training of {run_dir} failed (torchrun exit code {code})")
         return read_result(run_dir)
 
-    from dcslam.depth.train import resolve_device
+    from dcslam.device import resolve_device
     from dcslam.io.drive import read_splits
 
     splits = read_splits(ws.splits)

@@ -3,7 +3,7 @@ import pytest
 import torch
 
 from dcslam.depth.models import build_model, load_model, save_model
-from dcslam.depth.train import _read_last
+from dcslam.depth.train import read_checkpoint
 from dcslam.errors import DcslamError
 
 
@@ -42,5 +42,5 @@ def test_broken_resume_checkpoint(tmp_path, content):
     else:
         torch.save({"model": {"state_dict": {"w": torch.zeros(2)}}, "optimizer": {}}, path)
     with pytest.raises(DcslamError, match=r"last.pt: not a .*; start the run again with --force") as error:
-        _read_last(path, model, optimizer)
+        read_checkpoint(path, model, optimizer)
     assert "\n" not in str(error.value)

@@ -5,7 +5,8 @@ import torch
 
 from dcslam.depth.maps import stacked_points_map
 from dcslam.depth.models import load_model
-from dcslam.depth.train import TrainConfig, resolve_device
+from dcslam.depth.train import TrainConfig
+from dcslam.device import resolve_device
 from dcslam.stages.train import train
 from dcslam.errors import DcslamError
 
