@@ -112,33 +112,22 @@ def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int
            splat: int = 0) -> ModelView:
     """Render a map into a camera with a z-buffer; each point covers a (2 splat + 1)^2 pixel square.
 
+    A pixel shows the nearest point whose square covers it; of equally near ones, the one whose own pixel (the
+    square's centre) comes first in raster order, and of those the one with the highest index. Done as one z-buffer
+    pass over the points at their own pixels (an image ``splat`` pixels wider on each side, as a square may reach
+    in from outside) and a (2 splat + 1)^2 minimum filter in image space: the map's size costs one scatter, not
+    one per pixel of the square.
+
     Shape: T_world_cam (4, 4), K (3, 3) -> :class:`ModelView` of (H, W).
     """
     if T_world_cam.shape != (4, 4):
         raise DcslamError(f"T_world_cam has shape {tuple(T_world_cam.shape)}, expected (4, 4)")
     K = check_K(K)[0]
     device, dtype = pm.points.device, pm.points.dtype
-    index = torch.full((height * width,), -1, dtype=torch.int64, device=device)
     if len(pm):
-        p_cam = transform_points(inverse(T_world_cam.to(dtype)), pm.points.detach())
-        ids = torch.nonzero(p_cam[:, 2] > 0).squeeze(1)        # only points in front of the camera ...
-        uv, z = project(p_cam[ids], K.to(dtype))
-        px = torch.round(uv).to(torch.int64)
-        seen = (px[:, 0] >= -splat) & (px[:, 0] < width + splat) & (px[:, 1] >= -splat) & (px[:, 1] < height + splat)
-        ids, px, z = ids[seen], px[seen], z[seen]                # ... and within reach of the image
-        zbuf = torch.full((height * width,), float("inf"), dtype=dtype, device=device)
-        cand_pix, cand_z, cand_id = [], [], []
-        for dy in range(-splat, splat + 1):
-            for dx in range(-splat, splat + 1):
-                u, v = px[:, 0] + dx, px[:, 1] + dy
-                ok = (z > 0) & (u >= 0) & (u < width) & (v >= 0) & (v < height)
-                cand_pix.append((v * width + u)[ok])
-                cand_z.append(z[ok])
-                cand_id.append(ids[ok])
-        pix, zc, idc = torch.cat(cand_pix), torch.cat(cand_z), torch.cat(cand_id)
-        zbuf.scatter_reduce_(0, pix, zc, reduce="amin")
-        win = zc <= zbuf[pix]
-        index.scatter_(0, pix[win], idc[win])
+        index = _zbuffer(pm, T_world_cam, K, height, width, splat)
+    else:
+        index = torch.full((height * width,), -1, dtype=torch.int64, device=device)
     index = index.view(height, width)
     valid = index >= 0
     vertex = torch.zeros(height * width, 3, dtype=dtype, device=device)
@@ -150,6 +139,49 @@ def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int
         normal = normal.index_put((pix,), pm.normals.index_select(0, hit))
     vertex, normal = vertex.view(height, width, 3), normal.view(height, width, 3)
     return ModelView(index, vertex, normal, valid, T_world_cam.to(dtype), K.to(dtype))
+
+
+def _zbuffer(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
+             splat: int) -> torch.Tensor:
+    """The point :func:`render` shows at each pixel (-1: none). Shape: -> (H W,) int64."""
+    device, dtype = pm.points.device, pm.points.dtype
+    p_cam = transform_points(inverse(T_world_cam.to(dtype)), pm.points.detach())
+    ids = torch.nonzero(p_cam[:, 2] > 0).squeeze(1)        # only points in front of the camera ...
+    uv, z = project(p_cam.index_select(0, ids), K.to(dtype))
+    px = torch.round(uv).to(torch.int64)
+    seen = (px[:, 0] >= -splat) & (px[:, 0] < width + splat) & (px[:, 1] >= -splat) & (px[:, 1] < height + splat)
+    seen = torch.nonzero(seen).squeeze(1)
+    ids, px, z = ids.index_select(0, seen), px.index_select(0, seen), z.index_select(0, seen)  # ... within reach
+    # the z-buffer at the points' own pixels, in an image padded by splat: (Hp, Wp)
+    Hp, Wp = height + 2 * splat, width + 2 * splat
+    centre = (px[:, 1] + splat) * Wp + (px[:, 0] + splat)
+    zbuf = torch.full((Hp * Wp,), float("inf"), dtype=dtype, device=device)
+    zbuf.scatter_reduce_(0, centre, z, reduce="amin")
+    front = torch.nonzero(z <= zbuf.index_select(0, centre)).squeeze(1)
+    owner = torch.full((Hp * Wp,), -1, dtype=torch.int64, device=device)
+    owner.scatter_reduce_(0, centre.index_select(0, front), ids.index_select(0, front), reduce="amax")
+    # the minimum filter, separable: along rows, then along columns. Pixel (v, u) sees the centre (v - dy, u - dx)
+    # through the offset (dy, dx); of equal depths the largest dy, then the largest dx wins (the centre first in
+    # raster order), so each pass keeps the largest offset that reaches its minimum
+    zbuf, side = zbuf.view(Hp, Wp), 2 * splat + 1
+
+    def pass_(shifted: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+        """(minimum, the largest k with shifted[k] at the minimum) of same-shape images."""
+        low = shifted[0]
+        for zk in shifted[1:]:
+            low = torch.minimum(low, zk)
+        k = torch.zeros(low.shape, dtype=torch.int64, device=device)
+        for j, zk in enumerate(shifted[1:], 1):
+            k = torch.maximum(k, (zk == low).to(torch.int64) * j)
+        return low, k
+
+    row_low, dx = pass_([zbuf[:, 2 * splat - j:2 * splat - j + width] for j in range(side)])   # (Hp, W)
+    _, dy = pass_([row_low[2 * splat - j:2 * splat - j + height] for j in range(side)])          # (H, W)
+    r = torch.arange(height, device=device)[:, None] + 2 * splat - dy       # the centre's row in the padded image
+    u = torch.arange(width, device=device)[None, :]
+    dx = dx.reshape(-1).index_select(0, (r * width + u).reshape(-1)).view(height, width)
+    # an empty pixel sees only centres of depth inf, whose owner is -1
+    return owner.index_select(0, (r * Wp + u + 2 * splat - dx).reshape(-1))
 
 
 def assign_voxels(pm: PointMap, keys: torch.Tensor, target: torch.Tensor,
