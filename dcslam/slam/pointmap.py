@@ -191,22 +191,24 @@ def assign_voxels(pm: PointMap, keys: torch.Tensor, target: torch.Tensor,
     Shape: keys (F,) int64, target (F,) int64 (-1 = unassigned) -> (target (F,) all >= 0, new voxel keys (Q,)),
     where slots ``len(pm) ... len(pm) + Q - 1`` are new points.
     """
-    free = target < 0
-    target = target.clone()
+    free = torch.nonzero(target < 0).squeeze(1)           # only these are looked up (few where projective
+    target = target.clone()                                # association matched most of the frame)
     n = len(pm)
     if voxel_size <= 0:
-        count = int(free.sum())
-        target[free] = n + torch.arange(count, device=target.device)
-        return target, keys[free]
-    if n:
+        target[free] = n + torch.arange(free.numel(), device=target.device)
+        return target, keys.index_select(0, free)
+    # the frame's distinct voxels, looked up once each: sorting the frame's keys and searching the distinct ones in
+    # the sorted map keys is several times faster than a binary search per frame point
+    voxels, voxel_of = torch.unique(keys.index_select(0, free), return_inverse=True)
+    slot = torch.full_like(voxels, -1)
+    if n and voxels.numel():
         sorted_keys, order = torch.sort(pm.voxel_key)
-        pos = torch.searchsorted(sorted_keys, keys).clamp_max(n - 1)
-        hit = free & (sorted_keys[pos] == keys)
-        target[hit] = order[pos[hit]]
-        free = free & ~hit
-    new_keys, inverse = torch.unique(keys[free], return_inverse=True)
-    target[free] = n + inverse
-    return target, new_keys
+        pos = torch.searchsorted(sorted_keys, voxels).clamp_max(n - 1)
+        slot = torch.where(sorted_keys.index_select(0, pos) == voxels, order.index_select(0, pos), slot)
+    new = slot < 0                                         # new voxels: slots n, n + 1, ... in the order of keys
+    slot = torch.where(new, n + torch.cumsum(new, 0) - 1, slot)
+    target[free] = slot.index_select(0, voxel_of)
+    return target, voxels[new]
 
 
 def merge(pm: PointMap, target: torch.Tensor, new_keys: torch.Tensor, points: torch.Tensor, normals: torch.Tensor,

@@ -87,6 +87,31 @@ def test_assign_voxels_reuses_existing_voxels():
     assert target.tolist() == [0, 1, 1] and new.numel() == 1
 
 
+def test_assign_voxels_by_definition():
+    """Frame points already matched keep their target; a free one goes to the map point of its voxel, else to the
+    new slot of its voxel, new voxels numbered after the map in the order of their keys."""
+    g = torch.Generator().manual_seed(5)
+    map_keys = torch.randperm(40, generator=g)[:15] * 7
+    pm = PointMap(torch.zeros(15, 3), torch.zeros(15, 3), torch.zeros(15, 3), torch.ones(15), torch.ones(15),
+                  torch.zeros(15, dtype=torch.int64), torch.ones(15, dtype=torch.int64), map_keys)
+    keys = torch.randint(0, 300, (200,), generator=g)
+    keys[:50] = map_keys[torch.randint(0, 15, (50,), generator=g)]
+    given = torch.where(torch.rand(200, generator=g) < 0.3, torch.randint(0, 15, (200,), generator=g), -1)
+    target, new = assign_voxels(pm, keys, given, 0.1)
+    free_new = sorted({k for k, t in zip(keys.tolist(), given.tolist()) if t < 0 and k not in map_keys.tolist()})
+    assert new.tolist() == free_new
+    for k, t, out in zip(keys.tolist(), given.tolist(), target.tolist()):
+        if t >= 0:
+            assert out == t
+        elif k in map_keys.tolist():
+            assert out == map_keys.tolist().index(k)
+        else:
+            assert out == 15 + free_new.index(k)
+    empty, new = assign_voxels(PointMap.empty(), keys[:5], torch.full((5,), -1), 0.1)
+    assert new.tolist() == sorted(set(keys[:5].tolist())) and empty.tolist() == [new.tolist().index(k)
+                                                                                  for k in keys[:5].tolist()]
+
+
 def _drive(frames, mapper):
     scene, K = StreetScene(0, length=frames + 40.0), kitti_K(H, W)
     T = street_trajectory(frames, step=1.0).float()
