@@ -112,7 +112,7 @@ def vertex_normals(vertex: torch.Tensor, valid: torch.Tensor | None = None, sear
 
     Args:
         vertex: camera-frame points per pixel (see :func:`dcslam.geometry.camera.backproject`).
-        valid: pixels with a point; default ``vertex z > 0``.
+        valid: pixels with a point (finite there); default ``vertex z > 0``.
         search: how far (pixels) to look for the nearest valid neighbour in each direction; 1 for dense depth,
             tens of pixels for LiDAR-like sparse depth (its rows are tens of pixels apart far from the car).
         max_relative_gap: neighbours whose depth differs by more than this fraction of the centre depth per pixel
