@@ -175,13 +175,15 @@ def _zbuffer(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: i
             k = torch.maximum(k, (zk == low).to(torch.int64) * j)
         return low, k
 
-    row_low, dx = pass_([zbuf[:, 2 * splat - j:2 * splat - j + width] for j in range(side)])   # (Hp, W)
-    _, dy = pass_([row_low[2 * splat - j:2 * splat - j + height] for j in range(side)])          # (H, W)
-    r = torch.arange(height, device=device)[:, None] + 2 * splat - dy       # the centre's row in the padded image
+    # k = offset + splat; the centre of pixel (v, u) through offset k is (v - ky + splat, u - kx + splat) in the
+    # image, (v - ky + 2 splat, u - kx + 2 splat) in the padded z-buffer
+    row_low, kx = pass_([zbuf[:, 2 * splat - k:2 * splat - k + width] for k in range(side)])   # (Hp, W)
+    _, ky = pass_([row_low[2 * splat - k:2 * splat - k + height] for k in range(side)])          # (H, W)
+    r = torch.arange(height, device=device)[:, None] + 2 * splat - ky       # the centre's row in the padded image
     u = torch.arange(width, device=device)[None, :]
-    dx = dx.reshape(-1).index_select(0, (r * width + u).reshape(-1)).view(height, width)
+    kx = kx.reshape(-1).index_select(0, (r * width + u).reshape(-1)).view(height, width)
     # an empty pixel sees only centres of depth inf, whose owner is -1
-    return owner.index_select(0, (r * Wp + u + 2 * splat - dx).reshape(-1))
+    return owner.index_select(0, (r * Wp + u + 2 * splat - kx).reshape(-1))
 
 
 def assign_voxels(pm: PointMap, keys: torch.Tensor, target: torch.Tensor,
