@@ -124,26 +124,22 @@ def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int
         raise DcslamError(f"T_world_cam has shape {tuple(T_world_cam.shape)}, expected (4, 4)")
     K = check_K(K)[0]
     device, dtype = pm.points.device, pm.points.dtype
-    if len(pm):
-        index = _zbuffer(pm, T_world_cam, K, height, width, splat)
-    else:
-        index = torch.full((height * width,), -1, dtype=torch.int64, device=device)
-    index = index.view(height, width)
-    valid = index >= 0
+    index = torch.full((height * width,), -1, dtype=torch.int64, device=device)
     vertex = torch.zeros(height * width, 3, dtype=dtype, device=device)
     normal = torch.zeros(height * width, 3, dtype=dtype, device=device)
     if len(pm):                                   # gather at the covered pixels only (few for a sparse map)
-        pix = torch.nonzero(valid.reshape(-1)).squeeze(1)
-        hit = index.reshape(-1).index_select(0, pix)
-        vertex = vertex.index_put((pix,), pm.points.index_select(0, hit))
-        normal = normal.index_put((pix,), pm.normals.index_select(0, hit))
-    vertex, normal = vertex.view(height, width, 3), normal.view(height, width, 3)
-    return ModelView(index, vertex, normal, valid, T_world_cam.to(dtype), K.to(dtype))
+        pix, hit = _zbuffer(pm, T_world_cam, K, height, width, splat)
+        index = index.index_copy(0, pix, hit)          # index_copy: 1.5-2.5x faster than index_put here
+        vertex = vertex.index_copy(0, pix, pm.points.index_select(0, hit))
+        normal = normal.index_copy(0, pix, pm.normals.index_select(0, hit))
+    index, vertex, normal = index.view(height, width), vertex.view(height, width, 3), normal.view(height, width, 3)
+    return ModelView(index, vertex, normal, index >= 0, T_world_cam.to(dtype), K.to(dtype))
 
 
 def _zbuffer(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
-             splat: int) -> torch.Tensor:
-    """The point :func:`render` shows at each pixel (-1: none). Shape: -> (H W,) int64."""
+             splat: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The pixels :func:`render` covers and the point it shows at each. Shape: -> (pixels (C,) flat indices into
+    H W, in raster order; points (C,) int64)."""
     device, dtype = pm.points.device, pm.points.dtype
     p_cam = transform_points(inverse(T_world_cam.to(dtype)), pm.points.detach())
     ids = torch.nonzero(p_cam[:, 2] > 0).squeeze(1)        # only points in front of the camera ...
@@ -164,26 +160,27 @@ def _zbuffer(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: i
     # through the offset (dy, dx); of equal depths the largest dy, then the largest dx wins (the centre first in
     # raster order), so each pass keeps the largest offset that reaches its minimum
     zbuf, side = zbuf.view(Hp, Wp), 2 * splat + 1
+    small = torch.uint8 if side < 256 else torch.int64     # offsets' indices: a quarter of the memory traffic
 
     def pass_(shifted: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
         """(minimum, the largest k with shifted[k] at the minimum) of same-shape images."""
         low = shifted[0]
         for zk in shifted[1:]:
             low = torch.minimum(low, zk)
-        k = torch.zeros(low.shape, dtype=torch.int64, device=device)
+        k = torch.zeros(low.shape, dtype=small, device=device)
         for j, zk in enumerate(shifted[1:], 1):
-            k = torch.maximum(k, (zk == low).to(torch.int64) * j)
+            k = torch.maximum(k, (zk == low).to(small) * j)
         return low, k
 
     # k = offset + splat; the centre of pixel (v, u) through offset k is (v - ky + splat, u - kx + splat) in the
     # image, (v - ky + 2 splat, u - kx + 2 splat) in the padded z-buffer
     row_low, kx = pass_([zbuf[:, 2 * splat - k:2 * splat - k + width] for k in range(side)])   # (Hp, W)
-    _, ky = pass_([row_low[2 * splat - k:2 * splat - k + height] for k in range(side)])          # (H, W)
-    r = torch.arange(height, device=device)[:, None] + 2 * splat - ky       # the centre's row in the padded image
-    u = torch.arange(width, device=device)[None, :]
-    kx = kx.reshape(-1).index_select(0, (r * width + u).reshape(-1)).view(height, width)
-    # an empty pixel sees only centres of depth inf, whose owner is -1
-    return owner.index_select(0, (r * Wp + u + 2 * splat - kx).reshape(-1))
+    low, ky = pass_([row_low[2 * splat - k:2 * splat - k + height] for k in range(side)])        # (H, W)
+    pix = torch.nonzero(torch.isfinite(low).reshape(-1)).squeeze(1)     # covered: a centre with a point in reach
+    v, u = torch.div(pix, width, rounding_mode="floor"), pix % width
+    r = v + 2 * splat - ky.reshape(-1).index_select(0, pix).to(torch.int64)   # the centre's row, padded image
+    c = u + 2 * splat - kx.reshape(-1).index_select(0, r * width + u).to(torch.int64)
+    return pix, owner.index_select(0, r * Wp + c)
 
 
 def assign_voxels(pm: PointMap, keys: torch.Tensor, target: torch.Tensor,
