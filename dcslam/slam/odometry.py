@@ -107,6 +107,7 @@ class PointToPlane:
         self.hold_below = hold_below
         self.scale = float(source.detach().norm(dim=1).mean()) if source.shape[0] else 1.0
         self.pairs = None
+        self._usable = None if weights is None else weights.detach() > 0   # the weight gate, once per problem
 
     def residuals(self, T: torch.Tensor):
         """(residuals (M,), inlier source index (M,), target points (M, 3), target normals (M, 3)) at pose T."""
@@ -116,8 +117,8 @@ class PointToPlane:
         ok = ((diff.detach() ** 2).sum(1) < self.max_distance ** 2) & \
              ((rotate(T.detach(), self.source_normals.detach().index_select(0, src)) * n.detach()).sum(1)
               > self.cos_max_angle)
-        if self.weights is not None:
-            ok &= self.weights.detach().index_select(0, src) > 0
+        if self._usable is not None:
+            ok &= self._usable.index_select(0, src)
         keep = torch.nonzero(ok).squeeze(1)         # one nonzero and index_select: cheaper than four masks
         n = n.index_select(0, keep)
         return (diff.index_select(0, keep) * n).sum(1), src.index_select(0, keep), q.index_select(0, keep), n
