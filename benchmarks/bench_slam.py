@@ -1,25 +1,33 @@
-"""SLAM accuracy and speed beside the references, and memory on a long drive (``make bench``).
+"""dcslam beside KISS-ICP and Open3D in one table (``make bench``): frames per CPU-second, ATE, drift and peak
+memory of every SLAM run, on the same generated drives, in one run.
 
-1. On the same generated drives (prepared drive files; ``--drives``, default ``$DCSLAM_WORKSPACE/drives``, else two
-   short drives generated into a temporary folder): dcslam with its default settings on sparse and on dense depth
-   at full KITTI size, Open3D's point-to-plane ICP on the same depth, and KISS-ICP on the 360 degree Velodyne scans
-   (skipped, with a line saying so, when ``kiss-icp`` is not installed: ``pip install -e .[bench]``). For each:
-   ATE, RPE, final drift %, frames/s, and dcslam's flagged steps.
-2. Peak memory (process RSS, each run in a fresh process) and local-map size at frames 200, 400, ..., 1,000 of a
-   long analytic street drive (``dcslam.slam.scene``) with LiDAR-like sparse depth at full size, with the default
-   settings (the points leaving the 50-frame local map archived in a temporary file for the map file) and with the
-   archive off; they must be flat within 10 %. ``--long-dense`` adds a dense run at ``--dense-scale`` of the size
-   (every pixel is ray-cast: about 2 s a frame at full size).
+Rows: dcslam with its default settings (``dcslam.run_slam``: the frames streamed from the drive file with the
+prefetch thread, as ``dcslam slam`` runs them) on the LiDAR's sparse 64-beam depth, on the annotated dense depth and
+on two completions of the sparse depth (IP-Basic fast and planefit, written by ``dcslam.complete_drive`` before the
+runs); Open3D's point-to-plane ICP frame to frame on the same depths; KISS-ICP 1.3.0 on the 360 degree Velodyne
+scans (the ``bench`` extra; a line says so when it is missing). ``--open3d-completed`` chooses which completions
+Open3D also runs on (default IP-Basic only: Open3D takes about 3 CPU-seconds a frame there).
 
-Figures depend on the machine and its load: read them next to the machine line that ``benchmarks/run_all.py``
-prints. Run with ``OMP_NUM_THREADS=1`` on a shared machine (the script sets torch to one thread unless
-``--threads`` says otherwise). Usage: ``python benchmarks/bench_slam.py [--drives DIR] [--frames 60]
-[--long-frames 1000] [--device cuda]``.
+Each run is a child process of its own with one torch / OpenMP thread (KISS-ICP's registration on one thread too),
+so that its peak memory (``VmHWM``, the imports included) is its own; the runs of a drive follow one another,
+dcslam and its peers interleaved, so that a change of the machine's load touches every row alike. A run's CPU time
+is its process time from opening its input to its trajectory: reading and decoding the frames are counted for
+every row. Over the drives: frames per CPU-second = all frames / all CPU-seconds, ATE (RMSE of the position errors,
+no alignment: every run starts at the true first pose) and drift (final position error / distance travelled) the
+mean, peak RSS the largest.
+
+Drives: ``--drives DIR`` (prepared drive files, the KITTI root beside them for the Velodyne scans), else
+``$DCSLAM_WORKSPACE/drives``, else 2 drives of ``--frames`` frames generated into a temporary folder (seed 2027).
+Read the CPU figures as ratios when other processes share the cores; the script prints the load average before and
+after. ``--long-memory`` adds the long analytic-street memory runs (:func:`memory`). Usage:
+``python benchmarks/bench_slam.py [--drives DIR] [--frames 30] [--max-drives 2]``.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import platform
 import resource
 import subprocess
 import sys
@@ -31,10 +39,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from slam_drives import DriveScore, run_dcslam  # noqa: E402
+from slam_drives import score  # noqa: E402
 from slam_references import kiss_icp_available, run_kiss_icp, run_open3d  # noqa: E402
 
 from dcslam.allocator import SLAM_MMAP_THRESHOLD, heap_mb, trim  # noqa: E402
+
+COMPLETERS = {"ip-basic": "ip-basic-fast", "planefit": "planefit"}   # row name -> registered completer
+DEPTHS = ("sparse", "dense", *COMPLETERS)
 
 
 def _drives(args) -> tuple[list[Path], Path]:
@@ -46,7 +57,8 @@ def _drives(args) -> tuple[list[Path], Path]:
             folder = workspace / "drives"
     if folder is None:
         tmp = Path(tempfile.mkdtemp(prefix="dcslam-bench-"))
-        print(f"no drives given: generating 2 drives x {args.frames + 10} frames (seed 2027) in {tmp}", flush=True)
+        print(f"no drives given: generating 2 drives x {args.frames + 10} frames (seed 2027; prepare-kitti keeps "
+              f"{args.frames}) in {tmp}", flush=True)
         env = dict(os.environ, DCSLAM_PROGRESS="0")
         for cmd in (["synth", "--drives", "2", "--frames", str(args.frames + 10), "--seed", "2027"],
                     ["prepare-kitti", "--all-drives"]):
@@ -54,38 +66,114 @@ def _drives(args) -> tuple[list[Path], Path]:
                            stdout=subprocess.DEVNULL)
         folder = tmp / "drives"
     paths = sorted(folder.glob("*.h5"))[:args.max_drives or None]
+    if not paths:
+        raise SystemExit(f"{folder} holds no drive files (*.h5)")
     return paths, folder.parent / "kitti"
 
 
-def _line(label: str, rows: list[DriveScore], flags: bool = True) -> str:
-    ate = np.array([r.ate_m for r in rows])
-    text = (f"  {label:<28} ATE {ate.mean():6.3f} m (max {ate.max():6.3f})  RPE {np.mean([r.rpe_m for r in rows]):.3f}"
-            f" m  drift {np.mean([r.drift_pct for r in rows]):6.2f} %  {np.median([r.fps for r in rows]):6.2f} "
-            f"frames/s wall, {np.median([r.cpu_fps for r in rows]):6.2f} per CPU-second")
-    if flags:
-        text += (f"  flagged steps {sum(r.degraded + r.rejected for r in rows)}, suspect drives "
-                 f"{sum(r.suspect for r in rows)}/{len(rows)}")
-    return text
+def _layers(paths: list[Path]) -> dict[tuple[str, str], Path]:
+    """(drive stem, completion row) -> its layer file, completed from the sparse depth once (kept beside the drives,
+    under ``bench-layers/``, so that a second run reuses them)."""
+    import dcslam
+
+    layers = {}
+    for path in paths:
+        for row, model in COMPLETERS.items():
+            out = path.parent.parent / "bench-layers" / f"{path.stem}.{row}.h5"
+            if not out.exists():
+                out.parent.mkdir(parents=True, exist_ok=True)
+                dcslam.complete_drive(path, out, model)
+            layers[path.stem, row] = out
+    return layers
+
+
+def _peak_rss_mb() -> float:
+    """This process's peak resident memory (Linux ``VmHWM``: unlike ``ru_maxrss``, not inherited from the parent
+    that forked it)."""
+    for line in open("/proc/self/status"):
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _child(system: str, drive: Path, source: str, frames: int, kitti_root: Path) -> dict:
+    """One run in this (fresh) process -> its scores, CPU and wall seconds and peak RSS (MB). A 2-frame run first,
+    not timed, loads the libraries the run imports lazily (every row alike)."""
+    import torch
+
+    torch.set_num_threads(1)
+    depth = Path(source) if source.endswith(".h5") else source
+    if system == "dcslam":
+        import dcslam
+
+        def run(n: int):
+            wall, cpu = time.perf_counter(), time.process_time()
+            out = dcslam.run_slam(drive, depth, frames=n)
+            wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+            return score(drive.stem, source, out.T_gt, out.T_world_cam, wall, cpu_seconds=cpu)
+    elif system == "open3d":
+        def run(n: int):
+            return run_open3d(drive, depth, n)
+    else:
+        def run(n: int):
+            return run_kiss_icp(kitti_root, drive, n, threads=1)
+    run(2)
+    rss_warm = _peak_rss_mb()
+    result = run(frames)
+    return {"frames": result.frames, "ate_m": result.ate_m, "drift_pct": result.drift_pct,
+            "cpu_s": result.frames / result.cpu_fps, "wall_s": result.frames / result.fps,
+            "peak_rss_warm_mb": rss_warm, "peak_rss_mb": _peak_rss_mb()}
+
+
+def _run_child(args, system: str, drive: Path, source: str, kitti_root: Path) -> dict:
+    env = dict(os.environ, DCSLAM_PROGRESS="0", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    cmd = [sys.executable, __file__, "--child", system, "--child-drive", str(drive), "--child-source", source,
+           "--frames", str(args.frames), "--child-kitti", str(kitti_root)]
+    done = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"{system} on {source} of {drive.name} failed (exit {done.returncode})")
+    return json.loads(done.stdout.strip().splitlines()[-1])
 
 
 def side_by_side(args) -> None:
     from dcslam.slam.config import SlamSettings
 
     paths, kitti_root = _drives(args)
-    print(f"accuracy and speed: {len(paths)} drives x {args.frames} frames, full size, dcslam defaults "
-          f"{SlamSettings().to_dict()}", flush=True)
-    for depth in ("sparse", "dense"):
-        print(_line(f"dcslam {depth}", [run_dcslam(p, depth, SlamSettings(), args.frames, device=args.device)
-                                        for p in paths]), flush=True)
-        print(_line(f"Open3D point-to-plane {depth}", [run_open3d(p, depth, args.frames) for p in paths],
-                    flags=False), flush=True)
-    if not kiss_icp_available():
-        print("  KISS-ICP: skipped (not installed; pip install kiss-icp, or the dcslam[bench] extra)")
-    elif not (kitti_root / "raw").is_dir():
-        print(f"  KISS-ICP: skipped ({kitti_root / 'raw'} holds no Velodyne scans)")
-    else:
-        print(_line("KISS-ICP velodyne 360", [run_kiss_icp(kitti_root, p, args.frames) for p in paths],
-                    flags=False), flush=True)
+    load_before = os.getloadavg()
+    layers = _layers(paths)
+    rows = [("dcslam", d) for d in DEPTHS] + [("Open3D", d) for d in ("sparse", "dense", *args.open3d_completed)]
+    kiss = kiss_icp_available() and (kitti_root / "raw").is_dir()
+    rows += [("KISS-ICP", "velodyne 360")] if kiss else []
+    print(f"side by side: {len(paths)} drives x {args.frames} frames at full size ({', '.join(p.stem for p in paths)})"
+          f"; dcslam defaults {SlamSettings().to_dict()}; one thread per run, each in its own process; "
+          f"load average {load_before[0]:.1f} before", flush=True)
+    if not kiss:
+        print("  KISS-ICP: skipped (" + ("not installed; pip install -e .[bench]" if not kiss_icp_available()
+                                        else f"{kitti_root / 'raw'} holds no Velodyne scans") + ")", flush=True)
+    results: dict[tuple[str, str], list[dict]] = {row: [] for row in rows}
+    for drive in paths:                 # per drive, every row: dcslam and its peers interleaved in time
+        for system, depth in rows:
+            source = str(layers[drive.stem, depth]) if depth in COMPLETERS else depth
+            results[system, depth].append(_run_child(args, system.lower().replace("-", ""), drive, source,
+                                                     kitti_root))
+    print("\n| system | depth | frames per CPU-s | ATE m | drift % | peak RSS MB | frames |", flush=True)
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    fps = {}
+    for (system, depth), runs in results.items():
+        frames = sum(r["frames"] for r in runs)
+        fps[system, depth] = frames / sum(r["cpu_s"] for r in runs)
+        label = {"ip-basic": "IP-Basic of sparse", "planefit": "planefit of sparse"}.get(depth, depth)
+        print(f"| {system} | {label} | {fps[system, depth]:.2f} | {np.mean([r['ate_m'] for r in runs]):.3f} | "
+              f"{np.mean([r['drift_pct'] for r in runs]):.2f} | {max(r['peak_rss_mb'] for r in runs):.0f} | "
+              f"{frames} |", flush=True)
+    load_after = os.getloadavg()
+    print(f"\nload average {load_before[0]:.1f} before, {load_after[0]:.1f} after ({os.cpu_count()} cores, "
+          f"{platform.processor() or platform.machine()})")
+    if kiss:
+        ratio = fps["dcslam", "sparse"] / fps["KISS-ICP", "velodyne 360"]
+        print(f"dcslam sparse / KISS-ICP frames per CPU-s: {ratio:.2f} (target >= 1.5)")
+    print(f"dcslam on IP-Basic's completion: {fps['dcslam', 'ip-basic']:.2f} frames per CPU-s (target >= 8), "
+          f"on planefit's {fps['dcslam', 'planefit']:.2f}", flush=True)
 
 
 def _rss_mb() -> float:
@@ -161,8 +249,12 @@ def memory_child(args) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--drives", type=Path, help="folder of prepared drive files")
-    parser.add_argument("--frames", type=int, default=60, help="frames per drive")
-    parser.add_argument("--max-drives", type=int, default=4)
+    parser.add_argument("--frames", type=int, default=30, help="frames per drive")
+    parser.add_argument("--max-drives", type=int, default=2)
+    parser.add_argument("--open3d-completed", nargs="*", choices=tuple(COMPLETERS), default=["ip-basic"],
+                        help="the completions Open3D runs on besides sparse and dense")
+    parser.add_argument("--long-memory", action="store_true",
+                        help="also the long analytic-street memory runs (minutes: --long-frames frames at full size)")
     parser.add_argument("--long-frames", type=int, default=1000, help="frames of the memory drive")
     parser.add_argument("--keep-global-map", action="store_true",
                         help="memory run keeps the archive for the map file (grows with the street seen)")
@@ -177,16 +269,21 @@ def main() -> None:
     parser.add_argument("--probe-trim", action="store_true",
                         help="memory run: at each mark, also the RSS after malloc_trim(0) (how much malloc held free)")
     parser.add_argument("--memory-child", choices=("sparse", "dense"), help=argparse.SUPPRESS)
-    parser.add_argument("--skip", choices=("accuracy", "memory"), action="append", default=[])
+    parser.add_argument("--child", choices=("dcslam", "open3d", "kissicp"), help=argparse.SUPPRESS)
+    parser.add_argument("--child-drive", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--child-source", help=argparse.SUPPRESS)
+    parser.add_argument("--child-kitti", type=Path, help=argparse.SUPPRESS)
     args, _ = parser.parse_known_args()
+    if args.child:
+        print(json.dumps(_child(args.child, args.child_drive, args.child_source, args.frames, args.child_kitti)))
+        return
     import torch
 
     torch.set_num_threads(args.threads)
     if args.memory_child:
         return memory_child(args)
-    if "accuracy" not in args.skip:
-        side_by_side(args)
-    if "memory" not in args.skip:
+    side_by_side(args)
+    if args.long_memory:
         memory(args)
 
 
