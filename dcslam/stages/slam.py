@@ -12,6 +12,7 @@ The configuration extends :class:`dcslam.slam.config.SlamSettings`, so a field a
 from __future__ import annotations
 
 import contextlib
+import os
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -143,11 +144,12 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
     fix_mmap_threshold()
     with torch_threads(config.threads):
         for path, source, measured in jobs:
-            drive_run = run_drive_file(path, source, build_slam(config.settings()), config.frames or None,
-                                       config.device, settings={**to_dict(config), "source": str(source)},
-                                       confidence=config.confidence_use(), sources_kind=measured)
-            drive_run.name = path.stem
-            drive_run.evidence = companion_evidence(path, source, drive_run, config, measured)
+            with companion_evidence(path, source, config, measured) as evidence:   # beside the main run
+                drive_run = run_drive_file(path, source, build_slam(config.settings()), config.frames or None,
+                                           config.device, settings={**to_dict(config), "source": str(source)},
+                                           confidence=config.confidence_use(), sources_kind=measured)
+                drive_run.name = path.stem
+                drive_run.evidence = evidence(drive_run)
             written = write_outputs(drive_run, out_dir, force)
             results.append(SlamDriveResult(path.stem, drive_run.summary(), written))
     suspect = [r for r in results if r.summary["health"]["suspect"]]
@@ -216,34 +218,88 @@ def run_drive_file(drive_path: Path, source: str | Path, slam, frames: int | Non
         return run_drive(drive, slam, device, description, **options)
 
 
-def companion_evidence(drive_path: Path, source: str | Path, main: DriveRun, config: SlamStageConfig,
-                       sources_kind: str | None = None) -> dict:
-    """The evidence verdict of ``main`` (a run over ``source`` on ``drive_path``):
+@contextlib.contextmanager
+def companion_evidence(drive_path: Path, source: str | Path, config: SlamStageConfig,
+                       sources_kind: str | None = None):
+    """A function of ``main`` (the run over ``source`` on ``drive_path``) giving its evidence verdict:
     :func:`dcslam.slam.drive.companion_verdict` against a companion run with the same settings and frames on the
     measured depth kind behind ``source`` (:func:`dcslam.io.drive.measured_kind`; with measured ICP sources,
     ``sources_kind``, the kind they came from, so that exact depth aligned by 16-beam points is checked against
     16-beam SLAM); ``own`` for a sparse input, ``off`` with ``--evidence none``, ``unavailable`` when no measured
-    kind can be named or the drive lacks it."""
+    kind can be named or the drive lacks it.
+
+    The companion depends on the drive alone, so it starts on entering the block, in a spawned worker process when
+    a core is free (:func:`companion_beside`), and runs while the block runs the main one: its wall time hides on
+    the other core. Its torch thread count is the caller's, so its poses are those it would compute here."""
     from dcslam.io.drive import DriveFile, is_depth_kind, measured_kind
-    from dcslam.slam.config import build_slam
     from dcslam.slam.drive import companion_verdict
     from dcslam.slam.evidence import unavailable
 
     named = None if isinstance(source, Path) else str(source)
     if named is not None and is_depth_kind(named) and measured_kind(named) == named:
-        return unavailable(f"{named} is measured depth: its own run is its evidence", "own")
+        yield lambda main: unavailable(f"{named} is measured depth: its own run is its evidence", "own")
+        return
     if config.evidence == "none":
-        return unavailable("--evidence none", "off")
+        yield lambda main: unavailable("--evidence none", "off")
+        return
     kind = sources_kind or measured_kind(source if named is None or not is_depth_kind(named) else named)
     if kind is None:
-        return unavailable(f"{source} does not say which measured depth it was made from")
+        yield lambda main: unavailable(f"{source} does not say which measured depth it was made from")
+        return
     with DriveFile(drive_path) as drive:
         has_kind = kind in drive.kinds
+        frames, height, width = drive.shape
     if not has_kind:
-        return unavailable(f"{drive_path.name} holds no {kind} depth")
-    companion = run_drive_file(drive_path, kind, build_slam(config.settings()), config.frames or None,
-                               config.device, description=f"{drive_path.stem} companion {kind}")
-    return companion_verdict(main, companion, kind)
+        yield lambda main: unavailable(f"{drive_path.name} holds no {kind} depth")
+        return
+    import torch
+
+    args = (drive_path, kind, config, torch.get_num_threads(), f"{drive_path.stem} companion {kind}")
+    if not companion_beside(config, min(config.frames or frames, frames) * height * width):
+        yield lambda main: companion_verdict(main, companion_run(*args), kind)
+        return
+    from dcslam.workers import process_pool
+
+    with process_pool(1, 1) as pool:
+        companion = pool.submit(companion_run, *args, progress=False)
+        yield lambda main: companion_verdict(main, companion.result(), kind)
+
+
+#: Pixels (frames x height x width) a companion run must cover before it goes to a worker process of its own: a
+#: worker's start (importing torch and dcslam) costs 1.5-2 CPU-seconds, about 10 full-size KITTI frames of the main
+#: run on completed depth, so shorter runs would wait longer for the start than for the companion.
+BESIDE_MIN_PIXELS = 10 * 375 * 1242
+
+
+def companion_beside(config: SlamStageConfig, pixels: int) -> bool:
+    """Whether the companion run over ``pixels`` (frames x height x width) goes to a second process beside the main
+    run: on the CPU, when this process is no pool worker whose siblings keep every core busy
+    (:func:`dcslam.workers.cores_shared`), the main run's torch threads leave a core free and the run is long
+    enough to pay for the worker's start (:data:`BESIDE_MIN_PIXELS`)."""
+    import torch
+
+    from dcslam.workers import cores_shared
+
+    threads = config.threads or torch.get_num_threads()
+    return (config.device == "cpu" and not cores_shared() and (os.cpu_count() or 1) > threads
+            and pixels >= BESIDE_MIN_PIXELS)
+
+
+def companion_run(drive_path: Path, kind: str, config: SlamStageConfig, threads: int, description: str,
+                  progress: bool = True) -> DriveRun:
+    """The companion SLAM run over the measured depth ``kind`` of a drive, with ``threads`` torch threads (those of
+    the main run); ``progress``: its progress bar (off in a worker beside the main run's bar)."""
+    import torch
+
+    from dcslam.slam.config import build_slam
+
+    if not progress:
+        os.environ["DCSLAM_PROGRESS"] = "0"
+    torch.set_num_threads(threads)
+    run = run_drive_file(drive_path, kind, build_slam(config.settings()), config.frames or None, config.device,
+                         description=description)
+    run.map = None                      # only its poses and steps are judged: no map to carry back from a worker
+    return run
 
 
 def output_paths(out_dir: Path, name: str) -> dict[str, Path]:

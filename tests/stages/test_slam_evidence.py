@@ -80,3 +80,29 @@ def test_a_sparse_input_is_its_own_evidence_and_a_foreign_layer_has_none(scaled,
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].split(", ")[-1].startswith("ok ->")
     assert "UNVERIFIED (no evidence bounds the drift (" in lines[1] and "does not say which measured depth" in lines[1]
+
+
+def test_the_companion_beside_the_main_run_gives_the_verdict_it_gives_after_it(scaled, tmp_path, monkeypatch):
+    ws, path, layer = scaled
+    evidences = {}
+    for beside in (False, True):
+        monkeypatch.setattr(slam, "companion_beside", lambda config, pixels, beside=beside: beside)
+        run = _run(ws, path, layer, tmp_path / f"beside-{beside}", "auto")
+        evidences[beside] = {k: v for k, v in run.summary["health"]["evidence"].items() if k != "companion_seconds"}
+    assert evidences[True]["verdict"] == "departs"
+    assert evidences[True] == evidences[False]
+
+
+def test_the_companion_waits_for_the_main_run_where_no_core_is_free_or_the_run_is_short(monkeypatch):
+    config, long = slam.SlamStageConfig(threads=1), slam.BESIDE_MIN_PIXELS
+    monkeypatch.setattr("os.cpu_count", lambda: 2)
+    monkeypatch.delenv("DCSLAM_SHARED_CORES", raising=False)
+    assert slam.companion_beside(config, long)
+    assert not slam.companion_beside(config, long - 1)      # the worker's start would cost more than it hides
+    assert not slam.companion_beside(slam.SlamStageConfig(threads=2), long)
+    assert not slam.companion_beside(slam.SlamStageConfig(threads=1, device="cuda"), long)
+    monkeypatch.setenv("DCSLAM_SHARED_CORES", "1")         # a pool worker: its siblings keep every core busy
+    assert not slam.companion_beside(config, long)
+    monkeypatch.delenv("DCSLAM_SHARED_CORES")
+    monkeypatch.setattr("os.cpu_count", lambda: 1)
+    assert not slam.companion_beside(config, long)
