@@ -6,15 +6,16 @@ prefetch thread, as ``dcslam slam`` runs them) on the LiDAR's sparse 64-beam dep
 on two completions of the sparse depth (IP-Basic fast and planefit, written by ``dcslam.complete_drive`` before the
 runs); Open3D's point-to-plane ICP frame to frame on the same depths; KISS-ICP 1.3.0 on the 360 degree Velodyne
 scans (the ``bench`` extra; a line says so when it is missing). ``--open3d-completed`` chooses which completions
-Open3D also runs on (default IP-Basic only: Open3D takes about 3 CPU-seconds a frame there).
+Open3D also runs on (default IP-Basic only), and ``--open3d-completed-drives`` over how many drives (default the
+first: Open3D takes 3-5 CPU-seconds a frame there).
 
 Each run is a child process of its own with one torch / OpenMP thread (KISS-ICP's registration on one thread too),
-so that its peak memory (``VmHWM``, the imports included) is its own; the runs of a drive follow one another,
-dcslam and its peers interleaved, so that a change of the machine's load touches every row alike. A run's CPU time
-is its process time from opening its input to its trajectory: reading and decoding the frames are counted for
-every row. Over the drives: frames per CPU-second = all frames / all CPU-seconds, ATE (RMSE of the position errors,
-no alignment: every run starts at the true first pose) and drift (final position error / distance travelled) the
-mean, peak RSS the largest.
+so that its peak memory (``VmHWM``, the imports included) is its own; the runs go drive by drive, dcslam and its
+peers interleaved, ``--jobs`` at a time (default 2), so that a change of the machine's load touches every row
+alike. A run's CPU time is its process time from opening its input to its trajectory: reading and decoding the
+frames are counted for every row. Over the drives: frames per CPU-second = all frames / all CPU-seconds (and
+each drive's), ATE (RMSE of the position errors, no alignment: every run starts at the true first pose) and drift
+(final position error / distance travelled) of each drive, peak RSS the largest. ``--json`` writes every run's figures.
 
 Drives: ``--drives DIR`` (prepared drive files, the KITTI root beside them for the Velodyne scans), else
 ``$DCSLAM_WORKSPACE/drives``, else 2 drives of ``--frames`` frames generated into a temporary folder (seed 2027).
@@ -135,43 +136,66 @@ def _run_child(args, system: str, drive: Path, source: str, kitti_root: Path) ->
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def _tasks(args, paths: list[Path], layers: dict, kiss: bool) -> list[tuple[str, str, Path, str]]:
+    """(system, depth row, drive, source) of every run, drive by drive: dcslam and its peers interleaved in time.
+    Open3D runs on the completions over the first ``--open3d-completed-drives`` drives only (3-5 CPU-s a frame)."""
+    tasks = []
+    for k, drive in enumerate(paths):
+        peers = ("sparse", "dense", *(args.open3d_completed if k < args.open3d_completed_drives else ()))
+        rows = [("dcslam", d) for d in DEPTHS] + [("Open3D", d) for d in peers]
+        rows += [("KISS-ICP", "velodyne 360")] if kiss else []
+        tasks += [(system, depth, drive, str(layers[drive.stem, depth]) if depth in COMPLETERS else depth)
+                  for system, depth in rows]
+    return tasks
+
+
+def _each(runs: list[dict], key: str, spec: str) -> str:
+    """The drives' values of ``key`` (``fps``: frames per CPU-second) formatted by ``spec``, comma separated."""
+    return ", ".join(format(r["frames"] / r["cpu_s"] if key == "fps" else r[key], spec) for r in runs)
+
+
 def side_by_side(args) -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
     from dcslam.slam.config import SlamSettings
 
     paths, kitti_root = _drives(args)
     load_before = os.getloadavg()
     layers = _layers(paths)
-    rows = [("dcslam", d) for d in DEPTHS] + [("Open3D", d) for d in ("sparse", "dense", *args.open3d_completed)]
     kiss = kiss_icp_available() and (kitti_root / "raw").is_dir()
-    rows += [("KISS-ICP", "velodyne 360")] if kiss else []
     print(f"side by side: {len(paths)} drives x {args.frames} frames at full size ({', '.join(p.stem for p in paths)})"
-          f"; dcslam defaults {SlamSettings().to_dict()}; one thread per run, each in its own process; "
-          f"load average {load_before[0]:.1f} before", flush=True)
+          f"; dcslam defaults {SlamSettings().to_dict()}; one thread per run, each in its own process, "
+          f"{args.jobs} at a time; load average {load_before[0]:.1f} before", flush=True)
     if not kiss:
         print("  KISS-ICP: skipped (" + ("not installed; pip install -e .[bench]" if not kiss_icp_available()
                                         else f"{kitti_root / 'raw'} holds no Velodyne scans") + ")", flush=True)
-    results: dict[tuple[str, str], list[dict]] = {row: [] for row in rows}
-    for drive in paths:                 # per drive, every row: dcslam and its peers interleaved in time
-        for system, depth in rows:
-            source = str(layers[drive.stem, depth]) if depth in COMPLETERS else depth
-            results[system, depth].append(_run_child(args, system.lower().replace("-", ""), drive, source,
-                                                     kitti_root))
-    print("\n| system | depth | frames per CPU-s | ATE m | drift % | peak RSS MB | frames |", flush=True)
+    tasks = _tasks(args, paths, layers, kiss)
+    with ThreadPoolExecutor(args.jobs) as pool:       # each thread waits on its child process
+        done = list(pool.map(lambda t: _run_child(args, t[0].lower().replace("-", ""), t[2], t[3], kitti_root),
+                             tasks))
+    results: dict[tuple[str, str], list[dict]] = {}
+    for (system, depth, drive, _), run in zip(tasks, done):
+        results.setdefault((system, depth), []).append({**run, "drive": drive.stem})
+    if args.json:
+        args.json.write_text(json.dumps({f"{s} {d}": runs for (s, d), runs in results.items()}, indent=1))
+    print("\n| system | depth | frames per CPU-s: all (per drive) | ATE m per drive | drift % per drive "
+          "| peak RSS MB | frames |", flush=True)
     print("| --- | --- | --- | --- | --- | --- | --- |")
     fps = {}
-    for (system, depth), runs in results.items():
+    for (system, depth), runs in sorted(results.items(), key=lambda item: "dOK".index(item[0][0][0])):
         frames = sum(r["frames"] for r in runs)
         fps[system, depth] = frames / sum(r["cpu_s"] for r in runs)
         label = {"ip-basic": "IP-Basic of sparse", "planefit": "planefit of sparse"}.get(depth, depth)
-        print(f"| {system} | {label} | {fps[system, depth]:.2f} | {np.mean([r['ate_m'] for r in runs]):.3f} | "
-              f"{np.mean([r['drift_pct'] for r in runs]):.2f} | {max(r['peak_rss_mb'] for r in runs):.0f} | "
-              f"{frames} |", flush=True)
+        print(f"| {system} | {label} | {fps[system, depth]:.2f} ({_each(runs, 'fps', '.1f')}) | "
+              f"{_each(runs, 'ate_m', '.3f')} | {_each(runs, 'drift_pct', '.2f')} | "
+              f"{max(r['peak_rss_mb'] for r in runs):.0f} | {frames} |", flush=True)
     load_after = os.getloadavg()
     print(f"\nload average {load_before[0]:.1f} before, {load_after[0]:.1f} after ({os.cpu_count()} cores, "
           f"{platform.processor() or platform.machine()})")
     if kiss:
         ratio = fps["dcslam", "sparse"] / fps["KISS-ICP", "velodyne 360"]
-        print(f"dcslam sparse / KISS-ICP frames per CPU-s: {ratio:.2f} (target >= 1.5)")
+        print(f"dcslam sparse / KISS-ICP frames per CPU-s: {ratio:.2f} (target >= 1.5; a diverging KISS-ICP iterates "
+              f"to its cap, so read it beside the ATE of each drive)")
     print(f"dcslam on IP-Basic's completion: {fps['dcslam', 'ip-basic']:.2f} frames per CPU-s (target >= 8), "
           f"on planefit's {fps['dcslam', 'planefit']:.2f}", flush=True)
 
@@ -253,6 +277,10 @@ def main() -> None:
     parser.add_argument("--max-drives", type=int, default=2)
     parser.add_argument("--open3d-completed", nargs="*", choices=tuple(COMPLETERS), default=["ip-basic"],
                         help="the completions Open3D runs on besides sparse and dense")
+    parser.add_argument("--open3d-completed-drives", type=int, default=1,
+                        help="Open3D runs on the completions over this many of the drives (the first)")
+    parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), help="runs at a time")
+    parser.add_argument("--json", type=Path, help="also write every run's figures to this JSON file")
     parser.add_argument("--long-memory", action="store_true",
                         help="also the long analytic-street memory runs (minutes: --long-frames frames at full size)")
     parser.add_argument("--long-frames", type=int, default=1000, help="frames of the memory drive")
