@@ -230,7 +230,8 @@ def companion_evidence(drive_path: Path, source: str | Path, config: SlamStageCo
 
     The companion depends on the drive alone, so it starts on entering the block, in a spawned worker process when
     a core is free (:func:`companion_beside`), and runs while the block runs the main one: its wall time hides on
-    the other core. Its torch thread count is the caller's, so its poses are those it would compute here."""
+    the other core (else it runs after the main one, in this process). Its torch thread count is the caller's, so
+    its poses are those it would compute here."""
     from dcslam.io.drive import DriveFile, is_depth_kind, measured_kind
     from dcslam.slam.drive import companion_verdict
     from dcslam.slam.evidence import unavailable
@@ -274,15 +275,17 @@ BESIDE_MIN_PIXELS = 10 * 375 * 1242
 def companion_beside(config: SlamStageConfig, pixels: int) -> bool:
     """Whether the companion run over ``pixels`` (frames x height x width) goes to a second process beside the main
     run: on the CPU, when this process is no pool worker whose siblings keep every core busy
-    (:func:`dcslam.workers.cores_shared`), the main run's torch threads leave a core free and the run is long
-    enough to pay for the worker's start (:data:`BESIDE_MIN_PIXELS`)."""
+    (:func:`dcslam.workers.cores_shared`), a core is free besides the main run's torch threads (the load average
+    of the last minute below ``cores - threads - 0.5``: on a busy machine the worker only competes, measured 25 s
+    serial against 31-36 s beside at load 5.5 on 2 cores) and the run is long enough to pay for the worker's start
+    (:data:`BESIDE_MIN_PIXELS`)."""
     import torch
 
     from dcslam.workers import cores_shared
 
     threads = config.threads or torch.get_num_threads()
-    return (config.device == "cpu" and not cores_shared() and (os.cpu_count() or 1) > threads
-            and pixels >= BESIDE_MIN_PIXELS)
+    free = (os.cpu_count() or 1) - threads - os.getloadavg()[0]
+    return config.device == "cpu" and not cores_shared() and free > 0.5 and pixels >= BESIDE_MIN_PIXELS
 
 
 def companion_run(drive_path: Path, kind: str, config: SlamStageConfig, threads: int, description: str,

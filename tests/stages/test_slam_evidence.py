@@ -96,6 +96,7 @@ def test_the_companion_beside_the_main_run_gives_the_verdict_it_gives_after_it(s
 def test_the_companion_waits_for_the_main_run_where_no_core_is_free_or_the_run_is_short(monkeypatch):
     config, long = slam.SlamStageConfig(threads=1), slam.BESIDE_MIN_PIXELS
     monkeypatch.setattr("os.cpu_count", lambda: 2)
+    monkeypatch.setattr("os.getloadavg", lambda: (0.2, 0.2, 0.2))
     monkeypatch.delenv("DCSLAM_SHARED_CORES", raising=False)
     assert slam.companion_beside(config, long)
     assert not slam.companion_beside(config, long - 1)      # the worker's start would cost more than it hides
@@ -104,5 +105,8 @@ def test_the_companion_waits_for_the_main_run_where_no_core_is_free_or_the_run_i
     monkeypatch.setenv("DCSLAM_SHARED_CORES", "1")         # a pool worker: its siblings keep every core busy
     assert not slam.companion_beside(config, long)
     monkeypatch.delenv("DCSLAM_SHARED_CORES")
+    monkeypatch.setattr("os.getloadavg", lambda: (0.7, 0.2, 0.2))  # other work holds the second core
+    assert not slam.companion_beside(config, long)
+    monkeypatch.setattr("os.getloadavg", lambda: (0.2, 0.2, 0.2))
     monkeypatch.setattr("os.cpu_count", lambda: 1)
     assert not slam.companion_beside(config, long)
