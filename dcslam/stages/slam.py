@@ -115,9 +115,6 @@ class SlamDriveResult:
 
 def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[SlamDriveResult]:
     """SLAM over every selected drive; all outputs are checked not to exist (without ``force``) before any work."""
-    from dcslam.allocator import fix_mmap_threshold
-    from dcslam.slam.config import build_slam
-    from dcslam.stages.config import to_dict
     from dcslam.workspace import drive_file, layer_reference, output_folder, resolve_layer, select_drives
 
     names = select_drives(ws, config.drive)  # an empty test split is an error, not a run over nothing
@@ -128,6 +125,21 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
     from dcslam.device import resolve_device
 
     resolve_device(config.device)  # a GPU asked for on a CPU-only torch: one line, before any work
+    from dcslam.io.lineage import check_layer_folder
+    from dcslam.locks import output_lock
+
+    check_layer_folder(layer.folder)  # a layer made from an input that changed since is refused
+    with output_lock(out_dir, "SLAM output"):  # before anything is checked or written: one writer at a time
+        return _run_drives(config, layer, paths, out_dir, force)
+
+
+def _run_drives(config: SlamStageConfig, layer, paths: list[Path], out_dir: Path,
+                force: bool) -> list[SlamDriveResult]:
+    """SLAM over the drive files ``paths`` with depth from ``layer``, into ``out_dir`` (its lock held)."""
+    from dcslam.allocator import fix_mmap_threshold
+    from dcslam.slam.config import build_slam
+    from dcslam.stages.config import to_dict
+
     jobs = []
     for path in paths:
         source = layer.require(path.stem)
@@ -141,14 +153,17 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
     # a fixed mmap threshold keeps a long run's peak memory flat (glibc's own one lets the heap fragment: +16 % peak
     # from frame 200 to 1,000); MALLOC_MMAP_THRESHOLD_ in the environment overrides it (dcslam.allocator)
     fix_mmap_threshold()
+    from dcslam.io.lineage import made_from
+
     with torch_threads(config.threads):
         for path, source, measured in jobs:
+            inputs = made_from({"depth": source if isinstance(source, Path) else None}, out_dir)  # as it is read
             drive_run = run_drive_file(path, source, build_slam(config.settings()), config.frames or None,
                                        config.device, settings={**to_dict(config), "source": str(source)},
                                        confidence=config.confidence_use(), sources_kind=measured)
             drive_run.name = path.stem
             drive_run.evidence = companion_evidence(path, source, drive_run, config, measured)
-            written = write_outputs(drive_run, out_dir, force)
+            written = write_outputs(drive_run, out_dir, force, inputs)
             results.append(SlamDriveResult(path.stem, drive_run.summary(), written))
     suspect = [r for r in results if r.summary["health"]["suspect"]]
     if config.strict and suspect:
@@ -247,8 +262,10 @@ def companion_evidence(drive_path: Path, source: str | Path, main: DriveRun, con
 
 
 def output_paths(out_dir: Path, name: str) -> dict[str, Path]:
+    """A drive's SLAM outputs; ``done`` is the marker that commits them (written last,
+    :class:`dcslam.io.atomic.CommittedSet`): readers take only a committed set."""
     return {"trajectory": out_dir / f"{name}.txt", "kitti_poses": out_dir / f"{name}.kitti.txt",
-            "map": out_dir / f"{name}.ply", "summary": out_dir / f"{name}.json"}
+            "map": out_dir / f"{name}.ply", "summary": out_dir / f"{name}.json", "done": out_dir / f"{name}.done"}
 
 
 def check_outputs(out_dir: Path, name: str, force: bool) -> None:
@@ -258,23 +275,31 @@ def check_outputs(out_dir: Path, name: str, force: bool) -> None:
             raise DcslamError(f"{path} exists; pass --force to overwrite it")
 
 
-def write_outputs(run: DriveRun, out_dir: Path, force: bool = False) -> dict[str, Path]:
-    """Write ``run``'s trajectory (TUM with the drive's own timestamps, and KITTI poses), map and summary; fails
-    before writing anything when the timestamps are not strictly increasing (:func:`check_timestamps`)."""
+def write_outputs(run: DriveRun, out_dir: Path, force: bool = False, made_from: dict | None = None) -> dict[str, Path]:
+    """Write ``run``'s trajectory (TUM with the drive's own timestamps, and KITTI poses), map and summary as one
+    committed set (``<drive>.done`` written last: a failed write leaves none of them for a reader to take); fails
+    before writing anything when the timestamps are not strictly increasing (:func:`check_timestamps`).
+    ``made_from``: the identities of the inputs (:func:`dcslam.io.lineage.made_from`), kept in the summary."""
+    from dcslam.io.atomic import CommittedSet, write_json_atomic
     from dcslam.io.kitti_poses import write_kitti_poses
+    from dcslam.io.lineage import MADE_FROM
     from dcslam.io.ply import write_ply
     from dcslam.io.tum import write_tum
-    from dcslam.io.atomic import write_json_atomic
     from dcslam.workspace import stage_config
 
     paths = output_paths(out_dir, run.name)
     check_outputs(out_dir, run.name, force)
     timestamps = check_timestamps(run.timestamps, run.name)
-    write_tum(paths["trajectory"], timestamps, run.T_world_cam, force=force)
-    write_kitti_poses(paths["kitti_poses"], run.T_world_cam, force=force)
-    pm = run.map
-    write_ply(paths["map"], pm.points.numpy(), pm.normals.numpy(), pm.colors.clamp(0, 1).numpy(), force=force)
     record = stage_config("slam", run.settings)
     record.update(run.summary())
-    write_json_atomic(paths["summary"], record, force=force)
+    if made_from:
+        record[MADE_FROM] = made_from
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with CommittedSet(paths["done"]) as files:
+        write_tum(files.stage(paths["trajectory"]), timestamps, run.T_world_cam, force=True)
+        write_kitti_poses(files.stage(paths["kitti_poses"]), run.T_world_cam, force=True)
+        pm = run.map
+        write_ply(files.stage(paths["map"]), pm.points.numpy(), pm.normals.numpy(), pm.colors.clamp(0, 1).numpy(),
+                  force=True)
+        write_json_atomic(files.stage(paths["summary"]), record, force=True)
     return paths
