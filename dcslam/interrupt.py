@@ -18,6 +18,14 @@ import sys
 _received = False
 _signal: int | None = None  # the first interrupting signal received
 _told = False
+_kept: str | None = None  # what the interrupted command kept and how to go on, when it kept something
+
+
+def keep(line: str) -> None:
+    """Say, in the interrupt message, what the command kept and how to go on (``line``: "the run folder ... is kept
+    with last.pt; continue it with ... --resume"); by default the message says that nothing was kept."""
+    global _kept
+    _kept = line
 
 #: The signals that interrupt a command.
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -80,4 +88,5 @@ def tell(echo) -> None:
     global _told
     if not _told:
         _told = True
-        echo("interrupted: no partial output was kept; rerun the command to finish")
+        echo(f"interrupted: {_kept}" if _kept else "interrupted: no partial output was kept; rerun the command to "
+             "finish")

@@ -24,12 +24,11 @@ import torch
 
 from dcslam.depth.config import TrainConfig
 from dcslam.depth.data import DriveFrames
-from dcslam.depth.models import model_record, save_model
+from dcslam.depth.models import model_record, save_model, save_torch
 from dcslam.depth.objective import Objective, validate
 from dcslam.depth.recipes import LR_SCHEDULES, map_frames_of, selection_key
 from dcslam.depth.train_pose import validate_pose
 from dcslam.errors import DcslamError
-from dcslam.io.atomic import atomic_output
 
 
 @dataclass
@@ -195,8 +194,7 @@ class Checkpointer(Hook):
                       "next_chunk": next_chunk, "step": state.step,
                       "best": json.dumps(state.best) if state.best else "", "rng": torch.get_rng_state(),
                       "metrics_lines": len(metrics.read_text().splitlines()) if metrics.exists() else 0}
-        with atomic_output(state.run_dir / "last.pt", force=True) as tmp:
-            torch.save(checkpoint, tmp)
+        save_torch(state.run_dir / "last.pt", checkpoint)
 
 
 class EpochCallback(Hook):

@@ -88,5 +88,6 @@ def committed_outputs(out_dir: Path | str, drive: str, rerun: str = "dcslam slam
         committed_files(marker)
     except DcslamError as error:
         raise DcslamError(f"{error}".replace("rerun the command that makes it with --force", f"rerun `{rerun}`"))
-    check_made_from(read_summary(paths["summary"], f"rerun `{rerun}`"), out_dir, paths["summary"], rerun)
+    if paths["summary"].exists():  # a set made elsewhere may hold a trajectory alone
+        check_made_from(read_summary(paths["summary"], f"rerun `{rerun}`"), out_dir, paths["summary"], rerun)
     return paths

@@ -17,6 +17,7 @@ from dcslam.depth.recipes import geometry_terms, run_name, selection_key
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
 from dcslam.io.atomic import write_json_atomic
+from dcslam.locks import output_lock
 from dcslam.workspace import Workspace, stage_config
 
 CORRECTABLE = ("sparse-conv", "nconv", "nconv-guided")  # the networks with a correct_fill option
@@ -243,15 +244,26 @@ def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resu
     first); ``resume`` continues it from ``last.pt`` with its own settings (only the number of epochs and the device
     are taken from ``config``). ``hooks``: :class:`dcslam.depth.hooks.Hook` objects added to the loop's own.
     """
-    import torch
-
-    from dcslam.depth.train import barrier, rank_and_world, seed_all, train_loop
+    from dcslam.depth.train import rank_and_world
     from dcslam.device import resolve_device
-    from dcslam.report.plots import plot_training_curves
 
     run_dir = Path(run_dir)
     rank, world = rank_and_world()
     device = resolve_device(config.device)  # before the run's folder is made: a missing GPU leaves nothing behind
+    # one writer at a time, from before --force removes the run's files to the end; the processes of a distributed
+    # run are one writer, whose launcher (:func:`run`) holds the lock
+    with output_lock(run_dir, "run") if world == 1 else contextlib.nullcontext():
+        return _train(run_dir, config, device, force, resume, map_builder, hooks)
+
+
+def _train(run_dir: Path, config: TrainConfig, device, force: bool, resume: bool, map_builder, hooks):
+    """:func:`train` with the run's lock held."""
+    import torch
+
+    from dcslam.depth.train import barrier, rank_and_world, seed_all, train_loop
+    from dcslam.report.plots import plot_training_curves
+
+    rank, world = rank_and_world()
     made = not run_dir.exists()
     if rank == 0:
         _prepare_run_dir(run_dir, force, resume)
@@ -276,9 +288,14 @@ def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resu
         if resume and rank == 0:  # only once the epochs are trained
             _record_resume(run_dir, config)
         return result
-    except BaseException:
+    except BaseException as exc:
         if rank == 0 and not resume and not (run_dir / "last.pt").exists():
             _discard_unstarted(run_dir, made)  # failed before its first epoch: its rerun must not find "run exists"
+        elif rank == 0 and isinstance(exc, KeyboardInterrupt):
+            from dcslam import interrupt
+
+            interrupt.keep(f"the run folder {run_dir} is kept with last.pt (the last saved point of the training); "
+                           "continue it with the same command and --resume, or start again with --force")
         raise
     finally:
         for frames in open_drives:
@@ -317,11 +334,10 @@ def run(ws: Workspace, config: TrainStageConfig, *, force: bool = False):
     if config.nproc > 1 and not distributed.in_torchrun():
         import tempfile
 
-        _check_run_dir(run_dir, force, config.resume)  # here, not in every worker
-
         from dcslam.stages.config import to_toml
 
-        with tempfile.TemporaryDirectory() as tmp:
+        with output_lock(run_dir, "run"), tempfile.TemporaryDirectory() as tmp:
+            _check_run_dir(run_dir, force, config.resume)  # here, not in every worker
             path = Path(tmp) / "train.toml"
             path.write_text(to_toml(config))
             args = ["--workspace", str(ws.root), "--config", str(path)] + (["--force"] if force else [])
