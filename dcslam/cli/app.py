@@ -36,8 +36,9 @@ def fail(message: str) -> None:
 
 
 def known_errors(command):
-    """Turn :class:`~dcslam.errors.DcslamError` into one line on stderr and exit code 1, Ctrl-C into exit 130
-    (SIGTERM into 143)."""
+    """Turn :class:`~dcslam.errors.DcslamError` (and a write the machine refused: a full disk, a read-only
+    filesystem) into one line on stderr and exit code 1, Ctrl-C into exit 130 (SIGTERM into 143), with a line
+    saying what the command kept and how to go on (:func:`dcslam.interrupt.keep`)."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
@@ -50,6 +51,14 @@ def known_errors(command):
         except (FileExistsError, NotADirectoryError, IsADirectoryError, PermissionError) as error:
             # a path that is the wrong kind of thing, or not ours to write: the user's to fix, not a bug
             fail(f"{error.filename}: {error.strerror}; check the paths given (--workspace, --out, ...)")
+        except OSError as error:
+            # a write the machine refused (a full disk, a read-only or failing filesystem) that no stage named
+            from dcslam.errors import write_error
+
+            known = write_error(error, error.filename or "a file")
+            if known is None:
+                raise
+            fail(f"{known}; free space or choose a writable --workspace, then rerun the command")
         except KeyboardInterrupt:
             from dcslam import interrupt
 

@@ -100,8 +100,17 @@ def reproduce(workspace: Workspace, profile, table: str = "5.2", kitti_root: Pat
     for the independent stages; ``seeds``: training seeds per trained run (``seed`` … ``seed + seeds − 1``);
     ``executor``: where independent stages run instead (e.g. a :class:`~dcslam.executor.SlurmExecutor`; None:
     ``jobs`` local workers)."""
-    pipe = Pipeline(workspace, log, force=force, executor=executor)
-    return _experiment(table).compose(pipe, profile, kitti_root, seed, jobs, seeds)
+    from dcslam.locks import output_lock
+
+    # one reproduce per workspace: a second one would replace kitti/ and drives/ under the first (a lock beside the
+    # workspace, so that nothing inside it is touched before the lock is held)
+    with output_lock(workspace.root, "workspace"):
+        from dcslam import interrupt
+
+        interrupt.keep(f"the stages that finished are kept in {workspace.root} (stamped in .reproduce/); rerun the "
+                       "same command to go on from there (the stage that was running starts again)")
+        pipe = Pipeline(workspace, log, force=force, executor=executor)
+        return _experiment(table).compose(pipe, profile, kitti_root, seed, jobs, seeds)
 
 
 def make_executor(ws: Workspace, config: ReproduceConfig, log: Callable[[str], None] = lambda line: None):

@@ -165,12 +165,21 @@ def _run_drives(config: SlamStageConfig, layer, paths: list[Path], out_dir: Path
             drive_run.evidence = companion_evidence(path, source, drive_run, config, measured)
             written = write_outputs(drive_run, out_dir, force, inputs)
             results.append(SlamDriveResult(path.stem, drive_run.summary(), written))
+            _keep_on_interrupt(out_dir, [r.drive for r in results])
     suspect = [r for r in results if r.summary["health"]["suspect"]]
     if config.strict and suspect:
         raise DcslamError("suspect trajectories (--strict): " + "; ".join(
             f"{r.drive}: {', '.join(r.summary['health']['reasons'])}" for r in suspect)
             + f"; outputs written under {out_dir}")
     return results
+
+
+def _keep_on_interrupt(out_dir: Path, done: list[str]) -> None:
+    """What an interrupt leaves: the committed outputs of the drives done; the drive being run leaves nothing."""
+    from dcslam import interrupt
+
+    interrupt.keep(f"the SLAM outputs of {', '.join(done)} are kept, complete, in {out_dir} (the drive being run "
+                   "left nothing); rerun with --drive naming the others, or the same command with --force")
 
 
 def measured_sources(config: SlamStageConfig, source: str | Path, drive_path: Path) -> str | None:

@@ -68,11 +68,18 @@ def out_root(ws: Workspace, config: SynthConfig) -> Path:
 
 def run(ws: Workspace, config: SynthConfig, *, force: bool = False) -> SynthResult:
     """Generate the drives (or sequences) of ``config`` under :func:`out_root`."""
-    from dcslam.progress import Bar
-
     from dcslam.workspace import output_folder
 
+    from dcslam.locks import output_lock
+
     root = output_folder(out_root(ws, config), "--out")
+    with output_lock(root, "synthetic dataset"):  # one writer at a time, before anything is removed or written
+        return _generate(root, config, force)
+
+
+def _generate(root: Path, config: SynthConfig, force: bool) -> SynthResult:
+    from dcslam.progress import Bar
+
     if config.indoor:
         from dcslam.synth.indoor import generate_indoor
 
