@@ -19,13 +19,18 @@ _received = False
 _signal: int | None = None  # the first interrupting signal received
 _told = False
 _kept: str | None = None  # what the interrupted command kept and how to go on, when it kept something
+_kept_final = False
 
 
-def keep(line: str) -> None:
+def keep(line: str | None, final: bool = False) -> None:
     """Say, in the interrupt message, what the command kept and how to go on (``line``: "the run folder ... is kept
-    with last.pt; continue it with ... --resume"); by default the message says that nothing was kept."""
-    global _kept
-    _kept = line
+    with last.pt; continue it with ... --resume"); by default the message says that nothing was kept. ``final``: a
+    command that runs others in its process (``reproduce``) says it for all of them, and their own lines are
+    ignored; ``keep(None)`` starts afresh (the command line calls it before each command)."""
+    global _kept, _kept_final
+    if _kept_final and line is not None:
+        return
+    _kept, _kept_final = line, final and line is not None
 
 #: The signals that interrupt a command.
 SIGNALS = (signal.SIGINT, signal.SIGTERM)

@@ -42,8 +42,10 @@ def known_errors(command):
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
+        from dcslam import interrupt
         from dcslam.errors import DcslamError
 
+        interrupt.keep(None)  # what an interrupt leaves is said by the command that runs now
         try:
             return command(*args, **kwargs)
         except DcslamError as error:
@@ -60,8 +62,6 @@ def known_errors(command):
                 raise
             fail(f"{known}; free space or choose a writable --workspace, then rerun the command")
         except KeyboardInterrupt:
-            from dcslam import interrupt
-
             interrupt.tell(lambda line: typer.echo(line, err=True))
             raise typer.Exit(interrupt.exit_code()) from None
 

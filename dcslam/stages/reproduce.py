@@ -108,7 +108,7 @@ def reproduce(workspace: Workspace, profile, table: str = "5.2", kitti_root: Pat
         from dcslam import interrupt
 
         interrupt.keep(f"the stages that finished are kept in {workspace.root} (stamped in .reproduce/); rerun the "
-                       "same command to go on from there (the stage that was running starts again)")
+                       "same command to go on from there (the stage that was running starts again)", final=True)
         pipe = Pipeline(workspace, log, force=force, executor=executor)
         return _experiment(table).compose(pipe, profile, kitti_root, seed, jobs, seeds)
 
