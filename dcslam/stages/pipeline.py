@@ -224,7 +224,7 @@ class Pipeline:
                 if not outcome.ok:
                     details = outcome.task.labels()
                     if outcome.job is not None:
-                        details.append(f"Slurm job {outcome.job}, log {outcome.log}")
+                        details.append(f"Slurm job {outcome.job}" + (f", log {outcome.log}" if outcome.log else ""))
                     raise DcslamError(f"stage {stage.name} failed ({outcome.error})"
                                       f"{''.join(f'; {d}' for d in details)}; fix it and rerun: finished stages will "
                                       "be skipped")
