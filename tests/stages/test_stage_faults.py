@@ -108,3 +108,34 @@ def test_an_interrupted_training_says_its_run_folder_is_kept_and_how_to_resume(w
     assert f"interrupted: the run folder {run_dir} is kept with last.pt" in result.output
     assert "--resume" in result.output and "no partial output" not in result.output
     assert (run_dir / "last.pt").exists()
+
+
+@pytest.mark.parametrize("change, how", [("equal", "equal to"), ("backwards", "before")])
+def test_prepare_kitti_refuses_timestamps_that_do_not_strictly_increase(tmp_path, change, how):
+    from dcslam.io import kitti
+    from dcslam.stages.prepare import prepare_kitti
+    from tests.fixtures import kitti as fx
+
+    raw = fx.write_tiny_drive(tmp_path / "kitti")
+    stamps = kitti.read_timestamps(raw / "image_02" / "timestamps.txt")
+    stamps[7] = stamps[6] if change == "equal" else stamps[6] - 0.05
+    kitti.write_timestamps(raw / "image_02" / "timestamps.txt", stamps)
+    with pytest.raises(DcslamError, match=rf"^drive 2011_09_26_drive_0002_sync: the timestamp of frame 7 is {how} "
+                                          r"that of frame 6 in image_02/timestamps\.txt; timestamps must strictly "
+                                          r"increase"):
+        prepare_kitti(tmp_path / "kitti", tmp_path / "drives", include_unsplit=True)
+    assert not (tmp_path / "drives").exists() or list((tmp_path / "drives").iterdir()) == []
+
+
+def test_a_synth_run_that_fails_to_write_leaves_no_calibration_behind(tmp_path, monkeypatch):
+    from dcslam.stages.synth import SynthConfig, run
+    from dcslam.workspace import Workspace
+
+    def full(*args, **kwargs):
+        raise DcslamError("could not write x.png: no space left on device")
+
+    monkeypatch.setattr("dcslam.synth.street.generate._write_drives", full)
+    ws = Workspace(tmp_path / "ws")
+    with pytest.raises(DcslamError, match=NO_SPACE):
+        run(ws, SynthConfig(drives=1, frames=11))
+    assert not ws.kitti.exists() and sorted(p.name for p in ws.root.iterdir()) == []
