@@ -18,13 +18,15 @@ import sys
 _received = False
 _signal: int | None = None  # the first interrupting signal received
 _told = False
-_kept: str | None = None  # what the interrupted command kept and how to go on, when it kept something
+_kept = None  # what the interrupted command kept and how to go on: a line, or a function giving one (or None)
 _kept_final = False
 
 
-def keep(line: str | None, final: bool = False) -> None:
+def keep(line, final: bool = False) -> None:
     """Say, in the interrupt message, what the command kept and how to go on (``line``: "the run folder ... is kept
-    with last.pt; continue it with ... --resume"); by default the message says that nothing was kept. ``final``: a
+    with last.pt; continue it with ... --resume", or a function returning such a line, or None when nothing is kept,
+    asked when the interrupt is told: what is on disk then); by default the message says that nothing was kept.
+    ``final``: a
     command that runs others in its process (``reproduce``) says it for all of them, and their own lines are
     ignored; ``keep(None)`` starts afresh (the command line calls it before each command)."""
     global _kept, _kept_final
@@ -93,5 +95,6 @@ def tell(echo) -> None:
     global _told
     if not _told:
         _told = True
-        echo(f"interrupted: {_kept}" if _kept else "interrupted: no partial output was kept; rerun the command to "
+        kept = _kept() if callable(_kept) else _kept
+        echo(f"interrupted: {kept}" if kept else "interrupted: no partial output was kept; rerun the command to "
              "finish")

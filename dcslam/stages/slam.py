@@ -153,7 +153,10 @@ def _run_drives(config: SlamStageConfig, layer, paths: list[Path], out_dir: Path
     # a fixed mmap threshold keeps a long run's peak memory flat (glibc's own one lets the heap fragment: +16 % peak
     # from frame 200 to 1,000); MALLOC_MMAP_THRESHOLD_ in the environment overrides it (dcslam.allocator)
     fix_mmap_threshold()
+    from dcslam import interrupt
     from dcslam.io.lineage import made_from
+
+    interrupt.keep(lambda: _kept_line(out_dir, [path.stem for path, _, _ in jobs]))
 
     with torch_threads(config.threads):
         for path, source, measured in jobs:
@@ -165,7 +168,6 @@ def _run_drives(config: SlamStageConfig, layer, paths: list[Path], out_dir: Path
             drive_run.evidence = companion_evidence(path, source, drive_run, config, measured)
             written = write_outputs(drive_run, out_dir, force, inputs)
             results.append(SlamDriveResult(path.stem, drive_run.summary(), written))
-            _keep_on_interrupt(out_dir, [r.drive for r in results])
     suspect = [r for r in results if r.summary["health"]["suspect"]]
     if config.strict and suspect:
         raise DcslamError("suspect trajectories (--strict): " + "; ".join(
@@ -174,12 +176,15 @@ def _run_drives(config: SlamStageConfig, layer, paths: list[Path], out_dir: Path
     return results
 
 
-def _keep_on_interrupt(out_dir: Path, done: list[str]) -> None:
-    """What an interrupt leaves: the committed outputs of the drives done; the drive being run leaves nothing."""
-    from dcslam import interrupt
+def _kept_line(out_dir: Path, drives: list[str]) -> str | None:
+    """What an interrupt leaves: the drives whose outputs are committed in ``out_dir`` (None: none of them)."""
+    from dcslam.io.atomic import is_committed
 
-    interrupt.keep(f"the SLAM outputs of {', '.join(done)} are kept, complete, in {out_dir} (the drive being run "
-                   "left nothing); rerun with --drive naming the others, or the same command with --force")
+    done = [drive for drive in drives if is_committed(out_dir / f"{drive}.done")]
+    if not done:
+        return None
+    return (f"the SLAM outputs of {', '.join(done)} are kept, complete, in {out_dir} (the drive being run left "
+            "none that a reader takes); rerun with --drive naming the others, or the same command with --force")
 
 
 def measured_sources(config: SlamStageConfig, source: str | Path, drive_path: Path) -> str | None:
