@@ -2,14 +2,15 @@
 Rerun viewer (``dcslam view``), to watch a map being built and see where completed depth puts its outliers.
 
 On the ``frame`` sequence timeline, per frame: ``world/camera`` (the estimated pose, Transform3D),
-``world/camera/image`` (its Pinhole, the camera image and the input depth), ``world/frame/points`` (the input depth's
-points in the world, coloured by the image), ``world/frame/sources`` (the points ICP aligned, coloured by their weight
-when the depth has a confidence, else by their distance to the map as it stood before the frame: green near, red at
-:data:`RESIDUAL_RED` voxels or more), ``world/map`` every :data:`MAP_EVERY` frames and at the last (decimated to
-:data:`MAP_POINTS`), ``steps/verdict`` (TextLog: the step's verdict and its reasons) and the scalars ``steps/pairs``,
-``steps/sources``, ``steps/conditioning``, ``steps/gap_m`` and ``steps/verdict_level`` (0 accepted, 1 degraded,
-2 rejected). Static: ``world/trajectory/estimated``, ``world/trajectory/ground_truth`` and, when the stage ran one,
-``world/trajectory/companion`` (LineStrips3D of the camera positions, metres), logged when the run is done.
+``world/camera/image`` (its Pinhole, the camera image and the input depth, a 16-bit PNG), ``world/frame/points``
+(the input depth's points in the world, coloured by the image), ``world/frame/sources`` (the points ICP aligned,
+coloured by their weight when the depth has a confidence, else by their distance to the map as it stood before the
+frame: green near, red at :data:`RESIDUAL_RED` voxels or more), ``world/map`` every :data:`MAP_EVERY` frames and at
+the last (decimated to :data:`MAP_POINTS`), ``steps/verdict`` (TextLog: the step's verdict and its reasons) and the
+scalars ``steps/pairs``, ``steps/sources``, ``steps/conditioning``, ``steps/gap_m`` and ``steps/verdict_level``
+(0 accepted, 1 degraded, 2 rejected). Static: ``world/trajectory/estimated``, ``world/trajectory/ground_truth`` and,
+when the stage ran one, ``world/trajectory/companion`` (LineStrips3D of the camera positions, metres), logged when
+the run is done.
 
 Rerun (``rerun-sdk``, the ``viz`` extra, Python >= 3.11) is imported only here and only when a recording is asked
 for; the SLAM loop knows nothing of it (:func:`dcslam.slam.drive.run_drive` calls a per-step callback).
@@ -32,9 +33,12 @@ SUFFIX = ".rrd"
 MAP_EVERY = 10
 #: At most this many map points per logged map, and per frame's point cloud (every k-th point kept).
 MAP_POINTS = 50_000
-FRAME_POINTS = 20_000
+FRAME_POINTS = 10_000
 #: Source points this many effective voxels or more from the map are drawn fully red.
 RESIDUAL_RED = 5.0
+#: The input depth is stored as a 16-bit PNG in units of 1/DEPTH_UNITS m (3.9 mm steps up to 256 m): a tenth of the
+#: float image's bytes for LiDAR depth, a third for dense depth.
+DEPTH_UNITS = 256.0
 #: Verdicts as a number for a scalar plot, and as a text-log level.
 VERDICT_LEVELS = {"accepted": 0, "degraded": 1, "rejected": 2}
 TEXT_LEVELS = {"accepted": "INFO", "degraded": "WARN", "rejected": "ERROR"}
@@ -62,6 +66,17 @@ def every_kth(points: np.ndarray, limit: int) -> np.ndarray:
     """Every k-th row of ``points`` (N, ...) with k the smallest step that keeps at most ``limit`` rows."""
     k = max(1, -(-len(points) // limit))
     return points[::k]
+
+
+def depth_png(depth_m: np.ndarray) -> bytes:
+    """Depth (H, W) in metres as a single-channel 16-bit PNG in units of 1/:data:`DEPTH_UNITS` m (0: none)."""
+    import cv2
+
+    units = np.clip(np.round(np.nan_to_num(depth_m, nan=0.0) * DEPTH_UNITS), 0, 65535).astype(np.uint16)
+    ok, png = cv2.imencode(".png", units)
+    if not ok:
+        raise DcslamError(f"could not encode a depth image of shape {depth_m.shape} as PNG")
+    return png.tobytes()
 
 
 def positions(T_world_cam: np.ndarray) -> np.ndarray:
@@ -115,8 +130,8 @@ class SlamRecorder:
         if frame.rgb is not None:
             rgb = (frame.rgb.detach().cpu().numpy().reshape(H, W, 3) * 255).clip(0, 255).astype(np.uint8)
             rec.log("world/camera/image/rgb", rr.Image(rgb).compress(jpeg_quality=85))
-        depth = frame.depth.detach().cpu().numpy().reshape(H, W).astype(np.float32)
-        rec.log("world/camera/image/depth", rr.DepthImage(depth, meter=1.0))
+        rec.log("world/camera/image/depth", rr.EncodedDepthImage(
+            depth_png(frame.depth.detach().cpu().numpy().reshape(H, W)), media_type="image/png", meter=DEPTH_UNITS))
 
     def _log_sources(self, aligned, T: np.ndarray) -> None:
         """The aligned frame's points in the world, coloured by weight, or by distance to the map before the frame."""

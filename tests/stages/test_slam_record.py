@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from dcslam.errors import DcslamError
+from dcslam.io.drive import DriveFile
 from dcslam.io.tum import read_tum
 from dcslam.stages.slam import SlamStageConfig, run
 
@@ -25,6 +26,12 @@ def read_recording(path) -> dict:
     for chunk in RrdReader(path).stream():
         chunks.setdefault(chunk.entity_path, []).append(chunk.to_record_batch())
     return chunks
+
+
+def decode_png(blob) -> np.ndarray:
+    import cv2
+
+    return cv2.imdecode(np.asarray(blob, np.uint8), cv2.IMREAD_UNCHANGED).astype(np.float64)
 
 
 def column(batches, name: str) -> list:
@@ -50,6 +57,10 @@ def test_a_recorded_run_reads_back_with_its_frames_and_trajectory(ws):
     np.testing.assert_allclose(np.array(strip), T[:, :3, 3].astype(np.float32), rtol=0, atol=1e-6)
     (truth,) = column(chunks["/world/trajectory/ground_truth"], "LineStrips3D:strips")[0]
     assert len(truth) == 4
+    (blob, *_), meter = column(chunks["/world/camera/image/depth"], "EncodedDepthImage:blob")[1], \
+        column(chunks["/world/camera/image/depth"], "EncodedDepthImage:meter")[1]
+    with DriveFile(ws.drives / "drive_d.h5") as drive:
+        np.testing.assert_allclose(decode_png(blob) / meter[0], drive.depth("dense", 1), rtol=0, atol=0.5 / 256)
     texts = [text for (text,) in column(chunks["/steps/verdict"], "TextLog:text")]
     assert texts[0] == "frame 0: accepted" and all(t.startswith(f"frame {i}: ") for i, t in enumerate(texts))
     with pytest.raises(DcslamError, match=r"drive_d\.(txt|rrd) exists; pass --force"):
