@@ -83,3 +83,19 @@ def test_without_rerun_record_fails_in_one_line_naming_the_extra(ws, monkeypatch
     with pytest.raises(DcslamError, match=expected):
         run(ws, SlamStageConfig(odometry="gt", frames=2, record=True))
     assert not ws.slam.exists() or not any(ws.slam.rglob("*.txt"))
+
+
+@needs_rerun
+def test_the_command_writes_the_recording_beside_the_summary(cli, ws):
+    result = cli("slam", "-w", ws.root, "--odometry", "gt", "--frames", "2", "--voxel-size", "0.1", "--record")
+    assert result.exit_code == 0, result.output
+    out = ws.slam / "dense"
+    assert {p.name for p in out.iterdir()} == {"drive_d.txt", "drive_d.kitti.txt", "drive_d.ply", "drive_d.json",
+                                               "drive_d.rrd"}
+    assert sorted(column(read_recording(out / "drive_d.rrd")["/world/camera"], "frame")) == [0, 1]
+
+
+def test_the_command_without_rerun_exits_1_in_one_line(cli, ws, monkeypatch):
+    monkeypatch.setitem(sys.modules, "rerun", None)
+    result = cli("slam", "-w", ws.root, "--odometry", "gt", "--frames", "2", "--record")
+    assert result.exit_code == 1 and result.stderr.count("\n") == 1 and "--record" in result.stderr
