@@ -91,6 +91,8 @@ def test_help_lists_the_geometry_terms(cli):
     result = cli("train", "--help")
     assert result.exit_code == 0
     assert all(flag in result.output for flag in ("--normal-weight", "--plane-weight", "--edge-weight"))
+    summary = result.output.split("Examples:")[0]
+    assert all(loss in summary for loss in ("MSE", "chamfer", "pose"))  # the summary names every --loss
     result = cli("train", "--edge-weight", "much")
     assert result.exit_code == 2 and "--edge-weight" in result.output  # not a number: a usage error
 
