@@ -133,7 +133,7 @@ class FillCorrection(nn.Module):
         start, placed_mask, distance = self.start(sparse, mask)
         if self.output == "depth":
             level = start / scale
-        else:  # scale-free inverse depth: affine in the pixel coordinates on a plane, as the correction is
+        else:  # scale-free inverse depth, the quantity the correction is added to (affine on a plane)
             has = start > 0
             level = torch.where(has, scale / torch.where(has, start, torch.ones_like(start)), torch.zeros_like(start))
         inputs = [level, mask, *([placed_mask] if self.fill != "nearest" else []), torch.log1p(distance),

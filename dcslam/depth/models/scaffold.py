@@ -16,8 +16,9 @@ from, so they take the depth of the nearest scaffold pixel, and the head is told
 
 The output (:data:`FILL_OUTPUTS`): ``depth`` adds the head's correction to the start's depth, ``out = start + scale ·
 c``; ``inverse-residual`` adds it to the start's inverse depth, ``1 / out = 1 / start + c / scale``. Seen through a
-pinhole a plane has inverse depth affine in the pixel coordinates, so with ``inverse-residual`` a correction that is
-affine over a region turns any start into a plane there, and a zero one keeps the scaffold's planes exactly.
+pinhole a plane has inverse depth affine in the pixel coordinates, so with ``inverse-residual`` an affine correction
+of a start that is a plane over a region (a scaffold's, or one value the fill carried) leaves a plane there, and a
+zero one keeps the scaffold's planes exactly; with ``depth`` the same correction bends them.
 
 No torch at import: the command line reads :data:`FILLS` and :data:`FILL_OUTPUTS` to list the options.
 """
