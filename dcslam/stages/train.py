@@ -12,7 +12,8 @@ import os
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
-from dcslam.depth.config import TrainConfig, TrainSettings
+from dcslam.depth.config import TrainConfig, TrainSettings, check_choice
+from dcslam.depth.models.scaffold import FILL_OUTPUTS, FILLS
 from dcslam.depth.recipes import geometry_terms, run_name, selection_key
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
@@ -35,6 +36,14 @@ class TrainStageConfig(TrainSettings):
                                 help="sparse-conv, nconv, nconv-guided: output a correction of the nearest-neighbour "
                                      "fill of the input, learned from the network's own output (untrained: the "
                                      "fill); off: the network's own depth.")
+    fill: str = option("nearest", choices=FILLS,
+                       help="With --correct-fill: what the corrected start is made from: nearest (the nearest-"
+                            "neighbour fill of the input), scanline or planefit (the fill of a surface-preserving "
+                            "scaffold: that completer's output, its holes taking the nearest scaffold pixel's depth).")
+    fill_output: str = option("depth", choices=FILL_OUTPUTS,
+                              help="With --correct-fill: depth (the correction is added to the start's depth) or "
+                                   "inverse-residual (to its inverse depth, in which a plane is affine in the pixel "
+                                   "coordinates).")
     name: str | None = option(None, help="Run name (default: mse-dense, mse-sparse, chamfer-1, ...; with another "
                                          "input or target, e.g. mse-dense-sparse16, mse-dense-to-exact; with "
                                          "geometry terms, e.g. mse-dense-normal-plane).")
@@ -51,6 +60,11 @@ class TrainStageConfig(TrainSettings):
             raise DcslamError(f"--fill-holes is an option of sparse-conv, not of {self.model}")
         if self.correct_fill and self.model not in CORRECTABLE:
             raise DcslamError(f"--correct-fill is an option of {', '.join(CORRECTABLE)}, not of {self.model}")
+        check_choice(self, "fill", FILLS)
+        check_choice(self, "fill_output", FILL_OUTPUTS)
+        if (self.fill, self.fill_output) != ("nearest", "depth") and not self.correct_fill:
+            raise DcslamError(f"--fill {self.fill} --fill-output {self.fill_output} are options of --correct-fill; "
+                              "add --correct-fill")
         from dcslam.workspace import plain_name
 
         for name in ("name", "init"):
@@ -72,7 +86,9 @@ class TrainStageConfig(TrainSettings):
     def model_hparams(self) -> dict:
         """The network's options that differ from its defaults (recorded in its model file)."""
         return {**({"fill_holes": True} if self.fill_holes else {}),
-                **({"correct_fill": True} if self.correct_fill else {})}
+                **({"correct_fill": True} if self.correct_fill else {}),
+                **({"fill": self.fill} if self.fill != "nearest" else {}),
+                **({"fill_output": self.fill_output} if self.fill_output != "depth" else {})}
 
     def train_config(self, train_drives: list[Path], val_drives: list[Path],
                      init_model: Path | None = None) -> TrainConfig:

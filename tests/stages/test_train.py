@@ -143,7 +143,7 @@ def test_the_stage_declares_only_what_the_training_does_not():
     from dcslam.stages.config import options_of
 
     own = {f.name for f in dataclasses.fields(TrainStageConfig)} - {f.name for f in dataclasses.fields(TrainSettings)}
-    assert own == {"fill_holes", "correct_fill", "name", "resume", "nproc", "init"}
+    assert own == {"fill_holes", "correct_fill", "fill", "fill_output", "name", "resume", "nproc", "init"}
     assert not own & {f.name for f in dataclasses.fields(TrainConfig)}
     assert {f.name for f in dataclasses.fields(TrainSettings)} <= {f.name for f in options_of(TrainStageConfig)}
     config = TrainStageConfig(loss="pose", lr=0.02, pose_frames=3, input_mix=["sparse"], correct_fill=True,
