@@ -32,15 +32,18 @@ def scalars(record: dict) -> dict[str, float]:
 
 class TensorBoardWriter:
     """Event files under ``log_dir`` (made if missing): :meth:`write` a record, :meth:`close` (or use ``with``)
-    when done. ``epoch`` is written too, as the scalar ``<kind>/epoch``, so curves can be read per epoch."""
+    when done; ``purge_step``: events at or after that step already in ``log_dir`` are dropped (a resumed run).
+    ``epoch`` is written too, as the scalar ``<kind>/epoch``, so curves can be read per epoch."""
 
-    def __init__(self, log_dir: Path | str) -> None:
+    def __init__(self, log_dir: Path | str, purge_step: int | None = None) -> None:
         try:
             from torch.utils.tensorboard import SummaryWriter
         except ImportError:
             raise DcslamError(f"--log tensorboard needs the tensorboard package: {INSTALL}") from None
         self.log_dir = Path(log_dir)
-        self._writer = SummaryWriter(log_dir=str(self.log_dir))
+        # purge_step: a resumed run drops the events an earlier process wrote from that step on, as metrics.jsonl
+        # drops its rows after the checkpoint, so no step is plotted twice
+        self._writer = SummaryWriter(log_dir=str(self.log_dir), purge_step=purge_step)
 
     def write(self, record: dict) -> None:
         """One metrics record (as written to ``metrics.jsonl``)."""

@@ -21,6 +21,7 @@ from dcslam.io.atomic import write_json_atomic
 from dcslam.workspace import Workspace, stage_config
 
 CORRECTABLE = ("sparse-conv", "nconv", "nconv-guided")  # the networks with a correct_fill option
+LOGS = ("jsonl", "tensorboard")  # --log: metrics.jsonl alone, or TensorBoard's event files beside it
 
 
 @dataclass(frozen=True)
@@ -48,6 +49,10 @@ class TrainStageConfig(TrainSettings):
                                          "input or target, e.g. mse-dense-sparse16, mse-dense-to-exact; with "
                                          "geometry terms, e.g. mse-dense-normal-plane).")
     resume: bool = option(False, flags=("--resume",), help="Continue an interrupted run from last.pt.")
+    log: str = option("jsonl", choices=LOGS,
+                      help="Where the training curves go as the run trains: jsonl (metrics.jsonl, always written) "
+                           "or tensorboard (also event files in runs/<name>/tensorboard/, for `tensorboard --logdir "
+                           "runs`; needs pip install 'dcslam[tensorboard]').")
     nproc: int = option(1, help="Processes for distributed data-parallel training (launches torchrun).")
     init: str | None = option(None, help="Start from the best model of this run (runs/<INIT>/model.pt): "
                                          "fine-tuning, e.g. --loss pose --init chamfer-8.")
@@ -61,6 +66,7 @@ class TrainStageConfig(TrainSettings):
         if self.correct_fill and self.model not in CORRECTABLE:
             raise DcslamError(f"--correct-fill is an option of {', '.join(CORRECTABLE)}, not of {self.model}")
         check_choice(self, "fill", FILLS)
+        check_choice(self, "log", LOGS)
         check_choice(self, "fill_output", FILL_OUTPUTS)
         if (self.fill, self.fill_output) != ("nearest", "depth") and not self.correct_fill:
             raise DcslamError(f"--fill {self.fill} --fill-output {self.fill_output} are options of --correct-fill; "
@@ -324,12 +330,29 @@ def read_result(run_dir: Path):
                        last_val=val[-1] if val else None)
 
 
+def log_hooks(log: str) -> list:
+    """The hooks of ``--log``: none for ``jsonl`` (the loop writes metrics.jsonl itself), a
+    :class:`dcslam.depth.hooks.TensorBoardLog` for ``tensorboard``; a missing package fails here, before any work."""
+    if log != "tensorboard":
+        return []
+    import importlib.util
+
+    if importlib.util.find_spec("tensorboard") is None:
+        from dcslam.depth.tensorboard import INSTALL
+
+        raise DcslamError(f"--log tensorboard needs the tensorboard package: {INSTALL}")
+    from dcslam.depth.hooks import TensorBoardLog
+
+    return [TensorBoardLog()]
+
+
 def run(ws: Workspace, config: TrainStageConfig, *, force: bool = False):
     """Train ``config``'s run into ``runs/<name>/``; returns a :class:`dcslam.depth.train.TrainResult` (on every
     rank of a distributed run; only rank 0 writes files)."""
     from dcslam.depth import distributed
 
     run_dir = ws.runs / config.run_name
+    hooks = log_hooks(config.log)  # a missing package fails before any work
     if config.nproc > 1 and not distributed.in_torchrun():
         import tempfile
 
@@ -359,7 +382,7 @@ def run(ws: Workspace, config: TrainStageConfig, *, force: bool = False):
     if distributed.in_torchrun():
         distributed.init_from_env(resolve_device(config.device).type)
     try:
-        return train(run_dir, train_config, force=force, resume=config.resume)
+        return train(run_dir, train_config, force=force, resume=config.resume, hooks=hooks)
     finally:
         distributed.shutdown()
 

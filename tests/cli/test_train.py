@@ -130,7 +130,8 @@ GIVEN = [("--loss", "pose", "loss", "pose"), ("--mask", "sparse", "mask", "spars
          ("--pose-source-voxel", "0.1", "pose_source_voxel", 0.1), ("--pose-weights", "none", "pose_weights", "none"),
          ("--correct-fill", None, "correct_fill", True), ("--fill", "planefit", "fill", "planefit"),
          ("--fill-output", "inverse-residual", "fill_output", "inverse-residual"), ("--name", "mine", "name", "mine"),
-         ("--resume", None, "resume", True), ("--nproc", "2", "nproc", 2), ("--init", "first", "init", "first")]
+         ("--resume", None, "resume", True), ("--log", "tensorboard", "log", "tensorboard"),
+         ("--nproc", "2", "nproc", 2), ("--init", "first", "init", "first")]
 
 
 def test_print_config_shows_every_option_under_its_key(cli, tmp_path):
