@@ -132,7 +132,7 @@ def step_degeneracy(information) -> dict | None:
     return out
 
 
-def _step_covariance(report, rules: "HealthRules") -> np.ndarray | None:
+def _step_covariance(report, rules: HealthRules) -> np.ndarray | None:
     """The step's (6, 6) twist covariance: its own, or (a report without one) its worst-direction standard
     deviations ``sigma_m`` and ``sigma_deg`` in every direction; None when the step was not measured. Along each
     degenerate translation direction (:attr:`HealthRules.degenerate_share`) the prediction's variance is added:
@@ -196,11 +196,10 @@ def _worst_direction(P: np.ndarray) -> np.ndarray:
     return u
 
 
-def drift_bound(reports, rules: "HealthRules" = None) -> dict:
+def drift_bound(reports, rules: HealthRules | None = None) -> dict:
     """How far the run's last position may be from the truth, and in which direction: ``rules.drift_sigmas`` times
-    the sum,
-    over the measured steps, of each step's standard deviation along a direction (steps' errors taken as correlated:
-    see the module's docstring), maximised over directions.
+    the sum over the measured steps of each step's standard deviation along a direction (the steps' errors taken as
+    correlated: see the module's docstring), maximised over directions (``rules`` None: :class:`HealthRules`).
 
     A step i with twist covariance C (camera frame, :meth:`~dcslam.slam.odometry.PointToPlane.covariance`) moves a
     later frame k by ``R_i dt + (R_i dw) x (p_k - p_i)``: its translation, and its rotation about its own position
@@ -208,18 +207,18 @@ def drift_bound(reports, rules: "HealthRules" = None) -> dict:
     (:attr:`HealthRules.degenerate_share`). Rejected steps and steps without a covariance add nothing (they are
     flagged on their own).
 
-    Returns ``{"bound_m": b, "direction_world": [3], "direction": a name of :data:`AXIS_NAMES`, "from_frame": the
-    first frame whose own bound along that direction exceeds ``over_m`` (None when none does), "largest_frame":
-    the step that adds most, "weakest_frame": the step with the smallest translation share (:func:`step_degeneracy`),
-    "weakest_share": that share, "weakest_direction": its name}``; ``from_frame`` is filled in by :func:`summarise`
-    (it needs the threshold).
+    Returns ``{"bound_m": b, "sigmas": rules.drift_sigmas, "direction_world": [3], "direction": a name of
+    :data:`AXIS_NAMES`, "from_frame": None, "largest_frame": the step that adds most, "weakest_frame": the step
+    with the smallest translation share (:func:`step_degeneracy`), "weakest_share": that share,
+    "weakest_direction": its name}``; :func:`summarise` fills in ``from_frame`` (the first frame whose own bound
+    along that direction exceeds ``max_drift_m``) when the bound exceeds it.
     """
     rules = HealthRules() if rules is None else rules
     sigmas = rules.drift_sigmas
     steps = [r for r in reports if r.index > 0 and r.verdict != "rejected"]
     measured = [(r, C) for r, C in ((r, _step_covariance(r, rules)) for r in steps) if C is not None]
-    empty = {"bound_m": 0.0, "direction_world": None, "direction": None, "from_frame": None, "largest_frame": None,
-             "weakest_frame": None, "weakest_share": None, "weakest_direction": None}
+    empty = {"bound_m": 0.0, "sigmas": sigmas, "direction_world": None, "direction": None, "from_frame": None,
+             "largest_frame": None, "weakest_frame": None, "weakest_share": None, "weakest_direction": None}
     if not measured:
         return empty
     positions = np.stack([_numpy(r.T_world_cam)[:3, 3] for r in reports])
