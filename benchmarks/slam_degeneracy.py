@@ -61,6 +61,16 @@ def judge_run(path: Path, kind: str, frames: int) -> dict:
             "seconds": round(run.seconds, 2)}
 
 
+def rescaled(rows: list[dict], sigmas: float) -> list[dict]:
+    """The rows re-judged with a drift bound of ``sigmas`` standard deviations (the bound is proportional to it; the
+    other rules' verdicts are kept)."""
+    from dcslam.slam.health import HealthRules
+
+    limit = HealthRules().max_drift_m
+    return [{**r, "flagged": r["flagged_without_bound"] or r["drift"]["bound_m"] * sigmas / r["drift"]["sigmas"]
+             > limit} for r in rows]
+
+
 def table(rows: list[dict], truth: float) -> list[str]:
     """Markdown: per depth kind, runs / ending > truth / flagged of those (before / now) / flagged of the others."""
     groups = defaultdict(list)
@@ -88,7 +98,14 @@ def main(argv=None) -> int:
     parser.add_argument("--kinds", default="sparse,exact", help="full-density kinds to run (of the first beams' "
                                                                 "drives)")
     parser.add_argument("--truth", type=float, default=0.5, help="a run ending further than this (m) is bad")
+    parser.add_argument("--drift-sigmas", default="", help="also tabulate the verdicts with these standard "
+                                                           "deviations of the drift bound, comma-separated")
+    parser.add_argument("--rows", action="store_true", help="re-read <out>/rows.json instead of running SLAM")
     args = parser.parse_args(argv)
+    if args.rows:
+        rows = json.loads((args.out / "rows.json").read_text())
+        print_tables(rows, args)
+        return 0
     import torch
 
     torch.set_num_threads(1)
@@ -106,9 +123,16 @@ def main(argv=None) -> int:
                       f"before {'FLAG' if row['flagged_before'] else 'ok  '} bound {d['bound_m']:.2f} m "
                       f"{d['direction']} from {d['from_frame']} | {'; '.join(row['reasons'])[:160]}", flush=True)
     (args.out / "rows.json").write_text(json.dumps(rows, indent=1, default=str))
-    print()
-    print("\n".join(table(rows, args.truth)))
+    print_tables(rows, args)
     return 0
+
+
+def print_tables(rows: list[dict], args) -> None:
+    print("\nthe rules as they are")
+    print("\n".join(table(rows, args.truth)))
+    for sigmas in (float(x) for x in args.drift_sigmas.split(",") if x):
+        print(f"\ndrift bound of {sigmas:g} sigma")
+        print("\n".join(table(rescaled(rows, sigmas), args.truth)))
 
 
 if __name__ == "__main__":

@@ -56,7 +56,10 @@ class HealthRules:
         deviation) exceeds this may end further than this from the truth, and is suspect (0: never). The bound is
         absolute, as the question it answers ("may this trajectory be more than 0.5 m off?"): a longer drive
         accumulates more and is flagged sooner.
-    drift_sigmas: standard deviations of the drift bound.
+    drift_sigmas: standard deviations of the drift bound. 2.5: on the calibration drives it flags every run that
+        ends more than 0.5 m off (those only it flags have bounds of 0.90-0.96 m at 3 sigma) and 1 of 14 16-beam
+        runs that end within 0.5 m (4 at 3 sigma, bounds 0.51-0.88 m); at 8 beams it flags every run, whatever
+        sigmas (bounds of 0.70-1.07 m at 3 sigma on runs that end 0.09-0.41 m off): docs/slam.md.
     degenerate_share: a translation direction whose share of a step's information (:func:`step_degeneracy`) is
         below this is degenerate (Zhang & Singh): the pairs say next to nothing there, the pose along it is the
         prediction's, and so is its uncertainty. On the calibration drives no step of a drive that ends within
@@ -75,7 +78,7 @@ class HealthRules:
     max_degraded_run: int = 1
     max_rejected: int = 0
     max_drift_m: float = 0.5
-    drift_sigmas: float = 3.0
+    drift_sigmas: float = 2.5
     degenerate_share: float = 0.02
     prior_sigma_m: float = 0.05
     first_prior_sigma_m: float = 0.5

@@ -11,6 +11,9 @@ from dcslam.slam.health import (AXIS_NAMES, HealthRules, _position_covariances, 
                                 step_degeneracy, summarise)
 from dcslam.slam.pipeline import StepReport
 
+#: Rules whose drift bound is three standard deviations, so that the expected bounds below are round numbers.
+THREE = HealthRules(drift_sigmas=3.0)
+
 
 def _report(index, z, covariance=None, information=None, verdict="accepted"):
     """A step at (0, 0, z), camera axes along the world's. Shape: covariance, information (6, 6) or None."""
@@ -63,12 +66,13 @@ def test_steps_add_as_correlated_errors_and_rejected_ones_add_nothing():
     """Four steps of 1 cm along x: 3 x 4 x 1 cm, not 3 x sqrt(4) x 1 cm; a rejected step adds nothing."""
     C = np.diag([1e-4, 1e-8, 1e-8, 0, 0, 0])
     reports = [_report(0, 0.0)] + [_report(i, float(i), C) for i in range(1, 5)]
-    bound = drift_bound(reports)
-    assert bound["bound_m"] == pytest.approx(0.12, rel=1e-3)
+    bound = drift_bound(reports, THREE)
+    assert bound["bound_m"] == pytest.approx(0.12, rel=1e-3) and bound["sigmas"] == 3.0
     assert bound["direction"] == "across the road (camera x)"
     with_rejected = reports + [_report(5, 5.0, np.eye(6), verdict="rejected")]
-    assert drift_bound(with_rejected)["bound_m"] == pytest.approx(0.12, rel=1e-3)
+    assert drift_bound(with_rejected, THREE)["bound_m"] == pytest.approx(0.12, rel=1e-3)
     assert drift_bound([_report(0, 0.0)])["bound_m"] == 0.0
+    assert drift_bound(reports)["bound_m"] == pytest.approx(HealthRules().drift_sigmas * 0.04, rel=1e-3)
 
 
 def test_a_heading_error_moves_the_road_still_to_drive():
@@ -76,7 +80,7 @@ def test_a_heading_error_moves_the_road_still_to_drive():
     s = math.radians(0.1)
     C = np.diag([0, 0, 0, 0, s * s, 0])
     reports = [_report(0, 0.0)] + [_report(i, float(i), C) for i in range(1, 5)]
-    bound = drift_bound(reports)
+    bound = drift_bound(reports, THREE)
     assert bound["bound_m"] == pytest.approx(3 * s * (3 + 2 + 1 + 0), rel=1e-3)
     assert bound["direction"] == "across the road (camera x)"
 
@@ -88,19 +92,19 @@ def test_a_degenerate_direction_carries_the_predictions_uncertainty():
     C = np.diag([1e-6] * 3 + [1e-10] * 3)
     corridor = _corridor_information()
     reports = [_report(0, 0.0)] + [_report(i, float(i), C, corridor) for i in range(1, 6)]
-    bound = drift_bound(reports)
+    bound = drift_bound(reports, THREE)
     assert bound["bound_m"] == pytest.approx(3 * (0.5 + 4 * 0.05), rel=1e-2)
     assert bound["direction"] == "along the road (camera z)" and bound["weakest_direction"] == bound["direction"]
-    s = summarise(reports)
+    s = summarise(reports, THREE)
     assert s["suspect"] and s["drift"]["from_frame"] == 1
     assert "along the road (camera z) left unconstrained, past 0.5 m from frame 1" in s["reasons"][-1]
     walled = [_report(0, 0.0)] + [_report(i, float(i), C, _corridor_information(along=50)) for i in range(1, 6)]
-    assert not summarise(walled)["suspect"] and summarise(walled)["drift"]["bound_m"] < 0.05
+    assert not summarise(walled, THREE)["suspect"] and summarise(walled, THREE)["drift"]["bound_m"] < 0.05
     late = [_report(0, 0.0), _report(1, 1.0, C, _corridor_information(along=50))] + \
         [_report(i, float(i), C, corridor) for i in range(2, 5)]
-    assert not summarise(late)["suspect"]                                   # 3 x 3 x 0.05 m
+    assert not summarise(late, THREE)["suspect"]                            # 3 x 3 x 0.05 m
     longer = late + [_report(i, float(i), C, corridor) for i in range(5, 8)]
-    assert summarise(longer)["suspect"] and summarise(longer)["drift"]["from_frame"] == 5   # 3 x 4 x 0.05 m
+    assert summarise(longer, THREE)["suspect"] and summarise(longer, THREE)["drift"]["from_frame"] == 5  # 3 x 4 x 0.05
     assert not summarise(reports, HealthRules(max_drift_m=0))["suspect"]
 
 
