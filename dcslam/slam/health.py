@@ -62,8 +62,8 @@ class HealthRules:
         sigmas (bounds of 0.70-1.07 m at 3 sigma on runs that end 0.09-0.41 m off): docs/slam.md.
     degenerate_share: a translation direction whose share of a step's information (:func:`step_degeneracy`) is
         below this is degenerate (Zhang & Singh): the pairs say next to nothing there, the pose along it is the
-        prediction's, and so is its uncertainty. On the calibration drives no step of a drive that ends within
-        0.5 m has a share below 0.033; the steps that erred 0.6-1.2 m along a weak direction had 0.011-0.019.
+        prediction's, and so is its uncertainty. On the calibration drives no step of the 52 runs that end within
+        0.5 m has a share below 0.030; the steps that erred 0.56-1.18 m along a weak direction had 0.011-0.019.
     prior_sigma_m: the constant-velocity prediction's standard deviation per step, used along a degenerate
         direction (a car changes its velocity by a few centimetres per frame at 10 Hz).
     first_prior_sigma_m: the same for the first ICP step, which has no velocity to predict from (a car moves
