@@ -68,7 +68,36 @@ def rescaled(rows: list[dict], sigmas: float) -> list[dict]:
 
     limit = HealthRules().max_drift_m
     return [{**r, "flagged": r["flagged_without_bound"] or r["drift"]["bound_m"] * sigmas / r["drift"]["sigmas"]
-             > limit} for r in rows]
+             > limit} for r in rows if r["flagged_without_bound"] is not None]
+
+
+def judge_completed(path: Path, kind: str, frames: int, folder: Path) -> dict:
+    """IP-Basic (fast) completing ``kind`` on a drive, written as a layer that says what it completed, then
+    ``dcslam slam`` on it with its companion (``--evidence auto``) -> one row (its final error and verdict; no
+    "before", which would need the former companion too)."""
+    import numpy as np
+
+    from dcslam.depth.models.ip_basic import fast
+    from dcslam.io.drive import DriveFile, Layer, load_depth, write_layer
+    from dcslam.stages import slam
+    from dcslam.workspace import Workspace
+
+    completer = fast()
+    layer = folder / f"{completer.name}-{kind}"
+    layer.mkdir(parents=True, exist_ok=True)
+    if not (layer / path.name).exists():
+        with DriveFile(path) as drive:
+            sparse = load_depth(drive, kind)
+        write_layer(layer / path.name, Layer(depth=np.stack([completer(d) for d in sparse]).astype(np.float32),
+                                             drive=path.stem, made_by=completer.name, config={"input": kind}))
+    result = slam.run(Workspace(folder / "ws"), slam.SlamStageConfig(
+        depth=str(layer), drive=[str(path)], frames=frames, out=folder / "slam" / layer.name, evidence="auto"),
+        force=True)[0]
+    health = result.summary["health"]
+    return {"drive": path.stem, "kind": f"{completer.name} ({kind})",
+            "final_m": result.summary["translation_error_m"]["final"], "flagged": bool(health["suspect"]),
+            "reasons": health["reasons"], "drift": health["drift"], "evidence": health["evidence"]["verdict"],
+            "flagged_without_bound": None, "flagged_before": None, "seconds": result.summary["seconds"]}
 
 
 def table(rows: list[dict], truth: float) -> list[str]:
@@ -82,9 +111,12 @@ def table(rows: list[dict], truth: float) -> list[str]:
         rs = rows if kind == "all" else groups[kind]
         bad = [r for r in rs if r["final_m"] > truth]
         good = [r for r in rs if r["final_m"] <= truth]
-        lines.append(f"| {kind} | {len(rs)} | {len(bad)} | {sum(r['flagged_before'] for r in bad)} / "
-                     f"{sum(r['flagged'] for r in bad)} | {sum(r['flagged_before'] for r in good)} / "
-                     f"{sum(r['flagged'] for r in good)} of {len(good)} |")
+        def before(runs):
+            known = [r["flagged_before"] for r in runs if r["flagged_before"] is not None]
+            return str(sum(known)) if len(known) == len(runs) else "-"
+
+        lines.append(f"| {kind} | {len(rs)} | {len(bad)} | {before(bad)} / {sum(r['flagged'] for r in bad)} | "
+                     f"{before(good)} / {sum(r['flagged'] for r in good)} of {len(good)} |")
     return lines
 
 
@@ -101,6 +133,8 @@ def main(argv=None) -> int:
     parser.add_argument("--drift-sigmas", default="", help="also tabulate the verdicts with these standard "
                                                            "deviations of the drift bound, comma-separated")
     parser.add_argument("--rows", action="store_true", help="re-read <out>/rows.json instead of running SLAM")
+    parser.add_argument("--ip-basic", action="store_true", help="also IP-Basic (fast) completing each sparse kind, "
+                                                                "judged with its companion")
     args = parser.parse_args(argv)
     if args.rows:
         rows = json.loads((args.out / "rows.json").read_text())
@@ -122,6 +156,13 @@ def main(argv=None) -> int:
                 print(f"{kind:10s} {path.stem} final {row['final_m']:6.3f} {'FLAG' if row['flagged'] else 'ok  '} "
                       f"before {'FLAG' if row['flagged_before'] else 'ok  '} bound {d['bound_m']:.2f} m "
                       f"{d['direction']} from {d['from_frame']} | {'; '.join(row['reasons'])[:160]}", flush=True)
+        for kind in ([f"sparse@{beams}"] + (["sparse"] if k == 0 else [])) if args.ip_basic else []:
+            for path in drives:
+                row = judge_completed(path, kind, args.slam_frames, args.out / f"beams{beams}")
+                rows.append(row)
+                print(f"{row['kind']:10s} {path.stem} final {row['final_m']:6.3f} "
+                      f"{'FLAG' if row['flagged'] else 'ok  '} evidence {row['evidence']} bound "
+                      f"{row['drift']['bound_m']:.2f} m | {'; '.join(row['reasons'])[:160]}", flush=True)
     (args.out / "rows.json").write_text(json.dumps(rows, indent=1, default=str))
     print_tables(rows, args)
     return 0
