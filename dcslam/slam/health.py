@@ -98,6 +98,7 @@ def assess(accepted: bool, reason: str, inliers: int, sources: int, conditioning
         reasons.append(f"{gap_m:.2f} m / {gap_deg:.1f} deg from the constant-velocity prediction")
     return ("degraded" if reasons else "accepted"), reasons
 
+
 #: Names of the camera axes (x right, y down, z forward): a direction is named by the axis it is closest to, in the
 #: camera frame of the step that contributes most to it.
 AXIS_NAMES = ("across the road (camera x)", "vertical (camera y)", "along the road (camera z)")
@@ -161,7 +162,8 @@ def _step_covariance(report, rules: HealthRules) -> np.ndarray | None:
 
 
 def _directions(n: int = 400) -> np.ndarray:
-    """``n`` unit directions spread evenly over the sphere (a Fibonacci lattice). Shape: (n, 3)."""
+    """``n`` unit directions spread evenly over a hemisphere (a Fibonacci lattice; u and -u bound alike).
+    Shape: (n, 3)."""
     i = np.arange(n) + 0.5
     polar, azimuth = np.arccos(1 - i / n), math.pi * (1 + 5 ** 0.5) * i
     return np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], 1)
@@ -184,7 +186,7 @@ def _correlated_std(P: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 
 def _worst_direction(P: np.ndarray) -> np.ndarray:
-    """The unit direction u maximising sum_i sqrt(u^T P_i u): the best of a lattice over the sphere, then the ascent
+    """The unit direction u maximising sum_i sqrt(u^T P_i u): the best of a lattice of directions, then the ascent
     u <- grad / |grad|, which never lowers a convex, positively homogeneous function such as this one. (3,)"""
     U = _directions()
     u = U[int(np.argmax(_correlated_std(P, U).sum(0)))]
@@ -216,14 +218,19 @@ def drift_bound(reports, rules: HealthRules | None = None) -> dict:
     "weakest_direction": its name}``; :func:`summarise` fills in ``from_frame`` (the first frame whose own bound
     along that direction exceeds ``max_drift_m``) when the bound exceeds it.
     """
-    rules = HealthRules() if rules is None else rules
+    return _drift(reports, HealthRules() if rules is None else rules)[0]
+
+
+def _drift(reports, rules: HealthRules) -> tuple[dict, tuple | None]:
+    """:func:`drift_bound`, and what :func:`_first_frame_over` needs to follow the bound frame by frame (None when
+    no step was measured)."""
     sigmas = rules.drift_sigmas
     steps = [r for r in reports if r.index > 0 and r.verdict != "rejected"]
     measured = [(r, C) for r, C in ((r, _step_covariance(r, rules)) for r in steps) if C is not None]
     empty = {"bound_m": 0.0, "sigmas": sigmas, "direction_world": None, "direction": None, "from_frame": None,
              "largest_frame": None, "weakest_frame": None, "weakest_share": None, "weakest_direction": None}
     if not measured:
-        return empty
+        return empty, None
     positions = np.stack([_numpy(r.T_world_cam)[:3, 3] for r in reports])
     index = {r.index: k for k, r in enumerate(reports)}
     R = np.stack([_numpy(r.T_world_cam)[:3, :3] for r, _ in measured])
@@ -245,8 +252,7 @@ def drift_bound(reports, rules: HealthRules | None = None) -> dict:
         frame, d = min(shares, key=lambda fd: fd[1]["translation"])
         result.update(weakest_frame=int(frame), weakest_share=round(d["translation"], 5),
                       weakest_direction=axis_name(d["translation_direction"]))
-    result["_curve"] = (u, A, X, B, at, positions)
-    return result
+    return result, (u, A, X, B, at, positions)
 
 
 def _first_frame_over(curve, sigmas: float, over_m: float, reports) -> int | None:
@@ -311,8 +317,7 @@ def summarise(reports, rules: HealthRules = HealthRules()) -> dict:
     if longest > rules.max_degraded_run:
         reasons.append(f"{longest} consecutive steps degraded")
     sigma = drift_sigma_m(reports)
-    drift = drift_bound(reports, rules)
-    curve = drift.pop("_curve", None)
+    drift, curve = _drift(reports, rules)
     if rules.max_drift_m > 0 and drift["bound_m"] > rules.max_drift_m:
         drift["from_frame"] = _first_frame_over(curve, rules.drift_sigmas, rules.max_drift_m, reports)
         reasons.append(f"accumulated uncertainty {drift['bound_m']:.2f} m ({rules.drift_sigmas:g} sigma, steps "

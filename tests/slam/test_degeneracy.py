@@ -1,5 +1,6 @@
 """The degeneracy analysis of ICP steps and the drift bound it feeds (dcslam.slam.health): a direction the scan
 leaves unconstrained is found, named, and carried into a bound that flags the run."""
+import json
 import math
 
 import numpy as np
@@ -106,6 +107,7 @@ def test_a_degenerate_direction_carries_the_predictions_uncertainty():
     longer = late + [_report(i, float(i), C, corridor) for i in range(5, 8)]
     assert summarise(longer, THREE)["suspect"] and summarise(longer, THREE)["drift"]["from_frame"] == 5  # 3 x 4 x 0.05
     assert not summarise(reports, HealthRules(max_drift_m=0))["suspect"]
+    assert json.loads(json.dumps(s))["drift"] == s["drift"]                 # written as is in the run's summary
 
 
 def test_axis_names():
