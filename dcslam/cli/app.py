@@ -20,11 +20,14 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
-    context_settings={"help_option_names": ["-h", "--help"]},
+    # click's plain help: Rich's option tables squeeze the help into ~15-character columns at 80 columns and show
+    # flags as if they took a <bool> value; the plain layout wraps help beside the options and lists flags bare
+    rich_markup_mode=None,
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 120},
 )
 
 WorkspaceOption = Annotated[Optional[Path], typer.Option(
-    "--workspace", "-w", envvar="DCSLAM_WORKSPACE", show_default="./workspace",
+    "--workspace", "-w", envvar="DCSLAM_WORKSPACE", show_default="./workspace", metavar="PATH",
     help="Workspace folder holding kitti/, drives/, runs/, predictions/, slam/, results/.")]
 ForceOption = Annotated[bool, typer.Option("--force", help="Overwrite outputs that exist.")]
 

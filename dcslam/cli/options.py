@@ -19,7 +19,7 @@ import typer
 from dcslam.cli.app import ForceOption, WorkspaceOption, known_errors, summary
 
 ConfigOption = Annotated[Optional[Path], typer.Option(
-    "--config", help="Read the options from this TOML (or YAML) file; options given here override it.")]
+    "--config", metavar="PATH", help="Read the options from this TOML (or YAML) file; options given here override it.")]
 PrintConfigOption = Annotated[bool, typer.Option(
     "--print-config", help="Print the configuration this command would run, as TOML, and exit.")]
 
@@ -40,7 +40,7 @@ def _parameter(cls, field) -> inspect.Parameter:
         annotation = Optional[annotation]
     flags = meta.get("flags", (f"--{field.name.replace('_', '-')}",))
     extra = {k: meta[k] for k in ("min", "max", "show_default", "metavar") if k in meta}
-    if is_list and "choices" not in meta and "metavar" not in meta:
+    if "choices" not in meta and "metavar" not in meta and base is not bool:  # FLOAT, not Typer's <float range>
         extra["metavar"] = "PATH" if base is Path else base.__name__.upper()
     if "validate" in meta:
         extra["callback"] = _usage_check(meta["validate"], flags[0])

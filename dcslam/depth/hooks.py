@@ -207,6 +207,34 @@ class EpochCallback(Hook):
         self.callback()
 
 
+class TensorBoardLog(Hook):
+    """The metrics rows also as TensorBoard event files in ``<run>/tensorboard/`` (``dcslam train --log tensorboard``;
+    needs the ``tensorboard`` package), written as they come so the curves can be watched while the run trains. A
+    fresh run starts the folder empty; a resumed one drops the events after its checkpoint."""
+
+    FOLDER = "tensorboard"
+
+    def __init__(self) -> None:
+        self._writer = None
+
+    def before_train(self, state: TrainState) -> None:
+        from dcslam.depth.tensorboard import TensorBoardWriter
+
+        log_dir = state.run_dir / self.FOLDER
+        if state.resumed_lines is None and log_dir.is_dir():
+            for old in log_dir.glob("events.out.tfevents.*"):
+                old.unlink()
+        self._writer = TensorBoardWriter(log_dir, purge_step=None if state.resumed_lines is None else state.step)
+
+    def write(self, state: TrainState, row: dict) -> None:
+        self._writer.write(row)
+
+    def after_train(self, state: TrainState) -> None:
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+
+
 def default_hooks(rank: int, validation: bool, map_builder=None, on_epoch=None) -> list[Hook]:
     """The hooks of a run on process ``rank``: the schedule everywhere; files, validation and ``on_epoch`` on rank 0
     (``validation``: whether the run has validation drives)."""

@@ -30,8 +30,7 @@ def relative_motion(T_a, T_b):
     if torch is not None and (isinstance(T_a, torch.Tensor) or isinstance(T_b, torch.Tensor)):
         return _relative_motion_torch(torch, T_a, T_b)
     A, B = (np.asarray(T, dtype=np.float64) for T in (T_a, T_b))
-    _check_shapes(A.shape, B.shape)
-    batch = np.broadcast_shapes(A.shape[:-2], B.shape[:-2])
+    batch = _batch_shape(A.shape, B.shape)
     X = np.linalg.solve(np.broadcast_to(A, batch + (4, 4)), np.broadcast_to(B, batch + (4, 4)))
     R = X[..., :3, :3]
     vee = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], -1)
@@ -42,8 +41,8 @@ def relative_motion(T_a, T_b):
 def _relative_motion_torch(torch, T_a, T_b):
     device = T_a.device if isinstance(T_a, torch.Tensor) else T_b.device
     A, B = (torch.as_tensor(T, device=device).to(torch.float64) for T in (T_a, T_b))
-    _check_shapes(tuple(A.shape), tuple(B.shape))
-    batch = torch.broadcast_shapes(A.shape[:-2], B.shape[:-2])
+    # NumPy's broadcast of the batch shapes: torch.broadcast_shapes imports sympy on its first call (~0.5 CPU-s)
+    batch = _batch_shape(tuple(A.shape), tuple(B.shape))
     X = torch.linalg.solve(A.expand(*batch, 4, 4), B.expand(*batch, 4, 4))
     R = X[..., :3, :3]
     vee = torch.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], -1)
@@ -51,11 +50,12 @@ def _relative_motion_torch(torch, T_a, T_b):
     return X[..., :3, 3].norm(dim=-1), torch.atan2(vee.norm(dim=-1) / 2.0, cos)
 
 
-def _check_shapes(a: tuple, b: tuple) -> None:
+def _batch_shape(a: tuple, b: tuple) -> tuple[int, ...]:
+    """The broadcast batch shape of poses of shapes ``a`` and ``b`` (each (..., 4, 4)), checked."""
     for name, shape in (("T_a", a), ("T_b", b)):
         if len(shape) < 2 or tuple(shape[-2:]) != (4, 4):
             raise DcslamError(f"{name} has shape {tuple(shape)}, expected (..., 4, 4)")
     try:
-        np.broadcast_shapes(tuple(a[:-2]), tuple(b[:-2]))
+        return np.broadcast_shapes(tuple(a[:-2]), tuple(b[:-2]))
     except ValueError:
         raise DcslamError(f"poses of shapes {tuple(a)} and {tuple(b)} do not broadcast") from None

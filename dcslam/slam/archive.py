@@ -1,12 +1,15 @@
 """Where the points that leave a local map go: an append-only archive in an unnamed temporary file, so that a long
 drive's memory stays flat and its whole map can still be written at the end.
 
-Each appended part is stored as the raw bytes of its :class:`~dcslam.slam.pointmap.PointMap` fields, one field
-after the other; only the part sizes and dtypes stay in memory. The file is deleted when the archive is cleared,
-closed or collected (``tempfile.TemporaryFile``).
+Each appended part is stored as the raw bytes of its fields (a dataclass of tensors, one row per point, such as
+:class:`~dcslam.slam.pointmap.PointMap`), one field after the other; only the part sizes and the fields' dtypes and
+shapes stay in memory, and :meth:`MapArchive.read` rebuilds the appended class from them, so this module needs no
+map module (nothing here imports :mod:`dcslam.slam.pointmap`, which imports this one). The file is deleted when
+the archive is cleared, closed or collected (``tempfile.TemporaryFile``).
 """
 from __future__ import annotations
 
+import math
 import tempfile
 from dataclasses import fields
 
@@ -26,7 +29,9 @@ class MapArchive:
 
     def __init__(self) -> None:
         self._file = None
-        self._parts: list[tuple[int, int, torch.dtype]] = []       # (offset in bytes, points, float dtype)
+        # (offset in bytes, points, ((field, dtype, shape per point), ...)) per part
+        self._parts: list[tuple[int, int, tuple[tuple[str, torch.dtype, tuple[int, ...]], ...]]] = []
+        self._kind = None                      # the class of the appended maps
         self._points = 0
         self.nbytes = 0                        # bytes in the file
 
@@ -34,44 +39,47 @@ class MapArchive:
         return self._points
 
     def append(self, pm) -> None:
-        """Store the points of ``pm`` (a :class:`PointMap`; gradients are not kept)."""
+        """Store the points of ``pm`` (a :class:`PointMap`, or any dataclass of tensors with one row per point;
+        gradients are not kept). Every part is of the first part's class."""
         if len(pm) == 0:
             return
+        if self._kind is not None and type(pm) is not self._kind:
+            raise DcslamError(f"map archive holds {self._kind.__name__} parts, not {type(pm).__name__}")
         if self._file is None:
             self._file = tempfile.TemporaryFile(prefix="dcslam-map-archive-")
         self._file.seek(0, 2)
         offset = self._file.tell()
+        layout = []
         for f in fields(pm):
-            self._file.write(getattr(pm, f.name).detach().cpu().contiguous().numpy().tobytes())
+            column = getattr(pm, f.name).detach()
+            self._file.write(column.cpu().contiguous().numpy().tobytes())
+            layout.append((f.name, column.dtype, tuple(column.shape[1:])))
         self.nbytes = self._file.tell()
-        self._parts.append((offset, len(pm), pm.points.dtype))
+        self._kind = type(pm)
+        self._parts.append((offset, len(pm), tuple(layout)))
         self._points += len(pm)
 
     def read(self):
-        """Every archived point, detached, on the CPU, in append order -> :class:`PointMap` or None when empty."""
-        from dcslam.slam.pointmap import PointMap
-
+        """Every archived point, detached, on the CPU, in append order -> the appended class (:class:`PointMap`)
+        or None when empty."""
         if not self._parts:
             return None
-        template = PointMap.empty()
-        columns: dict[str, list[torch.Tensor]] = {f.name: [] for f in fields(template)}
-        for offset, n, dtype in self._parts:
+        columns: dict[str, list[torch.Tensor]] = {name: [] for name, _, _ in self._parts[0][2]}
+        for offset, n, layout in self._parts:
             self._file.seek(offset)
-            for f in fields(template):
-                column = getattr(template, f.name)
-                kind = dtype if column.is_floating_point() else column.dtype
-                shape = (n, column.shape[1]) if column.ndim == 2 else (n,)
-                nbytes = int(np.prod(shape)) * torch.empty(0, dtype=kind).element_size()
+            for name, dtype, tail in layout:
+                shape = (n, *tail)
+                kind = torch.empty(0, dtype=dtype).numpy().dtype
+                nbytes = math.prod(shape) * kind.itemsize
                 raw = self._file.read(nbytes)
                 if len(raw) != nbytes:
                     raise DcslamError(f"map archive {self._file.name}: truncated (the temporary file was changed "
                                       "outside dcslam); run the SLAM again")
-                array = np.frombuffer(raw, dtype=torch.empty(0, dtype=kind).numpy().dtype).reshape(shape)
-                columns[f.name].append(torch.from_numpy(array.copy()))
-        return PointMap(**{name: torch.cat(parts) for name, parts in columns.items()})
+                columns[name].append(torch.from_numpy(np.frombuffer(raw, dtype=kind).reshape(shape).copy()))
+        return self._kind(**{name: torch.cat(parts) for name, parts in columns.items()})
 
     def clear(self) -> None:
         """Forget every point and delete the file."""
         if self._file is not None:
             self._file.close()
-        self._file, self._parts, self._points, self.nbytes = None, [], 0, 0
+        self._file, self._parts, self._kind, self._points, self.nbytes = None, [], None, 0, 0

@@ -39,10 +39,12 @@ class ProjectiveAssociation:
             self.T_ref_world = inverse(target.T_world_cam)
             self.height, self.width = target.valid.shape
             self.valid = target.valid.reshape(-1)
-            self.vertex, self.normal = target.vertex.reshape(-1, 3), target.normal.reshape(-1, 3)
+            # point and normal side by side: one gather per iteration fetches both
+            self.table = torch.cat([target.vertex.reshape(-1, 3), target.normal.reshape(-1, 3)], 1)
 
         def __call__(self, points_world: torch.Tensor):
-            """points_world (F, 3) -> (source index (M,), target points (M, 3), target normals (M, 3))."""
+            """points_world (F, 3) -> (source index (M,), target points (M, 3), target normals (M, 3)); the targets
+            are views into one (M, 6) tensor."""
             uv, z = project(transform_points(self.T_ref_world, points_world.detach()), self.target.K)
             px = torch.round(uv)
             inside = (z > 0) & (px[:, 0] >= 0) & (px[:, 0] <= self.width - 1) & (px[:, 1] >= 0) & \
@@ -52,8 +54,8 @@ class ProjectiveAssociation:
             pix = torch.where(inside[:, None], px, torch.zeros((), dtype=px.dtype, device=px.device)).to(torch.int64)
             lin = pix[:, 1] * self.width + pix[:, 0]
             src = torch.nonzero(inside & self.valid.index_select(0, lin)).squeeze(1)
-            lin = lin.index_select(0, src)
-            return src, self.vertex.index_select(0, lin), self.normal.index_select(0, lin)
+            pairs = self.table.index_select(0, lin.index_select(0, src))
+            return src, pairs[:, :3], pairs[:, 3:]
 
 
 class NearestNeighbourAssociation:

@@ -28,7 +28,9 @@ from dcslam.slam.solvers import GaussNewton, Linearization
 @dataclass
 class OdometryResult:
     """Shape: T_world_cam (4, 4). ``accepted`` false means the estimate was rejected (``reason`` says why) and
-    ``T_world_cam`` is the initial guess."""
+    ``T_world_cam`` is the initial guess. ``information`` (6, 6): J^T W J of the final pairs at the estimate, and
+    ``covariance`` (6, 6): :meth:`PointToPlane.covariance`, both float64 over the twist (translation, rotation) in the
+    camera frame (None when the step never got that far): the degeneracy analysis of :mod:`dcslam.slam.health`."""
 
     T_world_cam: torch.Tensor
     accepted: bool = True
@@ -41,6 +43,8 @@ class OdometryResult:
     gate: float = math.nan
     sigma_m: float = math.nan
     sigma_deg: float = math.nan
+    information: torch.Tensor | None = None
+    covariance: torch.Tensor | None = None
 
 
 #: Iterations of each wide-gate ICP stage on dense depth (a value at more than :data:`DENSE_FRACTION` of the
@@ -107,6 +111,7 @@ class PointToPlane:
         self.hold_below = hold_below
         self.scale = float(source.detach().norm(dim=1).mean()) if source.shape[0] else 1.0
         self.pairs = None
+        self._usable = None if weights is None else weights.detach() > 0   # the weight gate, once per problem
 
     def residuals(self, T: torch.Tensor):
         """(residuals (M,), inlier source index (M,), target points (M, 3), target normals (M, 3)) at pose T."""
@@ -116,8 +121,8 @@ class PointToPlane:
         ok = ((diff.detach() ** 2).sum(1) < self.max_distance ** 2) & \
              ((rotate(T.detach(), self.source_normals.detach().index_select(0, src)) * n.detach()).sum(1)
               > self.cos_max_angle)
-        if self.weights is not None:
-            ok &= self.weights.detach().index_select(0, src) > 0
+        if self._usable is not None:
+            ok &= self._usable.index_select(0, src)
         keep = torch.nonzero(ok).squeeze(1)         # one nonzero and index_select: cheaper than four masks
         n = n.index_select(0, keep)
         return (diff.index_select(0, keep) * n).sum(1), src.index_select(0, keep), q.index_select(0, keep), n
@@ -294,6 +299,7 @@ class ICPOdometry:
             return OdometryResult(T_init, False, f"{lin.count} inliers", **base)
         base["conditioning"] = conditioning = self._conditioning(lin, source)
         cov = problem.covariance(T, lin, r)
+        base["information"], base["covariance"] = lin.H.detach().double(), cov
         base["sigma_m"] = math.sqrt(max(float(torch.linalg.eigvalsh(cov[:3, :3])[-1]), 0.0))
         base["sigma_deg"] = math.degrees(math.sqrt(max(float(torch.linalg.eigvalsh(cov[3:, 3:])[-1]), 0.0)))
         if conditioning < self.min_conditioning:

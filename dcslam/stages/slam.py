@@ -12,6 +12,7 @@ The configuration extends :class:`dcslam.slam.config.SlamSettings`, so a field a
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -68,6 +69,10 @@ class SlamStageConfig(SlamSettings):
         "measured LiDAR pixels behind it and flag the run when its trajectory leaves that companion's by more than "
         "the companion's own uncertainty allows; none: no companion (the summary says that no evidence bounds "
         "the drift). A sparse input is its own evidence."))
+    record: bool = option(False, help=(
+        "Also write a Rerun recording <out>/<drive>.rrd per drive: per frame the camera image, input depth, points, "
+        "ICP sources, map and step verdict, and the trajectories; open it with `dcslam view`. Needs rerun-sdk "
+        "(pip install 'dcslam[viz]', Python >= 3.11)."))
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -125,6 +130,10 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
     from dcslam.device import resolve_device
 
     resolve_device(config.device)  # a GPU asked for on a CPU-only torch: one line, before any work
+    if config.record:
+        from dcslam.slam.record import require_rerun
+
+        require_rerun()  # rerun-sdk missing: one line, before any work
     from dcslam.io.lineage import check_layer_folder
     from dcslam.locks import output_lock
 
@@ -137,13 +146,11 @@ def _run_drives(config: SlamStageConfig, layer, paths: list[Path], out_dir: Path
                 force: bool) -> list[SlamDriveResult]:
     """SLAM over the drive files ``paths`` with depth from ``layer``, into ``out_dir`` (its lock held)."""
     from dcslam.allocator import fix_mmap_threshold
-    from dcslam.slam.config import build_slam
-    from dcslam.stages.config import to_dict
 
     jobs = []
     for path in paths:
         source = layer.require(path.stem)
-        check_outputs(out_dir, path.stem, force)
+        check_outputs(out_dir, path.stem, force, config.record)
         if config.min_confidence > 0 and not has_confidence(source):
             raise DcslamError(f"--min-confidence {config.min_confidence}: {source} holds no confidence (only layers "
                               f"predicted by a confidence-aware model such as `dcslam train --model nconv` have one); "
@@ -161,13 +168,7 @@ def _run_drives(config: SlamStageConfig, layer, paths: list[Path], out_dir: Path
     with torch_threads(config.threads):
         for path, source, measured in jobs:
             inputs = made_from({"depth": source if isinstance(source, Path) else None}, out_dir)  # as it is read
-            drive_run = run_drive_file(path, source, build_slam(config.settings()), config.frames or None,
-                                       config.device, settings={**to_dict(config), "source": str(source)},
-                                       confidence=config.confidence_use(), sources_kind=measured)
-            drive_run.name = path.stem
-            drive_run.evidence = companion_evidence(path, source, drive_run, config, measured)
-            written = write_outputs(drive_run, out_dir, force, inputs)
-            results.append(SlamDriveResult(path.stem, drive_run.summary(), written))
+            results.append(slam_drive(path, source, measured, config, out_dir, force, inputs))
     suspect = [r for r in results if r.summary["health"]["suspect"]]
     if config.strict and suspect:
         raise DcslamError("suspect trajectories (--strict): " + "; ".join(
@@ -185,6 +186,32 @@ def _kept_line(out_dir: Path, drives: list[str]) -> str | None:
         return None
     return (f"the SLAM outputs of {', '.join(done)} are kept, complete, in {out_dir} (the drive being run left "
             "none that a reader takes); rerun with --drive naming the others, or the same command with --force")
+
+
+def slam_drive(path: Path, source: str | Path, measured: str | None, config: SlamStageConfig, out_dir: Path,
+               force: bool, made_from: dict | None = None) -> SlamDriveResult:
+    """One drive: SLAM over it, its companion evidence and its outputs (``made_from``: its inputs' identities,
+    :func:`write_outputs`); with ``config.record`` also its recording (:mod:`dcslam.slam.record`), which a
+    companion run adds its trajectory to."""
+    from dcslam.slam.config import build_slam
+    from dcslam.slam.record import drive_recording, recording_path
+    from dcslam.stages.config import to_dict
+
+    recording = recording_path(out_dir, path.stem)
+    with drive_recording(recording, force) if config.record else contextlib.nullcontext() as recorder:
+        drive_run = run_drive_file(path, source, build_slam(config.settings()), config.frames or None,
+                                   config.device, settings={**to_dict(config), "source": str(source)},
+                                   confidence=config.confidence_use(), sources_kind=measured,
+                                   on_step=None if recorder is None else recorder.step)
+        drive_run.name = path.stem
+        companions: list[DriveRun] = []
+        drive_run.evidence = companion_evidence(path, source, drive_run, config, measured, companions.append)
+        written = write_outputs(drive_run, out_dir, force, made_from)
+        if recorder is not None:
+            recorder.finish(drive_run, companions[0] if companions else None)
+    if config.record:
+        written["recording"] = recording
+    return SlamDriveResult(path.stem, drive_run.summary(), written)
 
 
 def measured_sources(config: SlamStageConfig, source: str | Path, drive_path: Path) -> str | None:
@@ -246,13 +273,13 @@ def run_drive_file(drive_path: Path, source: str | Path, slam, frames: int | Non
 
 
 def companion_evidence(drive_path: Path, source: str | Path, main: DriveRun, config: SlamStageConfig,
-                       sources_kind: str | None = None) -> dict:
+                       sources_kind: str | None = None, keep: Callable[[DriveRun], None] | None = None) -> dict:
     """The evidence verdict of ``main`` (a run over ``source`` on ``drive_path``):
     :func:`dcslam.slam.drive.companion_verdict` against a companion run with the same settings and frames on the
     measured depth kind behind ``source`` (:func:`dcslam.io.drive.measured_kind`; with measured ICP sources,
     ``sources_kind``, the kind they came from, so that exact depth aligned by 16-beam points is checked against
-    16-beam SLAM); ``own`` for a sparse input, ``off`` with ``--evidence none``, ``unavailable`` when no measured
-    kind can be named or the drive lacks it."""
+    16-beam SLAM), the companion run handed to ``keep`` when given; ``own`` for a sparse input, ``off`` with
+    ``--evidence none``, ``unavailable`` when no measured kind can be named or the drive lacks it."""
     from dcslam.io.drive import DriveFile, is_depth_kind, measured_kind
     from dcslam.slam.config import build_slam
     from dcslam.slam.drive import companion_verdict
@@ -272,6 +299,8 @@ def companion_evidence(drive_path: Path, source: str | Path, main: DriveRun, con
         return unavailable(f"{drive_path.name} holds no {kind} depth")
     companion = run_drive_file(drive_path, kind, build_slam(config.settings()), config.frames or None,
                                config.device, description=f"{drive_path.stem} companion {kind}")
+    if keep is not None:
+        keep(companion)
     return companion_verdict(main, companion, kind)
 
 
@@ -282,9 +311,11 @@ def output_paths(out_dir: Path, name: str) -> dict[str, Path]:
             "map": out_dir / f"{name}.ply", "summary": out_dir / f"{name}.json", "done": out_dir / f"{name}.done"}
 
 
-def check_outputs(out_dir: Path, name: str, force: bool) -> None:
-    """Fail before any work if an output exists and ``force`` is false."""
-    for path in output_paths(out_dir, name).values():
+def check_outputs(out_dir: Path, name: str, force: bool, record: bool = False) -> None:
+    """Fail before any work if an output (with ``record``, the recording too) exists and ``force`` is false."""
+    from dcslam.slam.record import recording_path
+
+    for path in [*output_paths(out_dir, name).values(), *([recording_path(out_dir, name)] if record else [])]:
         if path.exists() and not force:
             raise DcslamError(f"{path} exists; pass --force to overwrite it")
 

@@ -164,7 +164,8 @@ def test_score_depth_reports_the_surface_against_exact_depth(cli, step_ws):
 def test_score_trajectory_layer_and_files(cli, ws):
     result = cli("score", "trajectory", "-w", ws, "--layer", "sparse")
     assert result.exit_code == 0, result.output
-    rows = read_csv(ws / "results" / "trajectory_sparse.csv")
+    assert "ATE aligned" in result.stdout and "ate_aligned_rmse" not in result.stdout  # headers read by people
+    rows = read_csv(ws / "results" / "trajectory_sparse.csv")  # keys, read by programs
     assert [r["trajectory"] for r in rows] == ["d0", "d1"] and rows[0]["poses"] == "3"
     # x drifts by 0, 1, 2 m: unaligned ATE errors 0, 1, 2 → rmse sqrt(5/3); RPE translation 1 m every step
     assert float(rows[0]["ate_rmse"]) == pytest.approx(np.sqrt(5 / 3), rel=1e-6)

@@ -1,4 +1,7 @@
 import math
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -93,3 +96,17 @@ class TestRelativeMotion:
         T_a = _random_poses(3, seed=4).requires_grad_()
         T_b = (T_a.detach() @ se3_exp(0.4 * torch.randn(3, 6, dtype=torch.float64))).requires_grad_()
         assert torch.autograd.gradcheck(lambda a, b: relative_motion(a, b), (T_a, T_b))
+
+
+def test_torch_motion_does_not_import_sympy():
+    """torch.broadcast_shapes imports sympy on its first call (about half a CPU-second per process): the torch path
+    broadcasts the batch shapes without it. Checked in a fresh process, where nothing else has imported it."""
+    code = ("import sys, torch\n"
+            "from dcslam.geometry.motion import relative_motion\n"
+            "assert 'sympy' not in sys.modules, 'torch itself imported sympy'\n"
+            "m, r = relative_motion(torch.eye(4).expand(2, 4, 4), torch.eye(4, dtype=torch.float64))\n"
+            "assert m.shape == (2,) and r.shape == (2,)\n"
+            "print('sympy' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert out.stdout.strip() == "False"

@@ -3,7 +3,7 @@ import torch
 
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import backproject
-from dcslam.geometry.normals import vertex_normals
+from dcslam.geometry.normals import _grid_normals, _scan_line_normals, vertex_normals
 
 K = torch.tensor([[40.0, 0, 15.5], [0, 40.0, 11.5], [0, 0, 1]], dtype=torch.float64)
 
@@ -39,6 +39,27 @@ class TestVertexNormals:
             lines, lines_ok = vertex_normals(vertex, search=2)
             assert torch.equal(grid_ok, lines_ok) and torch.equal(grid, lines)
             assert grid_ok.any() and not grid_ok.all()  # the edges left pixels without a normal
+
+    def test_grid_pass_matches_the_scan_line_path_with_holes(self):
+        """The one-pass grid path (masks instead of torch.where, views into one padded copy) gives the scan-line
+        path's bits at search = 1 with holes, depth edges, image borders and a nearly degenerate column; their
+        gradients agree to float rounding (the sums run in another order)."""
+        g = torch.Generator().manual_seed(1)
+        for dtype, tol in ((torch.float32, 1e-6), (torch.float64, 1e-14)):
+            depth = 3 + torch.rand(2, 1, 19, 23, generator=g, dtype=torch.float64)
+            depth[..., 7:, 11:] += 6.0
+            depth[torch.rand(depth.shape, generator=g) < 0.25] = 0
+            depth[..., :, 0] = 1.0 + 1e-9 * torch.arange(19, dtype=torch.float64)
+            vertex = backproject(depth.to(dtype), K.to(dtype)).requires_grad_()
+            valid = vertex.detach()[:, 2:3] > 0
+            grid, grid_ok = _grid_normals(vertex, valid, 0.1)
+            lines, lines_ok = _scan_line_normals(vertex, valid, 1, 0.1)
+            assert torch.equal(grid_ok, lines_ok) and torch.equal(grid, lines)
+            assert 0 < int(grid_ok.sum()) < int(valid.sum())
+            w = torch.randn(grid.shape, generator=g, dtype=torch.float64).to(dtype)
+            g_grid, = torch.autograd.grad((grid * w).sum(), vertex)
+            g_lines, = torch.autograd.grad((lines * w).sum(), vertex)
+            assert float((g_grid - g_lines).abs().max()) <= tol * float(g_lines.abs().max())
 
     def test_faces_camera(self):
         depth = torch.full((2, 1, 8, 9), 3.0, dtype=torch.float64)
@@ -76,6 +97,14 @@ class TestVertexNormals:
     def test_gradcheck(self):
         depth = (torch.rand(1, 1, 5, 6, dtype=torch.float64) * 0.1 + 2).requires_grad_()
         assert torch.autograd.gradcheck(lambda d: vertex_normals(backproject(d, K))[0], (depth,))
+
+    def test_gradcheck_grid_with_holes_and_edges(self):
+        depth = torch.rand(1, 1, 6, 7, dtype=torch.float64, generator=torch.Generator().manual_seed(2)) * 0.1 + 2
+        depth[..., 3:, 4:] += 1.0                       # a depth edge the normals must not cross
+        depth[..., 2, 2] = 0                            # a hole
+        depth.requires_grad_()
+        valid = depth.detach() > 0
+        assert torch.autograd.gradcheck(lambda d: vertex_normals(backproject(d, K), valid)[0], (depth,))
 
     def test_errors(self):
         with pytest.raises(DcslamError, match=r"\(B, 3, H, W\)"):

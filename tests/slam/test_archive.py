@@ -56,3 +56,35 @@ def test_truncated_archive_file_is_refused():
     archive._file.truncate(100)
     with pytest.raises(DcslamError, match="truncated"):
         archive.read()
+
+
+def test_archive_imports_no_map_module():
+    """archive and pointmap imported each other (pointmap at the top, archive inside read): the archive rebuilds
+    the appended class from what it recorded, so no import of dcslam.slam.pointmap is left anywhere in it."""
+    import ast
+    import inspect
+
+    import dcslam.slam.archive as archive_module
+
+    tree = ast.parse(inspect.getsource(archive_module))
+    imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
+    imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
+    assert not any(name.startswith("dcslam.slam") for name in imported), imported
+
+
+def test_parts_of_another_class_are_refused():
+    from dataclasses import dataclass
+
+    @dataclass
+    class Other:
+        points: torch.Tensor
+
+        def __len__(self) -> int:
+            return self.points.shape[0]
+
+    archive = MapArchive()
+    archive.append(Other(torch.ones(3, 2, dtype=torch.float16)))
+    out = archive.read()
+    assert type(out) is Other and out.points.dtype == torch.float16 and torch.equal(out.points, torch.ones(3, 2))
+    with pytest.raises(DcslamError, match="Other parts, not PointMap"):
+        archive.append(_points(2, torch.float32, 0))
