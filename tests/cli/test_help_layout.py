@@ -25,3 +25,11 @@ def test_options_name_their_value_type_and_keep_their_help_beside_them():
     assert re.search(r"^  --max-distance FLOAT +ICP outlier gate, metres\.", output, re.M)
     assert re.search(r"^  --record +Also write a Rerun recording", output, re.M)
     assert re.search(r"^  -w, --workspace PATH +Workspace folder", output, re.M)
+
+
+@pytest.mark.parametrize("command", [[], ["score"]])
+def test_every_command_summary_shows_whole_at_80_columns(command):
+    output = CliRunner().invoke(app, [*command, "--help"], env={"COLUMNS": "80"}).output
+    listed = output.split("Commands:\n", 1)[1].splitlines()
+    assert len(listed) >= 6 and all(line.startswith("  ") for line in listed if line)
+    assert not [line for line in listed if line.endswith("...")]  # click cuts a summary too long for the width
