@@ -189,6 +189,35 @@ def test_independent_slam_stages_run_in_worker_processes(tmp_path):
     assert not json.loads((tmp_path / ".reproduce" / "fail.json").read_text())["complete"]  # claims nothing
 
 
+def test_stamps_record_the_cpu_seconds_of_the_process_that_ran_the_stage(tmp_path):
+    """A stage that computes for 0.3 s and one that sleeps 0.3 s, in this process and in worker processes: both
+    stamps record ~0.3 wall seconds, only the first ~0.3 CPU seconds (measured where the stage ran)."""
+    for jobs in (1, 2):
+        ws = Workspace(tmp_path / f"jobs{jobs}")
+        stages = [Stage(f"{what}-{jobs}", _busy, SlamStageConfig(frames=frames, out=ws.root / f"{what}.txt"),
+                        outputs=lambda p=ws.root / f"{what}.txt": [p])
+                  for what, frames in (("compute", 1), ("sleep", 2))]
+        Pipeline(ws).run_all(stages, jobs=jobs)
+        compute, sleep = (json.loads((ws.root / ".reproduce" / f"{s.name}.json").read_text()) for s in stages)
+        assert compute["seconds"] >= 0.3 and sleep["seconds"] >= 0.3
+        assert compute["cpu_seconds"] >= 0.25, (jobs, compute)  # in a worker: its CPU, not the parent's idle wait
+        assert sleep["cpu_seconds"] < 0.2, (jobs, sleep)
+
+
+def _busy(ws, config, *, force=False):
+    """A stage that computes (frames 1) or sleeps (frames 2) for 0.3 s (module level, for a spawned worker)."""
+    import time
+
+    if config.frames == 1:
+        start = time.process_time()
+        while time.process_time() - start < 0.3:
+            pass
+    else:
+        time.sleep(0.3)
+    config.out.parent.mkdir(parents=True, exist_ok=True)
+    config.out.write_text("done")
+
+
 def _touch(ws, config, *, force=False):
     """A stage for the worker test (module level, so a spawned worker can import it)."""
     import torch
@@ -206,7 +235,7 @@ def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(cli, tmp
     assert result.exit_code == 0, result.output
     printed = tomllib.loads(result.stdout)  # still a --config file of reproduce: the stages are comments
     assert printed == {"table": "5.2", "profile": "quick", "seed": 0, "force": False, "jobs": 1, "executor": "local",
-                       "slurm": {}, "dry_run": False}
+                       "slurm": {}, "dry_run": False, "calibrate": False}
     assert not ws.exists()  # nothing run, nothing written
     stages = read_stage_configs(result.stdout)
     names = list(stages)
