@@ -123,7 +123,10 @@ def test_smoke_profile_runs_every_stage_and_writes_the_tables(cli, tmp_path):
     processes of --jobs are tested on their own, below)."""
     import csv
 
-    result = cli("reproduce", "--profile", "smoke", "--workspace", tmp_path)
+    from dcslam.stages.slam import torch_threads
+
+    with torch_threads(1):  # the cost model's CPU seconds are one thread's, as the probe measures them
+        result = cli("reproduce", "--profile", "smoke", "--workspace", tmp_path)
     assert result.exit_code == 0, result.output
     results = tmp_path / "results"
     for name in ("table_5_1.md", "table_5_1.csv", "table_5_2.md", "table_5_2.csv", "table_5_2_per_drive.csv",
@@ -159,6 +162,38 @@ def test_smoke_profile_runs_every_stage_and_writes_the_tables(cli, tmp_path):
     again = cli("reproduce", "--profile", "smoke", "--workspace", tmp_path)
     assert again.exit_code == 0, again.output
     assert "[run]" not in again.stderr and again.stderr.count("[skip]") >= 20
+    _estimate_is_within_1_5_of_the_measured_cost(tmp_path)
+
+
+def _estimate_is_within_1_5_of_the_measured_cost(root):
+    """The cost the dry run estimates for the smoke profile, from the unit costs the probe measures on this machine
+    (``--calibrate``), is within x1.5 of the CPU seconds the smoke run's stamps recorded; an estimate 3x too high
+    fails the same check."""
+    from dcslam.stages.reproduce_cost import UnitCosts, estimate, measure, planned_drives, unit_costs
+    from dcslam.stages.reproduce_plan import planned_splits
+    from dcslam.stages.reproduce_probe import calibrate
+
+    stamps = [json.loads(p.read_text()) for p in (root / ".reproduce").glob("*.json") if p.stem != "splits"]
+    assert all(isinstance(s["cpu_seconds"], float) and s["cpu_seconds"] > 0 for s in stamps)
+    measured = measure(root)
+    total = sum(seconds for seconds, _, _ in measured.values())
+    probe = Workspace(root.parent / f"{root.name}-probe")
+    calibrate(probe, PROFILES["smoke"])
+    costs = unit_costs(probe.root, profile="smoke")
+    assert costs.source.startswith("dcslam reproduce --calibrate --profile smoke")
+    plan = Workspace(root.parent / f"{root.name}-plan")  # the plan as the dry run sees it, before anything ran
+    stages = planned_stages(plan, PROFILES["smoke"])
+    drives = planned_drives(plan, PROFILES["smoke"], None, planned_splits(plan, PROFILES["smoke"]))
+    estimated = estimate(stages, drives, costs)
+
+    def within(seconds: float) -> bool:
+        return 1 / 1.5 <= seconds / total <= 1.5
+
+    per_kind = {kind: (round(estimated.rows[kind][2], 1), round(measured[kind][0], 1)) for kind in measured}
+    assert within(estimated.total_seconds), (estimated.total_seconds, total, per_kind)
+    wrong = UnitCosts({k: 3 * v for k, v in costs.per_unit.items()}, "3x",
+                      {k: 3 * v for k, v in costs.per_stage.items()})
+    assert not within(estimate(stages, drives, wrong).total_seconds)
 
 
 def test_quick_profile_has_four_test_drives_and_profiles_check_their_split():
