@@ -11,10 +11,11 @@ SLAM settings), so unit costs hold for the profile they were measured at. Unit c
   :mod:`dcslam.stages.reproduce_probe` runs small samples of every stage kind at two sizes and fits ``stage_s`` and
   ``unit_s``; written to ``<workspace>/.reproduce/calibration.json``);
 - else the workspace's own finished stages;
-- else ``reproduce_costs.json`` (shipped with dcslam: the probe's figures on the machine its ``source`` names).
+- else ``reproduce_costs.json`` (shipped with dcslam: the probe's figures on the machine its ``note`` names; a
+  profile it lacks gets quick's, and the source says so).
 
 Seconds are CPU seconds of one torch thread (the probe runs one; a stage that runs more threads spends more CPU for
-less wall time), so their sum bounds the wall time at ``--jobs 1``.
+less wall time), so their sum is about the wall time of ``--jobs 1`` with one thread on a quiet machine.
 """
 from __future__ import annotations
 
@@ -32,7 +33,9 @@ UNITS = {"synth": "generated frames", "prepare-kitti": "drive frames",
          "train-pose": "training steps (frames x epochs)",
          "predict": "predicted frames", "predict-classical": "predicted frames", "filter": "filtered frames",
          "slam": "SLAM frames", "slam-long": "SLAM frames", "score": "SLAM runs scored"}
-CLASSICAL_PREFIX = "ip-basic"
+# IP-Basic's predictions are kind predict-classical; every other classical completer's are a kind of their own,
+# predict-<completer> (their costs differ tenfold: planefit against scanline)
+CLASSICAL_KIND = ("ip-basic", "ip-basic-fast")
 # frames 5 … N−6 of a generated drive of N raw frames have depth, and only those are in its drive file
 UNDEPTHED_FRAMES = 10
 
@@ -57,7 +60,8 @@ def stage_kind(name: str, config: dict) -> str:
     if name.startswith("train-"):
         return f"train-{config.get('loss', 'mse')}"
     if name.startswith("predict-"):
-        return "predict-classical" if config.get("model") else "predict"
+        model = config.get("model")
+        return "predict" if not model else "predict-classical" if model in CLASSICAL_KIND else f"predict-{model}"
     if name.startswith("filter-"):
         return "filter"
     if name.startswith("slam-long-"):
@@ -82,7 +86,7 @@ def stage_work(name: str, config: dict, drives: DriveFrames, slam_runs: int) -> 
         used = sum(min(config["max_frames"], drives.frames.get(d, 0)) // config["stride"]
                    for d in drives.splits.get("train", []) + drives.splits.get("val", []))
         return kind, float(config["epochs"] * used)  # a step's cost at the profile's scale is its unit cost
-    if kind in ("predict", "predict-classical", "filter"):
+    if kind.startswith("predict") or kind == "filter":
         return kind, float(drives.total(test))
     if kind in ("slam", "slam-long"):
         frames = [drives.frames.get(Path(d).stem, 0) for d in config["drive"] or test]
@@ -260,6 +264,11 @@ def planned_drives(ws, profile, kitti_root: Path | None, splits: dict[str, list[
     return DriveFrames(frames, splits)
 
 
+def unit_of(kind: str) -> str:
+    """What a unit of ``kind`` is, as the estimate prints it."""
+    return UNITS.get(kind) or ("predicted frames" if kind.startswith("predict-") else "?")
+
+
 def _hours(seconds: float | None) -> str:
     return "unmeasured" if seconds is None else f"{seconds / 3600:.3g}"
 
@@ -288,7 +297,7 @@ def plan_text(ws, config) -> str:
     for kind, (n, units, seconds) in result.rows.items():
         per = f"{costs.per_unit[kind]:.3g}" if kind in costs.per_unit else "—"
         fixed = f"{costs.per_stage.get(kind, 0.0):.3g}" if kind in costs.per_unit else "—"
-        lines.append(f"  {kind:<18}{n:>7}{units:>12.4g}  {UNITS[kind]:<34}{fixed:>9}{per:>9}{_hours(seconds):>11}")
+        lines.append(f"  {kind:<18}{n:>7}{units:>12.4g}  {unit_of(kind):<34}{fixed:>9}{per:>9}{_hours(seconds):>11}")
     unmeasured = [kind for kind, (_, _, s) in result.rows.items() if s is None]
     lines.append(f"  {'total':<18}{len(todo):>7}{'':>12}  {'':<34}{'':>18}{_hours(result.total_seconds):>11}"
                  + (f" (without {', '.join(unmeasured)}: no unit cost measured)" if unmeasured else ""))

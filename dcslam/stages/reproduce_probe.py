@@ -3,7 +3,8 @@ this machine by a short probe.
 
 The probe runs a sample of Table 5.2's stages at a profile's settings (its image scale, learning rate, SLAM settings,
 filters): synth, prepare-kitti, one training of each loss (mse, chamfer, pose), a prediction by a trained run and by
-IP-Basic, a filter, SLAM of a sparse and a predicted layer and over a whole drive, and the tables; twice, on 3
+IP-Basic and by each other classical completer (:data:`PROBE_COMPLETERS`), a filter, SLAM of a sparse and a
+predicted layer and over a whole drive, and the tables; twice, on 3
 generated drives of :data:`PROBE_SIZES` frames with depth (training and SLAM on as many frames; the larger sample
 runs SLAM on two more layers, so that the tables score more runs), each in a temporary workspace, with one torch
 thread. Each stage's stamp records its CPU seconds; the two samples of each kind give its fixed part per stage
@@ -21,7 +22,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from dcslam.errors import DcslamError
-from dcslam.stages.pipeline import Pipeline
+from dcslam.stages.pipeline import Pipeline, Stage
 from dcslam.stages.reproduce_cost import CALIBRATION, UNDEPTHED_FRAMES, measure
 from dcslam.workspace import Workspace
 
@@ -29,6 +30,8 @@ PROBE_SIZES = (2, 4)  # frames with depth per generated drive (and frames traine
 PROBE_STAGES = ("synth", "prepare-kitti", "train-mse-dense", "train-chamfer-8", "train-pose", "predict-mse-dense",
                 "predict-ip-basic-fast", "score-tables")
 PROBE_SLAM = (("sparse", "mse-dense"), ("sparse", "mse-dense", "dense", "ip-basic-fast"))  # layers, per sample
+# classical completers other than IP-Basic (which the experiment predicts with): each predicts the test drive too
+PROBE_COMPLETERS = ("ip-basic-multiscale", "scanline", "planefit")
 # imported before the samples run: otherwise the first stage of a kind in the first sample pays them (1-2 s of CPU),
 # which the fit would take for a fixed part of every stage of that kind
 WARM_IMPORTS = ("torch", "matplotlib.pyplot", "dcslam.depth.train", "dcslam.depth.train_pose", "dcslam.depth.chamfer",
@@ -58,7 +61,8 @@ def probe_profile(profile, frames: int):
 
 
 def _wanted(profile, layers: tuple[str, ...]) -> Callable[[str], bool]:
-    names = set(PROBE_STAGES) | {f"filter-mse-dense+{name}" for name in list(profile.filters)[:1]}
+    names = set(PROBE_STAGES) | {f"filter-mse-dense+{name}" for name in list(profile.filters)[:1]} \
+        | {f"predict-{name}" for name in PROBE_COMPLETERS}
     prefixes = tuple(f"slam-{layer}-" for layer in layers) + tuple(f"slam-long-{layer}-" for layer in
                                                                      profile.long_layers if layer in layers)
     return lambda name: name in names or name.startswith(prefixes)
@@ -71,9 +75,17 @@ def sample(profile, frames: int, layers: tuple[str, ...], root: Path,
     from dcslam.stages.experiments.table_5_2 import compose
     from dcslam.stages.slam import torch_threads
 
+    from dcslam.stages import predict
+
     small = probe_profile(profile, frames)
+    ws = Workspace(root)
     with torch_threads(1):
-        compose(_Sample(Workspace(root), _wanted(small, layers), log), small)
+        pipe = _Sample(ws, _wanted(small, layers), log)
+        compose(pipe, small)
+        for name in PROBE_COMPLETERS:
+            made = ws.predictions / name
+            pipe.run(Stage(f"predict-{name}", predict.run, predict.PredictConfig(model=name),
+                           outputs=lambda made=made: [made], kind="predict"))
     return measure(root)
 
 

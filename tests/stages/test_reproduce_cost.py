@@ -24,6 +24,9 @@ def test_work_of_each_stage_kind():
     assert stage_work("predict-nconv", {"run": "nconv", "model": None}, DRIVES, 0) == ("predict", 44.0)
     assert stage_work("predict-ip-basic-fast", {"run": None, "model": "ip-basic-fast"}, DRIVES, 0)[0] == \
         "predict-classical"
+    # every other classical completer a kind of its own (planefit costs ten times scanline)
+    assert stage_work("predict-planefit-sparse16", {"run": None, "model": "planefit"}, DRIVES, 0) == \
+        ("predict-planefit", 44.0)
     assert stage_work("slam-sparse-t1", {"drive": ["t1"], "frames": 30}, DRIVES, 0) == ("slam", 30.0)
     assert stage_work("slam-sparse-t2", {"drive": ["t2"], "frames": 30}, DRIVES, 0) == ("slam", 12.0)
     assert stage_work("slam-long-sparse-t1", {"drive": ["t1"], "frames": 0}, DRIVES, 0) == ("slam-long", 32.0)

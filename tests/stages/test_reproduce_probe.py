@@ -38,6 +38,7 @@ def test_probe_profile_shrinks_the_counts_and_keeps_the_settings():
     assert wanted("slam-sparse-2011_09_26_drive_1002_sync") and wanted("slam-long-sparse-2011_09_26_drive_1002_sync")
     assert not wanted("slam-mse-sparse-2011_09_26_drive_1002_sync") and not wanted("train-chamfer-1")
     assert not wanted("slam-mse-dense+edges-2011_09_26_drive_1002_sync") and not wanted("predict-pose")
+    assert wanted("predict-planefit") and wanted("predict-scanline") and wanted("predict-ip-basic-fast")
 
 
 def test_calibrate_writes_the_fit_the_dry_run_then_estimates_with(cli, tmp_path, monkeypatch):
