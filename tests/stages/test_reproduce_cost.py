@@ -107,6 +107,9 @@ def test_costs_file_round_trip_and_malformed_files(tmp_path):
     shipped = shipped_costs("smoke")  # the packaged figures: measured by the probe, a fixed and a unit part per kind
     assert {"synth", "train-chamfer", "slam", "score"} <= set(shipped.per_unit) and "probe" in shipped.source
     assert "not thesis's" in shipped_costs("thesis").source  # measured at another profile's settings, and says so
+    (tmp_path / "none.json").write_text('{"profiles": {}}')
+    with pytest.raises(DcslamError, match="none.json: cannot read the unit costs"):
+        shipped_costs("thesis", path=tmp_path / "none.json")
 
 
 def test_a_calibration_is_the_estimate_of_its_profile(tmp_path):
