@@ -61,10 +61,12 @@ class Task:
 
 @dataclass(frozen=True)
 class Outcome:
-    """How one task ended: ``seconds`` it ran, or ``error`` (one line); ``job`` and ``log`` on Slurm."""
+    """How one task ended: ``seconds`` it ran (wall) and ``cpu_seconds`` its process used, or ``error`` (one line);
+    ``job`` and ``log`` on Slurm."""
 
     task: Task
     seconds: float | None = None
+    cpu_seconds: float | None = None
     error: str | None = None
     job: str | None = None
     log: Path | None = None
@@ -84,11 +86,20 @@ class Executor(Protocol):
         """Start every task; yield each one's outcome as it finishes. Closing the iterator early stops the rest."""
 
 
-def timed(run: Callable, workspace, config) -> float:
-    """Run one stage with ``force=True``; return the seconds it took (what a worker or a job runs)."""
-    start = time.perf_counter()
+def cpu_clock() -> float:
+    """CPU seconds (user + system) of this process and of its children that have ended, so far."""
+    import resource
+
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
+
+
+def timed(run: Callable, workspace, config) -> tuple[float, float]:
+    """Run one stage with ``force=True``; return ``(wall seconds, CPU seconds)`` it took, measured in the process
+    that ran it (what a worker or a job runs)."""
+    start, cpu = time.perf_counter(), cpu_clock()
     run(workspace, config, force=True)
-    return time.perf_counter() - start
+    return time.perf_counter() - start, cpu_clock() - cpu
 
 
 class LocalExecutor:
@@ -113,11 +124,11 @@ class LocalExecutor:
             for future in as_completed(futures):
                 task = futures[future]
                 try:
-                    seconds = future.result()
+                    seconds, cpu = future.result()
                 except DcslamError as error:
                     yield Outcome(task, error=str(error))
                 else:
-                    yield Outcome(task, seconds=seconds)
+                    yield Outcome(task, seconds=seconds, cpu_seconds=cpu)
             finished = True
         finally:
             if finished:
@@ -238,8 +249,8 @@ def _resources(default: Resources, table, where: str) -> Resources:
 
 
 def slurm_job(run: Callable, workspace, config) -> tuple[str, object]:
-    """What one Slurm job runs: the stage, with as many threads as the job has CPUs; ``("ok", seconds)`` or
-    ``("error", message)`` for a known error (a bug still fails the job with its traceback)."""
+    """What one Slurm job runs: the stage, with as many threads as the job has CPUs; ``("ok", (seconds, CPU
+    seconds))`` or ``("error", message)`` for a known error (a bug still fails the job with its traceback)."""
     cpus = os.environ.get("SLURM_CPUS_PER_TASK")
     if cpus:
         from dcslam.workers import THREAD_VARIABLES
@@ -426,7 +437,9 @@ def _finished(job, task: Task) -> Outcome | None:
         return Outcome(task, error=f"job {job.job_id} failed: {lines[-1].strip() if lines else type(error).__name__}",
                        job=job.job_id, log=_log_path(job))
     if status == "ok":
-        return Outcome(task, seconds=float(value), job=job.job_id, log=_log_path(job))
+        seconds, cpu = value if isinstance(value, (tuple, list)) else (value, None)  # a bare number: an older job's
+        return Outcome(task, seconds=float(seconds), cpu_seconds=None if cpu is None else float(cpu), job=job.job_id,
+                       log=_log_path(job))
     return Outcome(task, error=str(value), job=job.job_id, log=_log_path(job))
 
 

@@ -21,6 +21,11 @@ def _log(line: str) -> None:
 
 
 def run(ws, config: reproduce.ReproduceConfig):
+    if config.calibrate:  # the unit costs measured here first, so that the plan below is estimated with them
+        from dcslam.stages.experiments import experiment
+        from dcslam.stages.reproduce_probe import calibrate
+
+        calibrate(ws, experiment("5.2").profile(config.profile), log=_log)
     if config.dry_run:  # the plan and its cost on stdout, nothing run or written
         from dcslam.stages.reproduce_cost import plan_text
 
@@ -120,5 +125,7 @@ reproduce_command = stage_command(app, "reproduce", reproduce.ReproduceConfig, r
                                             "dcslam reproduce --table beams --jobs 2 --print-config   # its stages, "
                                             "then drop --print-config to run it (make reproduce-beams)",
                                             "dcslam reproduce --profile study --dry-run   # what 3 seeds x 8 drives "
-                                            "will run and cost"),
+                                            "will run and cost",
+                                            "dcslam reproduce --profile study --dry-run --calibrate   # its cost "
+                                            "measured on this machine"),
                                   describe=stage_configs_toml)

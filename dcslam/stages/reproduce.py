@@ -56,8 +56,11 @@ class ReproduceConfig:
     dry_run: bool = option(False, flags=("--dry-run",), help="Print the stages it would run and their estimated "
                            "cost, then exit without running or writing anything.")
     costs_from: Path | None = option(None, help="Workspace of a finished reproduction whose stage timings give the "
-                                     "estimate's unit costs (default: this workspace's, else a quick run's "
-                                     "measured here, shipped with dcslam).")
+                                     "estimate's unit costs (default: this workspace's --calibrate, else its "
+                                     "finished stages, else the probe's figures shipped with dcslam).")
+    calibrate: bool = option(False, flags=("--calibrate",), help="First measure the estimate's unit costs on this "
+                             "machine: a probe runs small samples of every stage kind at the profile's settings (a "
+                             "minute or two of CPU) and writes them to <workspace>/.reproduce/calibration.json.")
 
     def __post_init__(self) -> None:
         if self.jobs < 1:
