@@ -88,9 +88,12 @@ def rejudge(health: dict, rules: HealthRules) -> dict:
         longest = max(longest, run)
     if longest > rules.max_degraded_run:
         reasons.append(f"{longest} consecutive steps degraded")
-    sigma = float(health.get("drift_sigma_m", 0.0))
-    if rules.max_drift_m > 0 and 3 * sigma > rules.max_drift_m:
-        reasons.append(f"accumulated uncertainty {3 * sigma:.2f} m (3 sigma)")
+    # the drift bound as written (dcslam.slam.health.drift_bound); a summary from before it has the random walk's sigma
+    drift = health.get("drift")
+    bound = (float(drift["bound_m"]) * rules.drift_sigmas / float(drift["sigmas"]) if drift
+             else rules.drift_sigmas * float(health.get("drift_sigma_m", 0.0)))
+    if rules.max_drift_m > 0 and bound > rules.max_drift_m:
+        reasons.append(f"accumulated uncertainty {bound:.2f} m ({rules.drift_sigmas:g} sigma)")
     return {**health, "accepted": steps - rejected - degraded, "degraded": degraded, "rejected": rejected,
             "suspect": bool(reasons), "reasons": reasons}
 
@@ -169,6 +172,8 @@ def main(argv=None) -> int:
     parser.add_argument("--floors", default="0.3", help="candidate floor_m values, comma-separated")
     parser.add_argument("--sigmas", default="3", help="candidate sigmas values, comma-separated")
     parser.add_argument("--min-pairs", default=str(HealthRules().min_pairs), help="candidate min_pairs values")
+    parser.add_argument("--drift-sigmas", default=f"{HealthRules().drift_sigmas:g}",
+                        help="candidate drift_sigmas values (standard deviations of the drift bound)")
     parser.add_argument("--json", type=Path, help="write the per-run rows of every candidate here")
     parser.add_argument("--runs", action="store_true", help="print every run of the last candidate")
     args = parser.parse_args(argv)
@@ -179,12 +184,15 @@ def main(argv=None) -> int:
     results = {"stored": verdicts(runs, None, None)}
     print_table("stored verdicts (no evidence)", table(results["stored"], args.truth), args.truth)
     for pairs in (int(p) for p in args.min_pairs.split(",")):
-        for sigmas in (float(s) for s in args.sigmas.split(",")):
-            for floor in (float(f) for f in args.floors.split(",")):
-                name = f"min_pairs {pairs}, evidence {sigmas:g} sigma, floor {floor:g} m"
-                rows = verdicts(runs, HealthRules(min_pairs=pairs), EvidenceRules(sigmas=sigmas, floor_m=floor))
-                results[name] = rows
-                print_table(name, table(rows, args.truth), args.truth)
+        for drift in (float(d) for d in args.drift_sigmas.split(",")):
+            for sigmas in (float(s) for s in args.sigmas.split(",")):
+                for floor in (float(f) for f in args.floors.split(",")):
+                    name = (f"min_pairs {pairs}, drift bound {drift:g} sigma, evidence {sigmas:g} sigma, "
+                            f"floor {floor:g} m")
+                    rows = verdicts(runs, HealthRules(min_pairs=pairs, drift_sigmas=drift),
+                                    EvidenceRules(sigmas=sigmas, floor_m=floor))
+                    results[name] = rows
+                    print_table(name, table(rows, args.truth), args.truth)
     if args.runs:
         for r in rows:
             print(f"{r['layer']:28s} {r['drive'][-9:-5]} final {r['final_m']:6.3f} gap {r['gap_m'] or 0:6.3f} "

@@ -61,10 +61,12 @@ class Task:
 
 @dataclass(frozen=True)
 class Outcome:
-    """How one task ended: ``seconds`` it ran, or ``error`` (one line); ``job`` and ``log`` on Slurm."""
+    """How one task ended: ``seconds`` it ran (wall) and ``cpu_seconds`` its process used, or ``error`` (one line);
+    ``job`` and ``log`` on Slurm."""
 
     task: Task
     seconds: float | None = None
+    cpu_seconds: float | None = None
     error: str | None = None
     job: str | None = None
     log: Path | None = None
@@ -84,11 +86,20 @@ class Executor(Protocol):
         """Start every task; yield each one's outcome as it finishes. Closing the iterator early stops the rest."""
 
 
-def timed(run: Callable, workspace, config) -> float:
-    """Run one stage with ``force=True``; return the seconds it took (what a worker or a job runs)."""
-    start = time.perf_counter()
+def cpu_clock() -> float:
+    """CPU seconds (user + system) of this process and of its children that have ended, so far."""
+    import resource
+
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
+
+
+def timed(run: Callable, workspace, config) -> tuple[float, float]:
+    """Run one stage with ``force=True``; return ``(wall seconds, CPU seconds)`` it took, measured in the process
+    that ran it (what a worker or a job runs)."""
+    start, cpu = time.perf_counter(), cpu_clock()
     run(workspace, config, force=True)
-    return time.perf_counter() - start
+    return time.perf_counter() - start, cpu_clock() - cpu
 
 
 class LocalExecutor:
@@ -113,11 +124,11 @@ class LocalExecutor:
             for future in as_completed(futures):
                 task = futures[future]
                 try:
-                    seconds = future.result()
+                    seconds, cpu = future.result()
                 except DcslamError as error:
                     yield Outcome(task, error=str(error))
                 else:
-                    yield Outcome(task, seconds=seconds)
+                    yield Outcome(task, seconds=seconds, cpu_seconds=cpu)
             finished = True
         finally:
             if finished:
@@ -238,8 +249,8 @@ def _resources(default: Resources, table, where: str) -> Resources:
 
 
 def slurm_job(run: Callable, workspace, config) -> tuple[str, object]:
-    """What one Slurm job runs: the stage, with as many threads as the job has CPUs; ``("ok", seconds)`` or
-    ``("error", message)`` for a known error (a bug still fails the job with its traceback)."""
+    """What one Slurm job runs: the stage, with as many threads as the job has CPUs; ``("ok", (seconds, CPU
+    seconds))`` or ``("error", message)`` for a known error (a bug still fails the job with its traceback)."""
     cpus = os.environ.get("SLURM_CPUS_PER_TASK")
     if cpus:
         from dcslam.workers import THREAD_VARIABLES
@@ -304,6 +315,10 @@ class SlurmExecutor:
         for task in tasks:
             kind = task.kind
             groups.setdefault((kind, self.settings.resources[kind].gpus_for(task)), []).append(task)
+        partitions = _partitions()
+        if partitions is not None:  # refused here, with the partition's limits, rather than pending forever
+            for kind, gpus in groups:
+                check_resources(kind, self.settings.resources[kind], gpus, partitions, self.settings.partition)
         for (kind, gpus), group in groups.items():
             executor = submitit.AutoExecutor(folder=self.folder / "%j", cluster="slurm")
             executor.update_parameters(**self._parameters(kind, gpus))
@@ -342,7 +357,7 @@ class SlurmExecutor:
                                                       f"(it asks {res.cpus} CPUs, {res.mem_gb:g} GB, "
                                                       f"{res.time_min} min, {res.gpus_for(task)} GPUs); lower "
                                                       f"[slurm.{task.kind}] of --config or choose another partition",
-                                          job=job_id, log=_log_path(job))
+                                          job=job_id, log=_existing_log(job))  # it never ran: no log
                         self.cancel([job_id])
                     if outcome is not None:
                         del pending[job_id]
@@ -422,12 +437,117 @@ def _finished(job, task: Task) -> Outcome | None:
         return Outcome(task, error=f"job {job.job_id} failed: {lines[-1].strip() if lines else type(error).__name__}",
                        job=job.job_id, log=_log_path(job))
     if status == "ok":
-        return Outcome(task, seconds=float(value), job=job.job_id, log=_log_path(job))
+        seconds, cpu = value if isinstance(value, (tuple, list)) else (value, None)  # a bare number: an older job's
+        return Outcome(task, seconds=float(seconds), cpu_seconds=None if cpu is None else float(cpu), job=job.job_id,
+                       log=_log_path(job))
     return Outcome(task, error=str(value), job=job.job_id, log=_log_path(job))
 
 
 def _log_path(job) -> Path:
     return Path(job.paths.stderr)
+
+
+def _existing_log(job) -> Path | None:
+    """The job's stderr log where it exists (a job that never started has none), else None."""
+    path = _log_path(job)
+    return path if path.exists() else None
+
+
+@dataclass(frozen=True)
+class Partition:
+    """What one node of a Slurm partition offers at most: ``cpus``, ``mem_gb``, ``gpus``, and the partition's time
+    limit (``time_min``, None: unlimited); ``default``: the partition jobs go to without ``--partition``."""
+
+    name: str
+    cpus: int
+    mem_gb: float
+    time_min: int | None
+    gpus: int = 0
+    default: bool = False
+
+
+#: The ``sinfo`` output format :func:`parse_sinfo` reads: partition, CPUs, memory (MB) per node, time limit, GRES.
+SINFO_FORMAT = "%P %c %m %l %G"
+
+
+def _minutes(limit: str) -> int | None:
+    """A Slurm time limit (``infinite``, ``MM``, ``MM:SS``, ``HH:MM:SS``, ``D-HH[:MM[:SS]]``) in whole minutes."""
+    if limit in ("infinite", "UNLIMITED", "n/a"):
+        return None
+    days, _, rest = limit.rpartition("-")
+    parts = [int(p) for p in rest.split(":")]
+    if days:
+        hours, minutes = (parts + [0, 0])[:2]
+    elif len(parts) == 3:
+        hours, minutes = parts[:2]
+    else:
+        hours, minutes = 0, parts[0]
+    return int(days or 0) * 1440 + hours * 60 + minutes
+
+
+def _gpus(gres: str) -> int:
+    """GPUs per node of a GRES field (``gpu:4``, ``gpu:a100:2(S:0-1)``, ``(null)``)."""
+    total = 0
+    for item in gres.split(","):
+        fields_ = item.split("(")[0].split(":")
+        if fields_[0] == "gpu" and fields_[-1].isdigit():
+            total += int(fields_[-1])
+    return total
+
+
+def parse_sinfo(text: str) -> dict[str, Partition]:
+    """Partitions from ``sinfo -h -o "%P %c %m %l %G"`` output: per partition the most any of its node groups
+    offers. Lines that do not parse are skipped."""
+    partitions: dict[str, Partition] = {}
+    for line in text.splitlines():
+        fields_ = line.split()
+        if len(fields_) < 4:
+            continue
+        name, cpus, mem, limit = fields_[:4]
+        try:
+            found = Partition(name.rstrip("*"), int(cpus.rstrip("+")), round(int(mem.rstrip("+")) / 1024, 1),
+                              _minutes(limit), _gpus(fields_[4]) if len(fields_) > 4 else 0, name.endswith("*"))
+        except ValueError:
+            continue
+        old = partitions.get(found.name)
+        if old is not None:
+            found = replace(found, cpus=max(old.cpus, found.cpus), mem_gb=max(old.mem_gb, found.mem_gb),
+                            gpus=max(old.gpus, found.gpus), default=old.default or found.default)
+        partitions[found.name] = found
+    return partitions
+
+
+def _partitions() -> dict[str, Partition] | None:
+    """The cluster's partitions (:func:`parse_sinfo`); None when sinfo does not answer."""
+    try:
+        done = subprocess.run(["sinfo", "-h", "-o", SINFO_FORMAT], capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    return parse_sinfo(done.stdout) if done.returncode == 0 else None
+
+
+def check_resources(kind: str, res: Resources, gpus: int, partitions: dict[str, Partition],
+                    partition: str | None = None) -> None:
+    """Refuse (one :class:`DcslamError` line) the jobs of ``kind`` when they ask more than one node of their
+    partition (``partition``, else the cluster's default) offers, naming the partition's limits and the fix."""
+    chosen = partitions.get(partition) if partition else next((p for p in partitions.values() if p.default), None)
+    if chosen is None:
+        if partition:
+            raise DcslamError(f"[slurm] partition {partition!r} is not one of this cluster's "
+                              f"({', '.join(partitions) or 'none'}); choose one in the [slurm] table of --config")
+        return
+    too_much = [what for what, asked, offered in (("CPUs", res.cpus, chosen.cpus), ("GB", res.mem_gb, chosen.mem_gb),
+                                                  ("GPUs", gpus, chosen.gpus))
+                if asked > offered]
+    if chosen.time_min is not None and res.time_min > chosen.time_min:
+        too_much.append("minutes")
+    if too_much:
+        limit = "no time limit" if chosen.time_min is None else f"{chosen.time_min} min"
+        raise DcslamError(
+            f"the {kind} jobs ask {res.cpus} CPUs, {res.mem_gb:g} GB, {res.time_min} min, {gpus} GPUs, more "
+            f"{', '.join(too_much)} than a node of partition {chosen.name} offers ({chosen.cpus} CPUs, "
+            f"{chosen.mem_gb:g} GB, {limit}, {chosen.gpus} GPUs); set cpus, mem_gb and time_min within those in "
+            f"[slurm.{kind}] of --config, or choose another partition")
 
 
 def _last_line(job) -> str:

@@ -18,6 +18,21 @@ import sys
 _received = False
 _signal: int | None = None  # the first interrupting signal received
 _told = False
+_kept = None  # what the interrupted command kept and how to go on: a line, or a function giving one (or None)
+_kept_final = False
+
+
+def keep(line, final: bool = False) -> None:
+    """Say, in the interrupt message, what the command kept and how to go on (``line``: "the run folder ... is kept
+    with last.pt; continue it with ... --resume", or a function returning such a line, or None when nothing is kept,
+    asked when the interrupt is told: what is on disk then); by default the message says that nothing was kept.
+    ``final``: a
+    command that runs others in its process (``reproduce``) says it for all of them, and their own lines are
+    ignored; ``keep(None)`` starts afresh (the command line calls it before each command)."""
+    global _kept, _kept_final
+    if _kept_final and line is not None:
+        return
+    _kept, _kept_final = line, final and line is not None
 
 #: The signals that interrupt a command.
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -80,4 +95,6 @@ def tell(echo) -> None:
     global _told
     if not _told:
         _told = True
-        echo("interrupted: no partial output was kept; rerun the command to finish")
+        kept = _kept() if callable(_kept) else _kept
+        echo(f"interrupted: {kept}" if kept else "interrupted: no partial output was kept; rerun the command to "
+             "finish")

@@ -188,13 +188,18 @@ def output_lock(path: Path | str, what: str = "output",
         finally:
             _held[lock] -= 1
         return
+    made = [folder for folder in (lock.parent, *lock.parent.parents) if not folder.exists()]
     try:
         lock.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise _lock_error(exc, lock) from None
-    fd = _take_flock(lock, what, path, note)
-    if fd is None:
-        fd = _take_exclusive(lock, what, path, note)
+    try:
+        fd = _take_flock(lock, what, path, note)
+        if fd is None:
+            fd = _take_exclusive(lock, what, path, note)
+    except BaseException:
+        _remove_empty(made)
+        raise
     _held[lock] = 1
     try:
         yield lock
@@ -203,6 +208,15 @@ def output_lock(path: Path | str, what: str = "output",
         with contextlib.suppress(OSError):  # removed while still locked, so no one locks a file about to vanish
             lock.unlink()
         os.close(fd)
+        _remove_empty(made)
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the folders made for a lock file (deepest first) that are still empty: a refused or failed command
+    leaves no empty ``predictions/`` or ``slam/`` behind."""
+    for folder in folders:
+        with contextlib.suppress(OSError):
+            folder.rmdir()
 
 
 def holder(path: Path | str) -> dict | None:

@@ -78,7 +78,9 @@ def interrupt(args, after_s: float) -> bool:
         assert out.strip(), (out, err)  # its work was done and summarised (stderr may hold its progress log)
         return False
     assert proc.returncode == 130, (proc.returncode, err)
-    assert err.strip().splitlines()[-1] == "interrupted: no partial output was kept; rerun the command to finish"
+    last = err.strip().splitlines()[-1]  # what was kept and how to go on, in one line
+    assert last == "interrupted: no partial output was kept; rerun the command to finish" or (
+        last.startswith("interrupted: the ") and " kept" in last and ("rerun" in last or "--resume" in last)), last
     return True
 
 

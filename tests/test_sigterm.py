@@ -1,5 +1,6 @@
 """SIGTERM (what ``kill``, a batch system or a container runtime sends to the process alone) stops a command as
-Ctrl-C does: the one-line interrupted message, nothing partial published, exit 143; the rerun finishes."""
+Ctrl-C does: the one-line interrupted message saying what was kept and how to go on, nothing partial published,
+exit 143; the rerun finishes."""
 from __future__ import annotations
 
 import os
@@ -14,7 +15,6 @@ from tests.fixtures.depth import write_workspace
 # Heavy modules are imported before "ready" is printed, so the signal falls in the command's own work.
 LAUNCH = ("import sys, dcslam.cli, torch, h5py, numpy, scipy; sys.argv[0] = 'dcslam'; print('ready', flush=True); "
           "dcslam.cli.main()")
-MESSAGE = "interrupted: no partial output was kept; rerun the command to finish"
 
 
 def _env() -> dict:
@@ -45,9 +45,11 @@ def test_sigterm_stops_slam_between_drives_and_keeps_no_partial_output(tmp_path)
     out = ws / "slam" / "dense"
     args = ["slam", "--depth", "dense", "--odometry", "icp", "--iterations", "3", "-w", str(ws),
             *(arg for d in drives for arg in ("--drive", d))]
-    done = _sigterm_when(args, ready=lambda: (out / "drive_a.json").exists())
+    done = _sigterm_when(args, ready=lambda: (out / "drive_a.done").exists())
     assert done.returncode == 143, done.stderr
-    assert done.stderr.strip().splitlines()[-1] == MESSAGE
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("interrupted: the SLAM outputs of drive_a") and f"are kept, complete, in {out}" in last
+    assert last.endswith("rerun with --drive naming the others, or the same command with --force")
     assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr, done.stderr
     assert not (out / "drive_d.json").exists() and _leftovers(ws) == []  # the last drive was never published
     again = subprocess.run([sys.executable, "-m", "dcslam", *args, "--force"], capture_output=True, text=True,
@@ -62,7 +64,9 @@ def test_sigterm_stops_training_which_then_resumes(tmp_path):
     args = ["train", "--loss", "mse", "--epochs", "500", "--name", "long", "-w", str(ws)]
     done = _sigterm_when(args, ready=lambda: (run / "last.pt").exists())
     assert done.returncode == 143, done.stderr
-    assert done.stderr.strip().splitlines()[-1] == MESSAGE
+    assert done.stderr.strip().splitlines()[-1] == (
+        f"interrupted: the run folder {run} is kept with last.pt (the last saved point of the training); continue "
+        "it with the same command and --resume, or start again with --force")
     assert "Traceback" not in done.stderr, done.stderr
     assert _leftovers(ws) == []
     again = subprocess.run([sys.executable, "-m", "dcslam", "train", "--resume", "--epochs", "2", "--name", "long",

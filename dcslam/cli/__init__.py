@@ -2,7 +2,7 @@
 from dcslam import interrupt
 from dcslam.cli.app import app
 from dcslam.cli import synth, prepare, train, predict, filter as filter_, slam, score, reproduce, demo_icl  # noqa: F401,E501
-from dcslam.cli import import_devkit, export_devkit  # noqa: F401
+from dcslam.cli import import_devkit, export_devkit, view  # noqa: F401
 
 __all__ = ["app", "main"]
 

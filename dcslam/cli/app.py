@@ -20,11 +20,14 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
-    context_settings={"help_option_names": ["-h", "--help"]},
+    # click's plain help: Rich's option tables squeeze the help into ~15-character columns at 80 columns and show
+    # flags as if they took a <bool> value; the plain layout wraps help beside the options and lists flags bare
+    rich_markup_mode=None,
+    context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 120},
 )
 
 WorkspaceOption = Annotated[Optional[Path], typer.Option(
-    "--workspace", "-w", envvar="DCSLAM_WORKSPACE", show_default="./workspace",
+    "--workspace", "-w", envvar="DCSLAM_WORKSPACE", show_default="./workspace", metavar="PATH",
     help="Workspace folder holding kitti/, drives/, runs/, predictions/, slam/, results/.")]
 ForceOption = Annotated[bool, typer.Option("--force", help="Overwrite outputs that exist.")]
 
@@ -36,13 +39,16 @@ def fail(message: str) -> None:
 
 
 def known_errors(command):
-    """Turn :class:`~dcslam.errors.DcslamError` into one line on stderr and exit code 1, Ctrl-C into exit 130
-    (SIGTERM into 143)."""
+    """Turn :class:`~dcslam.errors.DcslamError` (and a write the machine refused: a full disk, a read-only
+    filesystem) into one line on stderr and exit code 1, Ctrl-C into exit 130 (SIGTERM into 143), with a line
+    saying what the command kept and how to go on (:func:`dcslam.interrupt.keep`)."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
+        from dcslam import interrupt
         from dcslam.errors import DcslamError
 
+        interrupt.keep(None)  # what an interrupt leaves is said by the command that runs now
         try:
             return command(*args, **kwargs)
         except DcslamError as error:
@@ -50,9 +56,15 @@ def known_errors(command):
         except (FileExistsError, NotADirectoryError, IsADirectoryError, PermissionError) as error:
             # a path that is the wrong kind of thing, or not ours to write: the user's to fix, not a bug
             fail(f"{error.filename}: {error.strerror}; check the paths given (--workspace, --out, ...)")
-        except KeyboardInterrupt:
-            from dcslam import interrupt
+        except OSError as error:
+            # a write the machine refused (a full disk, a read-only or failing filesystem) that no stage named
+            from dcslam.errors import write_error
 
+            known = write_error(error, error.filename or "a file")
+            if known is None:
+                raise
+            fail(f"{known}; free space or choose a writable --workspace, then rerun the command")
+        except KeyboardInterrupt:
             interrupt.tell(lambda line: typer.echo(line, err=True))
             raise typer.Exit(interrupt.exit_code()) from None
 

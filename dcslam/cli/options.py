@@ -19,7 +19,7 @@ import typer
 from dcslam.cli.app import ForceOption, WorkspaceOption, known_errors, summary
 
 ConfigOption = Annotated[Optional[Path], typer.Option(
-    "--config", help="Read the options from this TOML (or YAML) file; options given here override it.")]
+    "--config", metavar="PATH", help="Read the options from this TOML (or YAML) file; options given here override it.")]
 PrintConfigOption = Annotated[bool, typer.Option(
     "--print-config", help="Print the configuration this command would run, as TOML, and exit.")]
 
@@ -40,7 +40,7 @@ def _parameter(cls, field) -> inspect.Parameter:
         annotation = Optional[annotation]
     flags = meta.get("flags", (f"--{field.name.replace('_', '-')}",))
     extra = {k: meta[k] for k in ("min", "max", "show_default", "metavar") if k in meta}
-    if is_list and "choices" not in meta and "metavar" not in meta:
+    if "choices" not in meta and "metavar" not in meta and base is not bool:  # FLOAT, not Typer's <float range>
         extra["metavar"] = "PATH" if base is Path else base.__name__.upper()
     if "validate" in meta:
         extra["callback"] = _usage_check(meta["validate"], flags[0])
@@ -139,6 +139,30 @@ def _command_parameters(config_cls, fields: list, force: bool) -> list[inspect.P
     return parameters
 
 
+# one line per command for the command lists of `dcslam --help` and `dcslam score --help`, short enough that an
+# 80-column terminal shows it whole (click would cut the first sentence of the help mid-phrase)
+SUMMARIES = {
+    "synth": "Generate KITTI-format drives (or ICL-NUIM rooms)",
+    "prepare-kitti": "KITTI raw + depth folders -> drive files",
+    "prepare-tum": "TUM RGB-D / ICL-NUIM sequences -> drive files",
+    "train": "Train a completer (MSE, chamfer or pose loss)",
+    "predict": "Complete drives with a run or a classical completer",
+    "filter": "Filter a depth layer into a new layer",
+    "slam": "Dense SLAM over drives; trajectories, maps, verdicts",
+    "reproduce": "Run an experiment end to end (Tables 5.1/5.2, beams)",
+    "demo-icl": "Appendix C.2: a DnCNN learns to denoise from maps",
+    "import": "KITTI devkit PNGs (another method's) -> a layer",
+    "export": "A depth layer -> KITTI devkit PNGs",
+    "view": "Open a SLAM recording in the Rerun viewer",
+    "depth": "Depth errors of layers (devkit and surface)",
+    "trajectory": "Trajectory scores of SLAM runs",
+    "map": "Chamfer distance of SLAM maps to the exact map",
+    "tables": "An experiment's tables from the workspace",
+    "page": "Refresh a page's result tables from results/",
+    "collect": "Copy a workspace's results into results/NAME/",
+}
+
+
 def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, report: Callable[[object], None],
                   *, help: str, force: bool = True, prepare: Callable | None = None,
                   examples: tuple[str, ...] = (), describe: Callable | None = None) -> Callable:
@@ -175,5 +199,5 @@ def stage_command(parent: typer.Typer, name: str, config_cls, run: Callable, rep
     wrapped.__annotations__ = {p.name: p.annotation for p in parameters}
     del wrapped.__wrapped__
     wrapped.__name__ = f"{name.replace('-', '_')}_command"
-    parent.command(name, help=help + examples_help(examples))(wrapped)
+    parent.command(name, help=help + examples_help(examples), short_help=SUMMARIES.get(name))(wrapped)
     return wrapped

@@ -13,7 +13,7 @@ from dcslam.stages import score
 score_app = typer.Typer(help="Score depth layers, trajectories and maps; build the experiments' tables (Tables 5.1 "
                              "and 5.2, the beams table) under results/.",
                         no_args_is_help=True)
-app.add_typer(score_app, name="score")
+app.add_typer(score_app, name="score", short_help="Score layers, runs and maps; build the tables")
 
 
 #: The width tables are printed to: a terminal's, not the Markdown file's (which keeps every column).

@@ -5,8 +5,9 @@ from dcslam.cli.app import app, summary
 from dcslam.cli.options import stage_command
 from dcslam.stages import train
 
-HELP = ("Train a depth-completion network with MSE (sparse/dense mask) or chamfer (1- or multi-frame maps) loss; "
-        "writes runs/<name>/ (model.pt, config.json, metrics.jsonl, curves.png).")
+HELP = ("Train a depth-completion network with MSE (sparse/dense mask), chamfer (1- or multi-frame maps) or pose "
+        "(relative-pose error of differentiable ICP) loss; writes runs/<name>/ (model.pt, config.json, "
+        "metrics.jsonl, curves.png).")
 
 
 def report(result) -> None:

@@ -24,12 +24,11 @@ import torch
 
 from dcslam.depth.config import TrainConfig
 from dcslam.depth.data import DriveFrames
-from dcslam.depth.models import model_record, save_model
+from dcslam.depth.models import model_record, save_model, save_torch
 from dcslam.depth.objective import Objective, validate
 from dcslam.depth.recipes import LR_SCHEDULES, map_frames_of, selection_key
 from dcslam.depth.train_pose import validate_pose
 from dcslam.errors import DcslamError
-from dcslam.io.atomic import atomic_output
 
 
 @dataclass
@@ -195,8 +194,7 @@ class Checkpointer(Hook):
                       "next_chunk": next_chunk, "step": state.step,
                       "best": json.dumps(state.best) if state.best else "", "rng": torch.get_rng_state(),
                       "metrics_lines": len(metrics.read_text().splitlines()) if metrics.exists() else 0}
-        with atomic_output(state.run_dir / "last.pt", force=True) as tmp:
-            torch.save(checkpoint, tmp)
+        save_torch(state.run_dir / "last.pt", checkpoint)
 
 
 class EpochCallback(Hook):
@@ -207,6 +205,34 @@ class EpochCallback(Hook):
 
     def after_epoch(self, state: TrainState) -> None:
         self.callback()
+
+
+class TensorBoardLog(Hook):
+    """The metrics rows also as TensorBoard event files in ``<run>/tensorboard/`` (``dcslam train --log tensorboard``;
+    needs the ``tensorboard`` package), written as they come so the curves can be watched while the run trains. A
+    fresh run starts the folder empty; a resumed one drops the events after its checkpoint."""
+
+    FOLDER = "tensorboard"
+
+    def __init__(self) -> None:
+        self._writer = None
+
+    def before_train(self, state: TrainState) -> None:
+        from dcslam.depth.tensorboard import TensorBoardWriter
+
+        log_dir = state.run_dir / self.FOLDER
+        if state.resumed_lines is None and log_dir.is_dir():
+            for old in log_dir.glob("events.out.tfevents.*"):
+                old.unlink()
+        self._writer = TensorBoardWriter(log_dir, purge_step=None if state.resumed_lines is None else state.step)
+
+    def write(self, state: TrainState, row: dict) -> None:
+        self._writer.write(row)
+
+    def after_train(self, state: TrainState) -> None:
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
 
 
 def default_hooks(rank: int, validation: bool, map_builder=None, on_epoch=None) -> list[Hook]:

@@ -241,11 +241,11 @@ class AtomicSet:
                     tmp.unlink()
         if isinstance(exc, OSError) and self._staged:  # a failed write of a member names the member
             filename = getattr(exc, "filename", None)
-            named = [path for tmp, path in self._staged
+            named = [(path, tmp) for tmp, path in self._staged
                      if filename is not None and Path(os.fsdecode(filename)).absolute() in (tmp.absolute(),
                                                                                             path.absolute())]
-            if filename is None or named:
-                translated = as_write_error(exc, (named or [self._staged[-1][1]])[0])
+            if filename is None or named:  # the member's final name, its temporary one accepted as the file
+                translated = as_write_error(exc, *(named or [self._staged[-1][::-1]])[0])
                 if translated is not None:
                     raise translated from exc
 

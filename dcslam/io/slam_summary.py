@@ -62,3 +62,32 @@ def run_verdict(record: dict, where: str = "SLAM summary") -> RunVerdict:
 def read_verdict(path: Path | str) -> RunVerdict:
     """:func:`run_verdict` of the summary file at ``path``."""
     return run_verdict(read_summary(path), str(path))
+
+
+def committed_outputs(out_dir: Path | str, drive: str, rerun: str = "dcslam slam --force") -> dict[str, Path]:
+    """A drive's SLAM outputs in ``out_dir`` (``trajectory``, ``kitti_poses``, ``map``, ``summary``), accepted only
+    as the complete set that ``<drive>.done`` commits and only while the inputs its summary records
+    (:mod:`dcslam.io.lineage`) are unchanged; otherwise one :class:`DcslamError` line saying to run ``rerun``.
+
+    Outputs without a marker (a run that failed while writing them, or one made before markers existed) are refused
+    rather than scored."""
+    from dcslam.io.atomic import committed_files
+    from dcslam.io.lineage import check_made_from
+
+    out_dir = Path(out_dir)
+    marker = out_dir / f"{drive}.done"
+    paths = {"trajectory": out_dir / f"{drive}.txt", "kitti_poses": out_dir / f"{drive}.kitti.txt",
+             "map": out_dir / f"{drive}.ply", "summary": out_dir / f"{drive}.json"}
+    if not marker.exists():
+        if not any(p.exists() for p in paths.values()):
+            raise DcslamError(f"trajectory {paths['trajectory']} not found; run `{rerun.replace(' --force', '')}` "
+                              "first")
+        raise DcslamError(f"the SLAM outputs of {drive} in {out_dir} are not committed (no {marker.name}: the run "
+                          f"failed while writing them, or an older dcslam wrote them); rerun `{rerun}`")
+    try:
+        committed_files(marker)
+    except DcslamError as error:
+        raise DcslamError(f"{error}".replace("rerun the command that makes it with --force", f"rerun `{rerun}`"))
+    if paths["summary"].exists():  # a set made elsewhere may hold a trajectory alone
+        check_made_from(read_summary(paths["summary"], f"rerun `{rerun}`"), out_dir, paths["summary"], rerun)
+    return paths

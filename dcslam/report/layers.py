@@ -18,8 +18,8 @@ from dcslam.eval.trajectory import (EVO_MAX_TIME_DIFF_S, Association, Trajectory
 from dcslam.workspace import LayerRef, Workspace, drive_file, find_layer, resolve_layer, select_drives
 
 __all__ = ["LayerRef", "TrajectoryPair", "drive_file", "find_layer", "load_pair", "resolve_layer",
-           "score_layer_depth", "score_layer_surface", "score_layer_trajectories", "select_drives", "slam_settings",
-           "slam_surface_settings", "slam_trajectory", "surface_frames", "surface_target"]
+           "score_layer_depth", "score_layer_surface", "score_layer_trajectories", "select_drives", "slam_outputs",
+           "slam_settings", "slam_surface_settings", "slam_trajectory", "surface_frames", "surface_target"]
 
 #: The SLAM settings that make two trajectories comparable (``beams``: the sparse input's beam count, when known;
 #: ``confidence`` and ``min_confidence``: how a layer's confidence was used, ``none`` for a layer without one;
@@ -200,12 +200,25 @@ def load_pair(est_path: Path | str, gt_path: Path | str,
                           T_est=T_est[assoc.est_indices], association=assoc)
 
 
+def slam_outputs(ws: Workspace, layer: str, drive: str, root: Path | None = None) -> dict[str, Path]:
+    """The committed SLAM outputs of ``<root>/<layer>/<drive>`` (``root``: ``slam/`` unless given), checked to be
+    made from the layer as it is now, and the layer from its own inputs as they are now
+    (:func:`dcslam.io.slam_summary.committed_outputs`, :func:`dcslam.io.lineage.check_layer_folder`); one
+    :class:`DcslamError` line naming what to rerun otherwise."""
+    from dcslam.io.lineage import check_layer_folder
+    from dcslam.io.slam_summary import committed_outputs
+
+    paths = committed_outputs((ws.slam if root is None else root) / layer, drive,
+                              f"dcslam slam --depth {layer} --force")
+    found = find_layer(ws, layer) if Path(layer).name == layer else None
+    check_layer_folder(found.folder if found is not None else None)
+    return paths
+
+
 def slam_trajectory(ws: Workspace, layer: str, drive: str, root: Path | None = None) -> Path:
-    """``<root>/<layer>/<drive>.txt``, ``root`` being ``slam/`` unless given (e.g. ``slam-long/``)."""
-    path = (ws.slam if root is None else root) / layer / f"{drive}.txt"
-    if not path.exists():
-        raise DcslamError(f"trajectory {path} not found; run `dcslam slam --depth {layer}` first")
-    return path
+    """``<root>/<layer>/<drive>.txt``, ``root`` being ``slam/`` unless given (e.g. ``slam-long/``); only from a
+    committed set whose inputs are unchanged (:func:`slam_outputs`)."""
+    return slam_outputs(ws, layer, drive, root)["trajectory"]
 
 
 def slam_settings(ws: Workspace, layer: str, drive: str, root: Path | None = None) -> dict:
@@ -219,6 +232,7 @@ def slam_settings(ws: Workspace, layer: str, drive: str, root: Path | None = Non
     path = (ws.slam if root is None else root) / layer / f"{drive}.json"
     if not path.exists():
         return {}
+    slam_outputs(ws, layer, drive, root)
     record = read_summary(path, f"rerun `dcslam slam --depth {layer} --force`")
     settings = {**record.get("settings", {}), **({"beams": record["beams"]} if "beams" in record else {})}
     used = record.get("confidence")

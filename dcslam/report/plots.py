@@ -5,6 +5,7 @@ Matplotlib is imported lazily with the Agg backend (no display needed). Files ar
 from __future__ import annotations
 
 import json
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +52,7 @@ def plot_trajectories(path: Path | str, T_gt: np.ndarray, estimates: dict[str, n
     if T_gt.ndim != 3 or T_gt.shape[1:] != (4, 4):
         raise DcslamError(f"ground-truth poses have shape {T_gt.shape}, expected (N, 4, 4)")
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6, 6))
+    fig, ax = plt.subplots(figsize=(8.5, 6))
     ax.plot(T_gt[0, 0, 3], T_gt[0, 2, 3], "ko", ms=4, zorder=1)  # the start, beneath everything
     ax.plot(T_gt[:, 0, 3], T_gt[:, 2, 3], "k--", lw=2, label="ground truth", zorder=2)
     for (name, T), style in zip(estimates.items(), trajectory_styles(T_gt, estimates)):
@@ -61,11 +62,13 @@ def plot_trajectories(path: Path | str, T_gt: np.ndarray, estimates: dict[str, n
     ax.set_ylabel("z (m)")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    # beside the axes, never over the curves: a table of 15 recipes would cover them
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+              ncol=1 if len(estimates) < 20 else 2)
     ax.set_title(title, fontsize=10)
     fig.tight_layout()
     with atomic_output(path, force=force) as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
+        fig.savefig(tmp, dpi=120, format="png", bbox_inches="tight")
     plt.close(fig)
     return Path(path)
 
@@ -88,7 +91,9 @@ def _dilate(depth: np.ndarray, radius: int = 2) -> np.ndarray:
 def plot_depth_examples(path: Path | str, rows: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]],
                         rgb: np.ndarray | None = None, max_depth_m: float | None = None, force: bool = False) -> Path:
     """One row per method: input depth (dilated so sparse points show), prediction, ground truth, absolute error
-    (where there is ground truth; one colour range, the 99th percentile over all rows, so rows compare).
+    (where there is ground truth; one colour range, the 99th percentile over all rows, so rows compare). Each panel
+    has its colour bar; the columns are named once above the first row and each row by its label on its left
+    (wrapped, never clipped).
 
     ``rows``: (label, input (H, W), prediction (H, W), ground truth (H, W)), metres, 0 = none; ``rgb`` (H, W, 3)
     uint8 shown above them when given.
@@ -108,17 +113,22 @@ def plot_depth_examples(path: Path | str, rows: list[tuple[str, np.ndarray, np.n
         for ax in axes[0]:
             ax.axis("off")
     for i, ((label, inp, pred, gt), error) in enumerate(zip(rows, errors), start=extra):
-        panels = [(_dilate(inp), "input (dilated to be seen)", "viridis", vmax), (pred, "prediction", "viridis", vmax),
-                  (gt, "ground truth", "viridis", vmax), (error, "|error| (m)", "magma", error_max)]
+        panels = [(_dilate(inp), "input depth (m), dilated to be seen", "viridis", vmax),
+                  (pred, "prediction (m)", "viridis", vmax), (gt, "ground truth (m)", "viridis", vmax),
+                  (error, "|error| (m)", "magma", error_max)]
         for ax, (image, name, cmap, top) in zip(axes[i], panels):
             shown = np.where(image > 0, image, np.nan) if cmap == "viridis" else image
             im = ax.imshow(shown, cmap=cmap, vmin=0, vmax=top, interpolation="nearest")
-            ax.set_title(f"{label}: {name}", fontsize=8)
-            ax.axis("off")
-        fig.colorbar(im, ax=axes[i, 3], fraction=0.03)
+            if i == extra:
+                ax.set_title(name, fontsize=9)
+            ax.set_xticks([])
+            ax.set_yticks([])
+            fig.colorbar(im, ax=ax, fraction=0.035, pad=0.01).ax.tick_params(labelsize=7)
+        axes[i, 0].set_ylabel(textwrap.fill(label, 18, break_on_hyphens=False), fontsize=9, rotation=0, ha="right",
+                              va="center")
     fig.tight_layout()
     with atomic_output(path, force=force) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
+        fig.savefig(tmp, dpi=100, format="png", bbox_inches="tight")
     plt.close(fig)
     return Path(path)
 

@@ -79,11 +79,30 @@ def depth_table(ws: Workspace, layer_name: str, drives: list[str], interpolate: 
 TRAJECTORY_SHOWN = ("poses", "localisation", "ate_aligned_rmse", "ate_rmse", "rpe_trans_m_rmse", "rpe_rot_deg_rmse")
 
 
+#: Readable headers of the trajectory scores (the CSV keeps the keys): a prefix of a key → its words and unit.
+TRAJECTORY_WORDS = {"ate_aligned_": ("ATE aligned", "m"), "ate_": ("ATE", "m"), "rpe_trans_m_": ("RPE trans", "m"),
+                    "rpe_rot_deg_": ("RPE rot", "°")}
+TRAJECTORY_HEADERS = {"trajectory": "trajectory", "poses": "poses", "localisation": "localisation (m + rad)",
+                      "localisation_thesis_clamp": "localisation, thesis clamp",
+                      "kitti_t_rel_percent": "KITTI drift (%)",
+                      "kitti_r_rel_deg_per_100m": "KITTI rot. drift (°/100 m)", "kitti_segments": "KITTI segments"}
+
+
+def trajectory_header(key: str) -> str:
+    """The header a person reads for the trajectory score ``key``: ``ate_aligned_rmse`` → ``ATE aligned rmse (m)``."""
+    if key in TRAJECTORY_HEADERS:
+        return TRAJECTORY_HEADERS[key]
+    for prefix, (words, unit) in TRAJECTORY_WORDS.items():
+        if key.startswith(prefix):
+            return f"{words} {key[len(prefix):]} ({unit})"
+    return key.replace("_", " ")
+
+
 def trajectory_table(pairs: dict[str, TrajectoryPair], title: str) -> Table:
     """Every trajectory score of each pair (``{name: pair}``), one row each (evo's full statistics in the CSV)."""
     rows = [{"trajectory": name, **pair.score().flat()} for name, pair in pairs.items()]
     keys = [k for k in rows[0] if k != "trajectory"] if rows else list(TRAJECTORY_SHOWN)
-    table = Table(title, [Column("trajectory", "trajectory")] + [Column(k, k) for k in keys], rows)
+    table = Table(title, [Column("trajectory", "trajectory")] + [Column(k, trajectory_header(k)) for k in keys], rows)
     table.notes.extend(f"{name}: {pair.left_out()}" for name, pair in pairs.items() if pair.left_out())
     table.notes.append("localisation: thesis accuracy (m + rad, ‖t_X‖ + acos((tr R_X − 1)/2), the angle computed "
                        "as atan2(|sin|, cos), exact near 0 and π); localisation_thesis_clamp: acos argument "

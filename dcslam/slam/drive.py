@@ -104,12 +104,14 @@ class DriveRun:
 
 def run_drive(drive: DriveFrames, slam, device: str = "cpu", description: str | None = None,
               settings: dict | None = None, confidence: ConfidenceUse = ConfidenceUse(),
-              sources_kind: str | None = None) -> DriveRun:
+              sources_kind: str | None = None, on_step: Callable | None = None) -> DriveRun:
     """SLAM (a :class:`dcslam.slam.pipeline.SLAM`, reset here) over every frame of ``drive``, whose confidence (if
     it has one) is used as ``confidence`` says. A frame's ``sources`` depth, when given, holds the pixels the
     odometry aligns instead of the depth's own, against the map fused from the depth
     (:meth:`~dcslam.slam.pipeline.SLAM.step_frame`'s ``source_frame``); ``sources_kind`` names that depth kind for
-    the summary (None: the depth's own points). The frames are read and prepared one ahead, on a second thread."""
+    the summary (None: the depth's own points). The frames are read and prepared one ahead, on a second thread.
+    ``on_step(slam, report, frame, source_frame)``, when given, is called after each step in the loop's thread
+    (e.g. :class:`dcslam.slam.record.SlamRecorder`): the run knows nothing of what it does with them."""
     import torch
 
     from dcslam.progress import Bar
@@ -137,6 +139,8 @@ def run_drive(drive: DriveFrames, slam, device: str = "cpu", description: str | 
                 pending = submit(lambda: prepare(_next_frame(frames, drive.where)))
             report = slam.step_frame(frame, torch.from_numpy(drive.T_world_cam[i]).float().to(device),
                                      source_frame=source_frame)
+            if on_step is not None:
+                on_step(slam, report, frame, source_frame)
             bar.advance(status=f"{report.points} points" + ("" if report.accepted else " (step rejected)"))
     seconds = time.perf_counter() - start
     used = {**confidence.record(drive.has_confidence),

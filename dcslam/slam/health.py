@@ -11,16 +11,26 @@ Each odometry step gets one verdict:
 
 :func:`summarise` turns a run's reports into counts and a ``suspect`` flag with its reasons: a run is suspect when
 any step was rejected, when more than a small fraction of its steps were degraded, when two consecutive steps were,
-or when its accumulated first-order uncertainty (:func:`drift_sigma_m`, three sigma) says it may end more than
-``max_drift_m`` from the truth: slow drift that no single step shows.
+or when its drift bound (:func:`drift_bound`) says it may end more than ``max_drift_m`` from the truth.
 
-The thresholds of :class:`HealthRules` are calibrated on generated street drives at 64, 32, 16 and 8 beams and on
-dense depth; the measurements behind each are in docs/slam.md ("Health rules and their calibration").
+The drift bound is the degeneracy analysis of Zhang & Singh (ICRA 2016) carried along a run: each measured step's
+point-to-plane information J^T W J says how well its pairs constrain each direction of motion (its smallest
+eigenvalues and their directions) and its covariance s^2 (J^T W J)^-1 how far the step may be off along each. The
+position covariance each step leaves at a frame (its translation, and its rotation times the road driven since) is
+summed over the steps as *correlated* errors: standard deviations add along a direction, they do not add as a random
+walk. Consecutive steps see the same structure through the same beams, so a direction the scan barely constrains
+slips the same way step after step (every 8-beam drive of the calibration sinks: its pitch and height err with one
+sign). The direction in which the bound is largest is the one the run left unconstrained.
+
+The thresholds of :class:`HealthRules` are calibrated on generated street drives; the measurements behind each are
+in docs/slam.md ("Health rules and their calibration", "Degeneracy and the drift bound").
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+import numpy as np
 
 VERDICTS = ("accepted", "degraded", "rejected")
 
@@ -42,10 +52,22 @@ class HealthRules:
     max_degraded_run: a run with more consecutive degraded steps than this is suspect (isolated weak steps happen;
         two in a row mean the tracker has lost the scene).
     max_rejected: a run with more rejected steps than this is suspect.
-    max_drift_m: a run whose accumulated uncertainty (three times :func:`drift_sigma_m`) exceeds this may end
-        further than this from the truth, and is suspect (0: never). The bound is absolute, as the question it
-        answers ("may this trajectory be more than 0.5 m off?"): a longer drive accumulates more and is flagged
-        sooner.
+    max_drift_m: a run whose drift bound (:func:`drift_bound`, ``drift_sigmas`` times its correlated standard
+        deviation) exceeds this may end further than this from the truth, and is suspect (0: never). The bound is
+        absolute, as the question it answers ("may this trajectory be more than 0.5 m off?"): a longer drive
+        accumulates more and is flagged sooner.
+    drift_sigmas: standard deviations of the drift bound. 2.5: on the calibration drives it flags every run that
+        ends more than 0.5 m off (those only it flags have bounds of 0.90-0.96 m at 3 sigma) and 1 of 14 16-beam
+        runs that end within 0.5 m (4 at 3 sigma, bounds 0.51-0.88 m); at 8 beams it flags every run, whatever
+        sigmas (bounds of 0.70-1.07 m at 3 sigma on runs that end 0.09-0.41 m off): docs/slam.md.
+    degenerate_share: a translation direction whose share of a step's information (:func:`step_degeneracy`) is
+        below this is degenerate (Zhang & Singh): the pairs say next to nothing there, the pose along it is the
+        prediction's, and so is its uncertainty. On the calibration drives no step of the 52 runs that end within
+        0.5 m has a share below 0.030; the steps that erred 0.56-1.18 m along a weak direction had 0.011-0.019.
+    prior_sigma_m: the constant-velocity prediction's standard deviation per step, used along a degenerate
+        direction (a car changes its velocity by a few centimetres per frame at 10 Hz).
+    first_prior_sigma_m: the same for the first ICP step, which has no velocity to predict from (a car moves
+        0.5-1.5 m per frame).
     """
 
     min_pairs: int = 100
@@ -56,6 +78,10 @@ class HealthRules:
     max_degraded_run: int = 1
     max_rejected: int = 0
     max_drift_m: float = 0.5
+    drift_sigmas: float = 2.5
+    degenerate_share: float = 0.02
+    prior_sigma_m: float = 0.05
+    first_prior_sigma_m: float = 0.5
 
 
 def assess(accepted: bool, reason: str, inliers: int, sources: int, conditioning: float, gap_m: float,
@@ -71,6 +97,175 @@ def assess(accepted: bool, reason: str, inliers: int, sources: int, conditioning
     if has_velocity and (gap_m > rules.max_prediction_gap_m or gap_deg > rules.max_prediction_gap_deg):
         reasons.append(f"{gap_m:.2f} m / {gap_deg:.1f} deg from the constant-velocity prediction")
     return ("degraded" if reasons else "accepted"), reasons
+
+
+#: Names of the camera axes (x right, y down, z forward): a direction is named by the axis it is closest to, in the
+#: camera frame of the step that contributes most to it.
+AXIS_NAMES = ("across the road (camera x)", "vertical (camera y)", "along the road (camera z)")
+
+
+def _numpy(tensor) -> np.ndarray:
+    return tensor.detach().cpu().double().numpy() if hasattr(tensor, "detach") else np.asarray(tensor, np.float64)
+
+
+def axis_name(direction_cam) -> str:
+    """The name of the camera axis closest to a direction (3,) in the camera frame, sign ignored."""
+    return AXIS_NAMES[int(np.argmax(np.abs(np.asarray(direction_cam, dtype=np.float64))))]
+
+
+def step_degeneracy(information) -> dict | None:
+    """Zhang & Singh's degeneracy analysis of one step: the translation and rotation blocks of its point-to-plane
+    information J^T W J (6, 6: twist (translation, rotation), camera frame), each divided by its trace so that the
+    eigenvalues are shares in [0, 1/3 for the smallest] whatever the number of pairs (a translation block's share is
+    that of the pairs' normal weight along the direction; 0 along a corridor's axis).
+
+    Returns ``{"translation": share, "translation_direction": (3,) camera frame, "rotation": share,
+    "rotation_axis": (3,) camera frame}`` of the smallest eigenvalue of each block, or None without an information.
+    """
+    if information is None:
+        return None
+    H = _numpy(information)
+    if not np.isfinite(H).all():
+        return None
+    out = {}
+    for key, axis_key, block in (("translation", "translation_direction", H[:3, :3]),
+                                 ("rotation", "rotation_axis", H[3:, 3:])):
+        trace = float(np.trace(block))
+        values, vectors = np.linalg.eigh(block / trace) if trace > 0 else (np.zeros(3), np.eye(3))
+        out[key], out[axis_key] = float(values[0]), vectors[:, 0]
+    return out
+
+
+def _step_covariance(report, rules: HealthRules) -> np.ndarray | None:
+    """The step's (6, 6) twist covariance: its own, or (a report without one) its worst-direction standard
+    deviations ``sigma_m`` and ``sigma_deg`` in every direction; None when the step was not measured. Along each
+    degenerate translation direction (:attr:`HealthRules.degenerate_share`) the prediction's variance is added:
+    the pose there is the prediction's."""
+    if getattr(report, "covariance", None) is not None:
+        C = _numpy(report.covariance).copy()
+        if not np.isfinite(C).all():
+            return None
+    elif math.isnan(report.sigma_m) or math.isnan(report.sigma_deg):
+        return None
+    else:
+        C = np.diag([report.sigma_m ** 2] * 3 + [math.radians(report.sigma_deg) ** 2] * 3)
+    information = getattr(report, "information", None)
+    if information is not None and np.isfinite(_numpy(information)).all():
+        block = _numpy(information)[:3, :3]
+        trace = float(np.trace(block))
+        values, vectors = np.linalg.eigh(block / trace) if trace > 0 else (np.zeros(3), np.eye(3))
+        prior = rules.first_prior_sigma_m if report.index == 1 else rules.prior_sigma_m
+        for value, v in zip(values, vectors.T):
+            if value < rules.degenerate_share:
+                C[:3, :3] += prior ** 2 * np.outer(v, v)
+    return C
+
+
+def _directions(n: int = 400) -> np.ndarray:
+    """``n`` unit directions spread evenly over a hemisphere (a Fibonacci lattice; u and -u bound alike).
+    Shape: (n, 3)."""
+    i = np.arange(n) + 0.5
+    polar, azimuth = np.arccos(1 - i / n), math.pi * (1 + 5 ** 0.5) * i
+    return np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], 1)
+
+
+def _position_covariances(A: np.ndarray, X: np.ndarray, B: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Covariance of a position error ``a - [d]x b`` (= a + b x d): ``a`` a translation error (covariance A), ``b`` a
+    rotation error (B; cross-covariance X = cov(a, b)), ``d`` the lever from the rotation's centre.
+    Shapes: A, X, B (S, 3, 3); d (S, 3) -> (S, 3, 3)."""
+    D = np.zeros(d.shape[:-1] + (3, 3))
+    D[..., 0, 1], D[..., 0, 2], D[..., 1, 2] = -d[..., 2], d[..., 1], -d[..., 0]
+    D[..., 1, 0], D[..., 2, 0], D[..., 2, 1] = d[..., 2], -d[..., 1], d[..., 0]
+    XD = X @ D.swapaxes(-1, -2)
+    return A - XD - XD.swapaxes(-1, -2) + D @ B @ D.swapaxes(-1, -2)
+
+
+def _correlated_std(P: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Per-step standard deviations along unit directions. Shapes: P (S, 3, 3), u (K, 3) -> (S, K)."""
+    return np.sqrt(np.maximum(np.einsum("ki,sij,kj->sk", u, P, u), 0.0))
+
+
+def _worst_direction(P: np.ndarray) -> np.ndarray:
+    """The unit direction u maximising sum_i sqrt(u^T P_i u): the best of a lattice of directions, then the ascent
+    u <- grad / |grad|, which never lowers a convex, positively homogeneous function such as this one. (3,)"""
+    U = _directions()
+    u = U[int(np.argmax(_correlated_std(P, U).sum(0)))]
+    for _ in range(50):
+        std = _correlated_std(P, u[None])[:, 0]
+        kept = std > 0
+        grad = (np.einsum("sij,j->si", P[kept], u) / std[kept, None]).sum(0)
+        norm = float(np.linalg.norm(grad))
+        if norm == 0 or np.allclose(grad / norm, u, atol=1e-10):
+            break
+        u = grad / norm
+    return u
+
+
+def drift_bound(reports, rules: HealthRules | None = None) -> dict:
+    """How far the run's last position may be from the truth, and in which direction: ``rules.drift_sigmas`` times
+    the sum over the measured steps of each step's standard deviation along a direction (the steps' errors taken as
+    correlated: see the module's docstring), maximised over directions (``rules`` None: :class:`HealthRules`).
+
+    A step i with twist covariance C (camera frame, :meth:`~dcslam.slam.odometry.PointToPlane.covariance`) moves a
+    later frame k by ``R_i dt + (R_i dw) x (p_k - p_i)``: its translation, and its rotation about its own position
+    times the road from there; along a direction the step leaves degenerate, the prediction's uncertainty
+    (:attr:`HealthRules.degenerate_share`). Rejected steps and steps without a covariance add nothing (they are
+    flagged on their own).
+
+    Returns ``{"bound_m": b, "sigmas": rules.drift_sigmas, "direction_world": [3], "direction": a name of
+    :data:`AXIS_NAMES`, "from_frame": None, "largest_frame": the step that adds most, "weakest_frame": the step
+    with the smallest translation share (:func:`step_degeneracy`), "weakest_share": that share,
+    "weakest_direction": its name}``; :func:`summarise` fills in ``from_frame`` (the first frame whose own bound
+    along that direction exceeds ``max_drift_m``) when the bound exceeds it.
+    """
+    return _drift(reports, HealthRules() if rules is None else rules)[0]
+
+
+def _drift(reports, rules: HealthRules) -> tuple[dict, tuple | None]:
+    """:func:`drift_bound`, and what :func:`_first_frame_over` needs to follow the bound frame by frame (None when
+    no step was measured)."""
+    sigmas = rules.drift_sigmas
+    steps = [r for r in reports if r.index > 0 and r.verdict != "rejected"]
+    measured = [(r, C) for r, C in ((r, _step_covariance(r, rules)) for r in steps) if C is not None]
+    empty = {"bound_m": 0.0, "sigmas": sigmas, "direction_world": None, "direction": None, "from_frame": None,
+             "largest_frame": None, "weakest_frame": None, "weakest_share": None, "weakest_direction": None}
+    if not measured:
+        return empty, None
+    positions = np.stack([_numpy(r.T_world_cam)[:3, 3] for r in reports])
+    index = {r.index: k for k, r in enumerate(reports)}
+    R = np.stack([_numpy(r.T_world_cam)[:3, :3] for r, _ in measured])
+    C = np.stack([C for _, C in measured])
+    A = R @ C[:, :3, :3] @ R.transpose(0, 2, 1)
+    X = R @ C[:, :3, 3:] @ R.transpose(0, 2, 1)
+    B = R @ C[:, 3:, 3:] @ R.transpose(0, 2, 1)
+    at = np.array([index[r.index] for r, _ in measured])
+    P = _position_covariances(A, X, B, positions[-1][None, :] - positions[at])
+    u = _worst_direction(P)
+    std = _correlated_std(P, u[None])[:, 0]
+    largest = int(np.argmax(std))
+    direction_cam = R[largest].T @ u
+    result = {**empty, "bound_m": float(sigmas * std.sum()), "direction_world": [float(x) for x in u],
+              "direction": axis_name(direction_cam), "largest_frame": int(measured[largest][0].index)}
+    shares = [(r.index, d) for r, d in ((r, step_degeneracy(getattr(r, "information", None))) for r, _ in measured)
+              if d is not None]
+    if shares:
+        frame, d = min(shares, key=lambda fd: fd[1]["translation"])
+        result.update(weakest_frame=int(frame), weakest_share=round(d["translation"], 5),
+                      weakest_direction=axis_name(d["translation_direction"]))
+    return result, (u, A, X, B, at, positions)
+
+
+def _first_frame_over(curve, sigmas: float, over_m: float, reports) -> int | None:
+    """The first frame whose own drift bound along the run's worst direction exceeds ``over_m``."""
+    u, A, X, B, at, positions = curve
+    for k in range(len(positions)):
+        mine = at <= k
+        if not mine.any():
+            continue
+        P = _position_covariances(A[mine], X[mine], B[mine], positions[k][None, :] - positions[at[mine]])
+        if sigmas * float(_correlated_std(P, u[None]).sum()) > over_m:
+            return int(reports[k].index)
+    return None
 
 
 def drift_sigma_m(reports) -> float:
@@ -104,7 +299,8 @@ def summarise(reports, rules: HealthRules = HealthRules()) -> dict:
     frame, which has nothing to align to, is not counted) and whether the trajectory is suspect, with why.
 
     Returns ``{"accepted": n, "degraded": n, "rejected": n, "suspect": bool, "reasons": [str],
-    "flagged_steps": [{"frame": i, "verdict": v, "why": [str]}], "drift_sigma_m": s}`` (:func:`drift_sigma_m`).
+    "flagged_steps": [{"frame": i, "verdict": v, "why": [str]}], "drift_sigma_m": s (:func:`drift_sigma_m`),
+    "drift": :func:`drift_bound`}``.
     """
     steps = [r for r in reports if r.index > 0]
     counts = {v: sum(r.verdict == v for r in steps) for v in VERDICTS}
@@ -121,9 +317,15 @@ def summarise(reports, rules: HealthRules = HealthRules()) -> dict:
     if longest > rules.max_degraded_run:
         reasons.append(f"{longest} consecutive steps degraded")
     sigma = drift_sigma_m(reports)
-    if rules.max_drift_m > 0 and 3 * sigma > rules.max_drift_m:
-        reasons.append(f"accumulated uncertainty {3 * sigma:.2f} m (3 sigma) exceeds {rules.max_drift_m:g} m")
+    drift, curve = _drift(reports, rules)
+    if rules.max_drift_m > 0 and drift["bound_m"] > rules.max_drift_m:
+        drift["from_frame"] = _first_frame_over(curve, rules.drift_sigmas, rules.max_drift_m, reports)
+        reasons.append(f"accumulated uncertainty {drift['bound_m']:.2f} m ({rules.drift_sigmas:g} sigma, steps "
+                       f"correlated) exceeds {rules.max_drift_m:g} m: {drift['direction']} left unconstrained, "
+                       f"past {rules.max_drift_m:g} m from frame {drift['from_frame']} (most from step "
+                       f"{drift['largest_frame']})")
+    drift["bound_m"] = round(drift["bound_m"], 4)
     flagged = [{"frame": r.index, "verdict": r.verdict, "why": list(r.health)} for r in steps
                if r.verdict != "accepted"]
     return {**counts, "suspect": bool(reasons), "reasons": reasons, "flagged_steps": flagged,
-            "drift_sigma_m": round(sigma, 4)}
+            "drift_sigma_m": round(sigma, 4), "drift": drift}

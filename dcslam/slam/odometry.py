@@ -28,7 +28,9 @@ from dcslam.slam.solvers import GaussNewton, Linearization
 @dataclass
 class OdometryResult:
     """Shape: T_world_cam (4, 4). ``accepted`` false means the estimate was rejected (``reason`` says why) and
-    ``T_world_cam`` is the initial guess."""
+    ``T_world_cam`` is the initial guess. ``information`` (6, 6): J^T W J of the final pairs at the estimate, and
+    ``covariance`` (6, 6): :meth:`PointToPlane.covariance`, both float64 over the twist (translation, rotation) in the
+    camera frame (None when the step never got that far): the degeneracy analysis of :mod:`dcslam.slam.health`."""
 
     T_world_cam: torch.Tensor
     accepted: bool = True
@@ -41,6 +43,8 @@ class OdometryResult:
     gate: float = math.nan
     sigma_m: float = math.nan
     sigma_deg: float = math.nan
+    information: torch.Tensor | None = None
+    covariance: torch.Tensor | None = None
 
 
 #: Iterations of each wide-gate ICP stage on dense depth (a value at more than :data:`DENSE_FRACTION` of the
@@ -295,6 +299,7 @@ class ICPOdometry:
             return OdometryResult(T_init, False, f"{lin.count} inliers", **base)
         base["conditioning"] = conditioning = self._conditioning(lin, source)
         cov = problem.covariance(T, lin, r)
+        base["information"], base["covariance"] = lin.H.detach().double(), cov
         base["sigma_m"] = math.sqrt(max(float(torch.linalg.eigvalsh(cov[:3, :3])[-1]), 0.0))
         base["sigma_deg"] = math.degrees(math.sqrt(max(float(torch.linalg.eigvalsh(cov[3:, 3:])[-1]), 0.0)))
         if conditioning < self.min_conditioning:

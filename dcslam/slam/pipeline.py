@@ -57,7 +57,9 @@ class StepReport:
     verdict: accepted, degraded or rejected; health: the reasons. sources: valid points of the frame; inliers: of
     them, paired within the gates; conditioning: see ``ICPOdometry._conditioning``; gap_m / gap_deg: distance of
     the estimate from the constant-velocity prediction; sigma_m / sigma_deg: the step's first-order standard
-    deviation of position / rotation along its worst direction (``PointToPlane.covariance``; NaN when not measured).
+    deviation of position / rotation along its worst direction (``PointToPlane.covariance``; NaN when not measured);
+    information / covariance: the step's (6, 6) ``OdometryResult.information`` and ``covariance`` (None when not
+    measured).
     """
 
     index: int
@@ -77,6 +79,8 @@ class StepReport:
     gap_deg: float = 0.0
     sigma_m: float = math.nan
     sigma_deg: float = math.nan
+    information: torch.Tensor | None = None
+    covariance: torch.Tensor | None = None
 
 
 class SLAM:
@@ -233,7 +237,7 @@ class SLAM:
         report = StepReport(index, result.T_world_cam, result.accepted, result.reason, result.iterations,
                             result.inliers, result.rmse, len(self.mapper.map), time.perf_counter() - start,
                             verdict, tuple(why), result.sources, result.conditioning, gap_m, gap_deg,
-                            result.sigma_m, result.sigma_deg)
+                            result.sigma_m, result.sigma_deg, result.information, result.covariance)
         self.reports.append(report)
         return report
 

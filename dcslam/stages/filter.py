@@ -73,9 +73,17 @@ def run(ws: Workspace, config: FilterConfig, *, force: bool = False) -> FilterRe
     jobs = [(ws.drives / f"{d}.h5", layer.source(d), out_dir / f"{d}.h5") for d in drives]
     settings = {"name": name, "source_layer": layer.name, "depth": config.depth, "drives": drives,
                 "filters": chain.describe(), "options": to_dict(config)}
+    from dcslam.io.lineage import MADE_FROM, check_layer_folder, made_from
+    from dcslam.locks import output_lock
+
+    check_layer_folder(layer.folder)  # a source layer made from an input that changed since is refused
     config_path = out_dir / "config.json"
-    if config_path.exists() and not force:
-        raise DcslamError(f"{config_path} exists; pass --force to overwrite it")
-    written = filter_drives(jobs, chain, made_by=name, settings={"source_layer": layer.name}, force=force)
-    write_json_atomic(config_path, stage_config("filter", settings), force=True)
+    with output_lock(out_dir, "layer"):  # before anything is checked, removed or written: one writer at a time
+        if config_path.exists() and not force:
+            raise DcslamError(f"{config_path} exists; pass --force to overwrite it")
+        written = filter_drives(jobs, chain, made_by=name, settings={"source_layer": layer.name}, force=force)
+        record = stage_config("filter", settings)
+        record[MADE_FROM] = made_from({drive: source if isinstance(source, Path) else None
+                                       for drive, (_, source, _) in zip(drives, jobs)}, out_dir)
+        write_json_atomic(config_path, record, force=True)
     return FilterResult(layer.name, chain.name, out_dir, written)

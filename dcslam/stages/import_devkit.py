@@ -158,21 +158,34 @@ def _drives_of(ws: Workspace, config: ImportConfig, src: Path) -> tuple[list | N
 
 def run(ws: Workspace, config: ImportConfig, *, force: bool = False) -> ImportResult:
     """Read and check every PNG, then write ``<out>/<drive>.h5`` for each drive and ``<out>/config.json``."""
-    from dcslam.io.atomic import AtomicSet, write_json_atomic
-    from dcslam.io.devkit import read_prediction
-    from dcslam.io.drive import DriveFile, Layer, input_beams, write_layer
-    from dcslam.progress import track
-    from dcslam.stages.config import to_dict
-    from dcslam.workspace import drive_file, new_folder, output_folder, plain_name, stage_config
+    from dcslam.workspace import output_folder, plain_name
 
     src = Path(config.src)
     if not src.is_dir():
         raise DcslamError(f"--src {src} is not a folder of devkit PNGs")
     name = plain_name(config.name or src.resolve().name, "--name")
     out_dir = output_folder(ws.predictions / name, "predictions/<name>")
-    kinds = None
     entries, drives = _drives_of(ws, config, src)
     outputs = {drive: out_dir / f"{drive}.h5" for drive in drives}
+    from dcslam.locks import output_lock
+
+    with output_lock(out_dir, "layer"):  # before anything is checked or written: one writer at a time
+        files = _import_drives(ws, config, src, name, out_dir, entries, drives, outputs, force)
+    return ImportResult(name, out_dir, list(outputs.values()), sum(len(f) for f in files.values()))
+
+
+def _import_drives(ws: Workspace, config: ImportConfig, src: Path, name: str, out_dir: Path, entries, drives,
+                   outputs: dict, force: bool) -> dict:
+    """Read, check and write every drive's layer and ``config.json`` (the layer folder's lock held); returns the
+    PNG files read per drive."""
+    from dcslam.io.atomic import AtomicSet, write_json_atomic
+    from dcslam.io.devkit import read_prediction
+    from dcslam.io.drive import DriveFile, Layer, input_beams, write_layer
+    from dcslam.progress import track
+    from dcslam.stages.config import to_dict
+    from dcslam.workspace import drive_file, new_folder, stage_config
+
+    kinds = None
     existing = [p for p in [*outputs.values(), out_dir / "config.json"] if p.exists()]
     if existing and not force:
         raise DcslamError(f"{existing[0]} exists; pass --force to overwrite it")
@@ -206,4 +219,4 @@ def run(ws: Workspace, config: ImportConfig, *, force: bool = False) -> ImportRe
     write_json_atomic(out_dir / "config.json",
                       stage_config("import", {**to_dict(config), "name": name, "drives": drives,
                                               "imported": imported}), force=True)
-    return ImportResult(name, out_dir, list(outputs.values()), sum(len(f) for f in files.values()))
+    return files

@@ -166,13 +166,15 @@ class Pipeline:
         self._claim(stage)
         options = " ".join(f"{k}={v}" for k, v in changed(stage.config).items())
         self.log(f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} {options}".rstrip())
-        start = time.perf_counter()
+        from dcslam.executor import cpu_clock
+
+        start, cpu = time.perf_counter(), cpu_clock()
         try:
             result = stage.run(self.ws, stage.config, force=True)
         except DcslamError as error:
             raise DcslamError(f"stage {stage.name} failed ({error}); fix it and rerun: finished stages will be "
                               "skipped") from None
-        self._done(stage, time.perf_counter() - start)
+        self._done(stage, time.perf_counter() - start, cpu_clock() - cpu)
         return result
 
     def _claim(self, stage: Stage) -> None:
@@ -183,9 +185,12 @@ class Pipeline:
                               "move it away or pass --force to overwrite it")
         write_json_atomic(self._stamp(stage), {**self._record(stage), "complete": False})  # claims nothing until done
 
-    def _done(self, stage: Stage, seconds: float) -> None:
+    def _done(self, stage: Stage, seconds: float, cpu_seconds: float | None) -> None:
+        """Stamp ``stage`` as complete with its measured cost: ``seconds`` (wall) and ``cpu_seconds`` (CPU time of
+        the process that ran it, and its ended children; None when the executor did not say)."""
         self.timings[stage.name] = seconds
-        write_json_atomic(self._stamp(stage), {**self._record(stage), "complete": True, "seconds": seconds})
+        write_json_atomic(self._stamp(stage), {**self._record(stage), "complete": True, "seconds": seconds,
+                                               "cpu_seconds": cpu_seconds})
 
     def run_all(self, stages: list[Stage], jobs: int = 1) -> None:
         """Run independent ``stages`` (none reads another's outputs) through the pipeline's executor (default: a
@@ -224,10 +229,10 @@ class Pipeline:
                 if not outcome.ok:
                     details = outcome.task.labels()
                     if outcome.job is not None:
-                        details.append(f"Slurm job {outcome.job}, log {outcome.log}")
+                        details.append(f"Slurm job {outcome.job}" + (f", log {outcome.log}" if outcome.log else ""))
                     raise DcslamError(f"stage {stage.name} failed ({outcome.error})"
                                       f"{''.join(f'; {d}' for d in details)}; fix it and rerun: finished stages will "
                                       "be skipped")
-                self._done(stage, outcome.seconds)
+                self._done(stage, outcome.seconds, outcome.cpu_seconds)
         finally:
             outcomes.close()  # stops what is still running when this gave up early

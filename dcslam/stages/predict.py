@@ -68,7 +68,18 @@ def run_predictor(run_dir: Path | str, device):
     config_path = run_dir / "config.json"
     if config_path.exists():
         config["train_settings"] = json.loads(config_path.read_text()).get("settings", {})
+        check_architecture(run_dir, model.ARCH, config["train_settings"])
     return Predictor(NetworkCompleter(model, device, scale, run_dir.name), run_dir.name, config)
+
+
+def check_architecture(run_dir: Path, arch: str, settings: dict) -> None:
+    """Refuse a run whose ``model.pt`` holds another network than its ``config.json`` says it trained (a model file
+    copied in from another run would be used under this run's name)."""
+    trained = settings.get("model") if isinstance(settings, dict) else None
+    if trained and str(trained) != arch:
+        raise DcslamError(f"{run_dir / 'model.pt'} holds a {arch} network but {run_dir / 'config.json'} says the run "
+                          f"trained {trained}; put the run's own model back or retrain it with `dcslam train "
+                          f"--name {run_dir.name} --force`")
 
 
 def predict_drive(predictor, drive_path: Path | str, out_path: Path | str, force: bool = False,
@@ -138,6 +149,17 @@ def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> Predict
     suffix = "" if kind == trained_on else "-" + kind.replace("@", "")
     out_dir = output_folder(config.output or ws.predictions / f"{chosen.made_by}{suffix}", "--out")
     outputs = [out_dir / Path(p).name for p in paths]
+    from dcslam.locks import output_lock
+
+    with output_lock(out_dir, "layer"):  # before anything is checked, removed or written: one writer at a time
+        empty = _write_layers(ws, config, chosen, kind, paths, out_dir, outputs, force)
+    return PredictResult(out_dir, outputs, chosen.made_by, empty)
+
+
+def _write_layers(ws: Workspace, config: PredictConfig, chosen, kind: str, paths: list, out_dir: Path,
+                  outputs: list[Path], force: bool) -> float | None:
+    """Write the layers and ``config.json`` (with the identity of the model they were predicted by, under
+    ``made_from``); returns the share of their pixels left empty."""
     existing = [p for p in outputs if p.exists()]
     if existing and not force:
         raise DcslamError(f"{existing[0]} exists; pass --force to overwrite it")
@@ -154,14 +176,16 @@ def run(ws: Workspace, config: PredictConfig, *, force: bool = False) -> Predict
         for path, out in zip(paths, outputs):
             share, size = _empty_share(predict_drive(chosen, path, files.stage(out), force=True, input=kind))
             empty, pixels = empty + share * size, pixels + size
-    from dcslam.stages.config import to_dict
     from dcslam.io.atomic import write_json_atomic
+    from dcslam.io.lineage import MADE_FROM, made_from
+    from dcslam.stages.config import to_dict
     from dcslam.workspace import stage_config
 
-    write_json_atomic(out_dir / "config.json", stage_config("predict", {**to_dict(config), "made_by": chosen.made_by,
-                                                                      "input": kind}),
-                      force=True)
-    return PredictResult(out_dir, outputs, chosen.made_by, empty / pixels if pixels else None)
+    model_file = chosen.config.get("model_file")
+    record = stage_config("predict", {**to_dict(config), "made_by": chosen.made_by, "input": kind})
+    record[MADE_FROM] = made_from({"model": Path(model_file) if model_file else None}, out_dir)
+    write_json_atomic(out_dir / "config.json", record, force=True)
+    return empty / pixels if pixels else None
 
 
 def _empty_share(layer_path: Path) -> tuple[float, int]:

@@ -15,6 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from dcslam.errors import DcslamError
 from dcslam.io.drive import DriveWriter, read_splits
 from dcslam.io.kitti import DriveIndex, RawDrive, find_drives, index_drive, read_drive
@@ -153,13 +155,37 @@ def prepare_kitti(kitti_root: Path | str, out_dir: Path | str, *, splits_file: P
     source = found[0].source
     chosen, label = _chosen_drives(kitti_root, found, splits_file, include_unsplit, notes)
 
+    indexes: list[DriveIndex] = [check_increasing(index_drive(drive).head(max_frames)) for drive, _ in chosen]
+    from dcslam.locks import output_lock
+
+    with output_lock(out_dir, "drives folder"):  # before anything is checked or written: one writer at a time
+        return _write_prepared(kitti_root, out_dir, chosen, indexes, beams, source, label, max_frames,
+                               include_unsplit, notes, force)
+
+
+def check_increasing(index: DriveIndex) -> DriveIndex:
+    """``index`` if its image timestamps strictly increase (what SLAM and evo need), else one :class:`DcslamError`
+    line naming the drive and the first frame whose timestamp is not after its predecessor's."""
+    steps = np.diff(np.asarray(index.timestamps, float))
+    bad = np.flatnonzero(~(steps > 0))
+    if len(bad):
+        k = int(bad[0]) + 1
+        how = "equal to" if steps[k - 1] == 0 else "before"
+        raise DcslamError(f"drive {index.drive.name}: the timestamp of frame {int(index.frame_ids[k])} is {how} that "
+                          f"of frame {int(index.frame_ids[k - 1])} in image_02/timestamps.txt; timestamps must "
+                          "strictly increase (fix or drop the drive)")
+    return index
+
+
+def _write_prepared(kitti_root: Path, out_dir: Path, chosen, indexes, beams, source, label, max_frames,
+                    include_unsplit, notes, force) -> PrepareResult:
+    """Write the drive files, ``splits.json`` and ``prepare-kitti.json`` (the drives folder's lock held)."""
     splits_path = out_dir / "splits.json"
     targets = [out_dir / f"{drive.name}.h5" for drive, _ in chosen]
     if not force:
         for path in (*targets, splits_path):
             if path.exists():
                 raise DcslamError(f"{path} exists; pass --force to overwrite it")
-    indexes: list[DriveIndex] = [index_drive(drive).head(max_frames) for drive, _ in chosen]
     written = _write_drive_files(chosen, indexes, targets, beams, source)
 
     out_splits = {split: [d.name for d in written if d.split == split] for split in SPLIT_NAMES}

@@ -56,8 +56,11 @@ class ReproduceConfig:
     dry_run: bool = option(False, flags=("--dry-run",), help="Print the stages it would run and their estimated "
                            "cost, then exit without running or writing anything.")
     costs_from: Path | None = option(None, help="Workspace of a finished reproduction whose stage timings give the "
-                                     "estimate's unit costs (default: this workspace's, else a quick run's "
-                                     "measured here, shipped with dcslam).")
+                                     "estimate's unit costs (default: this workspace's --calibrate, else its "
+                                     "finished stages, else the probe's figures shipped with dcslam).")
+    calibrate: bool = option(False, flags=("--calibrate",), help="First measure the estimate's unit costs on this "
+                             "machine: a probe runs small samples of every stage kind at the profile's settings (a "
+                             "minute or two of CPU) and writes them to <workspace>/.reproduce/calibration.json.")
 
     def __post_init__(self) -> None:
         if self.jobs < 1:
@@ -100,8 +103,17 @@ def reproduce(workspace: Workspace, profile, table: str = "5.2", kitti_root: Pat
     for the independent stages; ``seeds``: training seeds per trained run (``seed`` … ``seed + seeds − 1``);
     ``executor``: where independent stages run instead (e.g. a :class:`~dcslam.executor.SlurmExecutor`; None:
     ``jobs`` local workers)."""
-    pipe = Pipeline(workspace, log, force=force, executor=executor)
-    return _experiment(table).compose(pipe, profile, kitti_root, seed, jobs, seeds)
+    from dcslam.locks import output_lock
+
+    # one reproduce per workspace: a second one would replace kitti/ and drives/ under the first (a lock beside the
+    # workspace, so that nothing inside it is touched before the lock is held)
+    with output_lock(workspace.root, "workspace"):
+        from dcslam import interrupt
+
+        interrupt.keep(f"the stages that finished are kept in {workspace.root} (stamped in .reproduce/); rerun the "
+                       "same command to go on from there (the stage that was running starts again)", final=True)
+        pipe = Pipeline(workspace, log, force=force, executor=executor)
+        return _experiment(table).compose(pipe, profile, kitti_root, seed, jobs, seeds)
 
 
 def make_executor(ws: Workspace, config: ReproduceConfig, log: Callable[[str], None] = lambda line: None):

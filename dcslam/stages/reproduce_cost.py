@@ -1,30 +1,41 @@
 """What ``dcslam reproduce`` will run and what it will cost, printed before it starts (``--dry-run``: only that).
 
-The cost of a stage is its work in the units of its kind (generated frames, drive frames, training frames at full
-resolution × epochs, predicted or filtered frames, SLAM frames, SLAM runs scored; :func:`stage_work`) times a unit
-cost in seconds. Unit costs are measured, never assumed: every finished stage's stamp in ``<workspace>/.reproduce/``
-records its seconds and its configuration, from which :func:`measure` recomputes its work, so the seconds per unit
-of each kind are those of a finished reproduction: ``--costs-from DIR``, else the workspace's own finished stages,
-else a quick-profile run's as measured on the machine named in ``reproduce_costs.json`` (shipped with dcslam).
-Each stage's seconds are the wall time of the one process that ran it, so their sum is CPU time for one-thread
-stages and a bound on the wall time at ``--jobs 1``.
+The cost of a stage of a kind is ``stage_s + units × unit_s`` CPU seconds: ``units`` its work in the units of its kind
+(generated frames, drive frames, training steps (frames × epochs), predicted or filtered frames, SLAM frames, SLAM
+runs scored; :func:`stage_work`), counted at the profile's settings (image scale, model, loss, map frames, completer,
+SLAM settings), so unit costs hold for the profile they were measured at. Unit costs are measured, never assumed:
+
+- ``--costs-from DIR``: the stamps of a finished reproduction (each records the CPU seconds of its stage):
+  seconds per unit of each kind, no per-stage part;
+- else the calibration of this workspace for this profile (``dcslam reproduce --calibrate``:
+  :mod:`dcslam.stages.reproduce_probe` runs small samples of every stage kind at two sizes and fits ``stage_s`` and
+  ``unit_s``; written to ``<workspace>/.reproduce/calibration.json``);
+- else the workspace's own finished stages;
+- else ``reproduce_costs.json`` (shipped with dcslam: the probe's figures on the machine its ``note`` names; a
+  profile it lacks gets quick's, and the source says so).
+
+Seconds are CPU seconds of one torch thread (the probe runs one; a stage that runs more threads spends more CPU for
+less wall time), so their sum is about the wall time of ``--jobs 1`` with one thread on a quiet machine.
 """
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from dcslam.errors import DcslamError
 
 SHIPPED_COSTS = Path(__file__).with_name("reproduce_costs.json")
+CALIBRATION = "calibration.json"  # in <workspace>/.reproduce/: what `dcslam reproduce --calibrate` measured
 # each kind's unit, as the estimate prints it
 UNITS = {"synth": "generated frames", "prepare-kitti": "drive frames",
-         "train-mse": "training frames x epochs at full resolution", "train-chamfer": "training frames x epochs "
-         "at full resolution", "train-pose": "training frames x epochs at full resolution",
+         "train-mse": "training steps (frames x epochs)", "train-chamfer": "training steps (frames x epochs)",
+         "train-pose": "training steps (frames x epochs)",
          "predict": "predicted frames", "predict-classical": "predicted frames", "filter": "filtered frames",
          "slam": "SLAM frames", "slam-long": "SLAM frames", "score": "SLAM runs scored"}
-CLASSICAL_PREFIX = "ip-basic"
+# IP-Basic's predictions are kind predict-classical; every other classical completer's are a kind of their own,
+# predict-<completer> (their costs differ tenfold: planefit against scanline)
+CLASSICAL_KIND = ("ip-basic", "ip-basic-fast")
 # frames 5 … N−6 of a generated drive of N raw frames have depth, and only those are in its drive file
 UNDEPTHED_FRAMES = 10
 
@@ -49,7 +60,8 @@ def stage_kind(name: str, config: dict) -> str:
     if name.startswith("train-"):
         return f"train-{config.get('loss', 'mse')}"
     if name.startswith("predict-"):
-        return "predict-classical" if config.get("model") else "predict"
+        model = config.get("model")
+        return "predict" if not model else "predict-classical" if model in CLASSICAL_KIND else f"predict-{model}"
     if name.startswith("filter-"):
         return "filter"
     if name.startswith("slam-long-"):
@@ -73,8 +85,8 @@ def stage_work(name: str, config: dict, drives: DriveFrames, slam_runs: int) -> 
     if kind.startswith("train-"):
         used = sum(min(config["max_frames"], drives.frames.get(d, 0)) // config["stride"]
                    for d in drives.splits.get("train", []) + drives.splits.get("val", []))
-        return kind, float(config["epochs"] * used * config["scale"] ** 2)
-    if kind in ("predict", "predict-classical", "filter"):
+        return kind, float(config["epochs"] * used)  # a step's cost at the profile's scale is its unit cost
+    if kind.startswith("predict") or kind == "filter":
         return kind, float(drives.total(test))
     if kind in ("slam", "slam-long"):
         frames = [drives.frames.get(Path(d).stem, 0) for d in config["drive"] or test]
@@ -82,15 +94,11 @@ def stage_work(name: str, config: dict, drives: DriveFrames, slam_runs: int) -> 
     return kind, float(slam_runs)
 
 
-def measure(root: Path) -> dict[str, tuple[float, float]]:
-    """``{kind: (seconds, units)}`` summed over the finished stages stamped in ``<root>/.reproduce/`` (work from
-    each stamp's configuration and the workspace's drive files); empty when it has none."""
-    from dcslam.io.drive import DriveFile, read_splits
-
-    root = Path(root)
-    stamps = sorted((root / ".reproduce").glob("*.json")) if (root / ".reproduce").is_dir() else []
+def _stamps(root: Path) -> list[tuple[str, dict]]:
+    """``(stage name, stamp)`` of the finished stages stamped in ``<root>/.reproduce/``."""
+    state = Path(root) / ".reproduce"
     records = []
-    for path in stamps:
+    for path in sorted(state.glob("*.json")) if state.is_dir() else []:
         try:
             record = json.loads(path.read_text())
         except json.JSONDecodeError:
@@ -98,6 +106,17 @@ def measure(root: Path) -> dict[str, tuple[float, float]]:
         if isinstance(record, dict) and record.get("complete") and isinstance(record.get("seconds"), (int, float)) \
                 and isinstance(record.get("config"), dict):
             records.append((path.stem, record))
+    return records
+
+
+def measure(root: Path) -> dict[str, tuple[float, float, int]]:
+    """``{kind: (CPU seconds, units, stages)}`` summed over the finished stages stamped in ``<root>/.reproduce/``
+    (work from each stamp's configuration and the workspace's drive files; a stamp without ``cpu_seconds``, from an
+    older dcslam, counts its wall seconds); empty when it has none."""
+    from dcslam.io.drive import DriveFile, read_splits
+
+    root = Path(root)
+    records = _stamps(root)
     if not records:
         return {}
     splits_file = root / "drives" / "splits.json"
@@ -108,41 +127,78 @@ def measure(root: Path) -> dict[str, tuple[float, float]]:
             frames[drive.stem] = len(d)
     drives = DriveFrames(frames, splits)
     slam_runs = sum(name.startswith("slam-") for name, _ in records)
-    totals: dict[str, tuple[float, float]] = {}
+    totals: dict[str, tuple[float, float, int]] = {}
     for name, record in records:
         try:
             kind, units = stage_work(name, record["config"], drives, slam_runs)
         except (DcslamError, KeyError, TypeError):
             continue  # a stage this estimate does not know, or a stamp of another version's options
-        seconds, work = totals.get(kind, (0.0, 0.0))
-        totals[kind] = (seconds + float(record["seconds"]), work + units)
+        cpu = record.get("cpu_seconds")
+        seconds = float(cpu if isinstance(cpu, (int, float)) else record["seconds"])
+        total, work, stages = totals.get(kind, (0.0, 0.0, 0))
+        totals[kind] = (total + seconds, work + units, stages + 1)
     return totals
 
 
 @dataclass(frozen=True)
 class UnitCosts:
-    """Seconds per unit of each stage kind, and where they were measured."""
+    """CPU seconds of each stage kind: ``per_stage`` (each stage's fixed part: imports, model set-up, files) plus
+    ``per_unit`` × its units; and where they were measured."""
 
     per_unit: dict[str, float]
     source: str
+    per_stage: dict[str, float] = field(default_factory=dict)
+
+    def seconds(self, kind: str, stages: int, units: float) -> float | None:
+        """Estimated CPU seconds of ``stages`` stages of ``kind`` doing ``units`` in all (None: not measured)."""
+        if kind not in self.per_unit:
+            return None
+        return stages * self.per_stage.get(kind, 0.0) + units * self.per_unit[kind]
 
 
-def shipped_costs(path: Path = SHIPPED_COSTS) -> UnitCosts:
-    """The unit costs shipped with dcslam (``reproduce_costs.json``: ``source`` and ``{kind: [seconds, units]}``)."""
+def read_costs(path: Path, profile: str) -> UnitCosts | None:
+    """The unit costs of ``profile`` in a costs file (``reproduce_costs.json``, or a workspace's calibration:
+    ``{"profiles": {profile: {"source": ..., "kinds": {kind: {"stage_s": s, "unit_s": s, ...}}}}}``); None when it
+    has none for ``profile``; a :class:`DcslamError` when it cannot be read."""
     try:
-        data = json.loads(Path(path).read_text())
-        per_unit = {kind: float(s) / float(u) for kind, (s, u) in data["kinds"].items() if u}
-        return UnitCosts(per_unit, str(data["source"]))
-    except (OSError, json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+        entry = json.loads(Path(path).read_text())["profiles"].get(profile)
+        if entry is None:
+            return None
+        kinds = entry["kinds"]
+        return UnitCosts({k: float(v["unit_s"]) for k, v in kinds.items()}, str(entry["source"]),
+                         {k: float(v["stage_s"]) for k, v in kinds.items()})
+    except (OSError, json.JSONDecodeError, KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise DcslamError(f"{path}: cannot read the unit costs ({exc}); rerun `dcslam reproduce --calibrate` (or "
+                          "reinstall dcslam for its own)") from None
+
+
+def shipped_costs(profile: str = "quick", path: Path = SHIPPED_COSTS) -> UnitCosts:
+    """The unit costs shipped with dcslam for ``profile``; for a profile it has none for, quick's (else its first
+    profile's; the source then says they were measured at another profile's settings)."""
+    costs = read_costs(path, profile)
+    if costs is not None:
+        return costs
+    try:
+        profiles = list(json.loads(Path(path).read_text())["profiles"])
+        other = "quick" if "quick" in profiles else profiles[0]
+    except (OSError, json.JSONDecodeError, KeyError, TypeError, IndexError) as exc:
         raise DcslamError(f"{path}: cannot read the unit costs ({exc}); reinstall dcslam or pass --costs-from") \
             from None
+    costs = read_costs(path, other)
+    return UnitCosts(costs.per_unit, f"{costs.source} (at profile {other}'s settings, not {profile}'s: run "
+                     "`dcslam reproduce --calibrate` for a better estimate)", costs.per_stage)
 
 
-def unit_costs(workspace_root: Path, costs_from: Path | None = None) -> UnitCosts:
-    """The unit costs of the estimate: measured in ``costs_from`` (a :class:`DcslamError` when it has no finished
-    stage), else in ``workspace_root`` when it has finished stages, else :func:`shipped_costs`; kinds the measured
-    workspace lacks are taken from the shipped ones (the source says so)."""
-    shipped = shipped_costs()
+def unit_costs(workspace_root: Path, costs_from: Path | None = None, profile: str = "quick") -> UnitCosts:
+    """The unit costs of the estimate of ``profile``: measured in ``costs_from``'s stamps (a :class:`DcslamError`
+    when it has no finished stage), else this workspace's calibration for ``profile``, else its finished stages,
+    else :func:`shipped_costs`; kinds a measurement lacks are taken from the shipped ones (the source says so)."""
+    shipped = shipped_costs(profile)
+    root = Path(workspace_root)
+    if costs_from is None and (root / ".reproduce" / CALIBRATION).exists():
+        calibrated = read_costs(root / ".reproduce" / CALIBRATION, profile)
+        if calibrated is not None:
+            return _with_shipped(calibrated, calibrated.source, shipped)
     if costs_from is not None:
         totals = measure(costs_from)
         if not totals:
@@ -150,19 +206,23 @@ def unit_costs(workspace_root: Path, costs_from: Path | None = None) -> UnitCost
                               f"{Path(costs_from) / '.reproduce'}; give the workspace of a finished `dcslam reproduce`")
         where = f"the stage stamps of {costs_from}"
     else:
-        totals = measure(workspace_root)
+        totals = measure(root)
         if not totals:
             return shipped
-        where = f"this workspace's stage stamps ({Path(workspace_root) / '.reproduce'})"
-    per_unit = {kind: seconds / units for kind, (seconds, units) in totals.items() if units > 0}
-    rest = sorted(set(shipped.per_unit) - set(per_unit))
+        where = f"this workspace's stage stamps ({root / '.reproduce'})"
+    per_unit = {kind: seconds / units for kind, (seconds, units, _) in totals.items() if units > 0}
+    return _with_shipped(UnitCosts(per_unit, where, {kind: 0.0 for kind in per_unit}), where, shipped)
+
+
+def _with_shipped(costs: UnitCosts, where: str, shipped: UnitCosts) -> UnitCosts:
+    rest = sorted(set(shipped.per_unit) - set(costs.per_unit))
     source = where + (f"; {', '.join(rest)} from {shipped.source}" if rest else "")
-    return UnitCosts({**shipped.per_unit, **per_unit}, source)
+    return UnitCosts({**shipped.per_unit, **costs.per_unit}, source, {**shipped.per_stage, **costs.per_stage})
 
 
 @dataclass(frozen=True)
 class Estimate:
-    """Per stage kind: stages, units of work and estimated seconds (None: no unit cost measured)."""
+    """Per stage kind: stages, units of work and estimated CPU seconds (None: no unit cost measured)."""
 
     rows: dict[str, tuple[int, float, float | None]]
     source: str
@@ -183,8 +243,8 @@ def estimate(stages: list, drives: DriveFrames, costs: UnitCosts) -> Estimate:
         row = rows.setdefault(kind, [0, 0.0])
         row[0] += 1
         row[1] += units
-    return Estimate({kind: (n, units, units * costs.per_unit[kind] if kind in costs.per_unit else None)
-                     for kind, (n, units) in rows.items()}, costs.source)
+    return Estimate({kind: (n, units, costs.seconds(kind, n, units)) for kind, (n, units) in rows.items()},
+                    costs.source)
 
 
 def planned_drives(ws, profile, kitti_root: Path | None, splits: dict[str, list[str]]) -> DriveFrames:
@@ -205,6 +265,11 @@ def planned_drives(ws, profile, kitti_root: Path | None, splits: dict[str, list[
     return DriveFrames(frames, splits)
 
 
+def unit_of(kind: str) -> str:
+    """What a unit of ``kind`` is, as the estimate prints it."""
+    return UNITS.get(kind) or ("predicted frames" if kind.startswith("predict-") else "?")
+
+
 def _hours(seconds: float | None) -> str:
     return "unmeasured" if seconds is None else f"{seconds / 3600:.3g}"
 
@@ -221,31 +286,24 @@ def plan_text(ws, config) -> str:
     checker = Pipeline(ws)
     todo = [s for s in stages if not checker.up_to_date(s)]
     drives = planned_drives(ws, profile, config.kitti, splits)
-    costs = unit_costs(ws.root, config.costs_from)
+    costs = unit_costs(ws.root, config.costs_from, profile.name)
     result = estimate(todo, drives, costs)
     trained = sorted({s.seed for s in stages if s.seed is not None})
     lines = [f"dcslam reproduce --table {config.table} --profile {profile.name}: {len(splits.get('test', []))} test "
              f"drive(s), {seeds} training seed(s) per trained run (seeds {', '.join(map(str, trained)) or '—'}); "
              f"{len(stages)} stages, {len(stages) - len(todo)} up to date, {len(todo)} to run",
              f"estimated cost of the {len(todo)} to run (unit costs measured from {result.source}):",
-             f"  {'stage kind':<18}{'stages':>7}{'units':>12}  {'unit':<45}{'s/unit':>9}{'CPU-hours':>11}"]
+             f"  {'stage kind':<18}{'stages':>7}{'units':>12}  {'unit':<34}{'s/stage':>9}{'s/unit':>9}"
+             f"{'CPU-hours':>11}"]
     for kind, (n, units, seconds) in result.rows.items():
         per = f"{costs.per_unit[kind]:.3g}" if kind in costs.per_unit else "—"
-        lines.append(f"  {kind:<18}{n:>7}{units:>12.4g}  {UNITS[kind]:<45}{per:>9}{_hours(seconds):>11}")
+        fixed = f"{costs.per_stage.get(kind, 0.0):.3g}" if kind in costs.per_unit else "—"
+        lines.append(f"  {kind:<18}{n:>7}{units:>12.4g}  {unit_of(kind):<34}{fixed:>9}{per:>9}{_hours(seconds):>11}")
     unmeasured = [kind for kind, (_, _, s) in result.rows.items() if s is None]
-    lines.append(f"  {'total':<18}{len(todo):>7}{'':>12}  {'':<45}{'':>9}{_hours(result.total_seconds):>11}"
+    lines.append(f"  {'total':<18}{len(todo):>7}{'':>12}  {'':<34}{'':>18}{_hours(result.total_seconds):>11}"
                  + (f" (without {', '.join(unmeasured)}: no unit cost measured)" if unmeasured else ""))
     if any(units == 0 for _, units, _ in result.rows.values()):
         lines.append("  (0 units: the drive files are not prepared yet, so their frames are not known)")
-    lines.append("  CPU-hours: each stage's measured single-process wall seconds per unit x its units; with --jobs "
-                 "J the training, prediction and SLAM stages run J at a time")
+    lines.append("  CPU-hours: stages x s/stage + units x s/unit, CPU seconds of one thread measured at this profile's "
+                 "settings; with --jobs J the training, prediction and SLAM stages run J at a time")
     return "\n".join(lines)
-
-
-def costs_record(root: Path, source: str) -> dict:
-    """What ``reproduce_costs.json`` holds: ``source`` (where and how ``root``'s stages were measured) and
-    ``{kind: [seconds, units]}`` of its finished stages (:func:`measure`)."""
-    totals = measure(root)
-    if not totals:
-        raise DcslamError(f"{Path(root) / '.reproduce'}: no finished stage to measure")
-    return {"source": source, "kinds": {kind: [round(s, 3), u] for kind, (s, u) in sorted(totals.items())}}

@@ -151,7 +151,9 @@ def run_map(ws: Workspace, config: ScoreMapConfig, *, force: bool = False) -> Sc
     name, out = _file_or_layer_output(ws, "map", config.map_path, config.gt, config.layer, config.out, force,
                                       "give either --map X.ply --gt Y.ply, or --layer NAME")
     if config.layer:
-        scores = {d: score_map(ws.slam / config.layer / f"{d}.ply", ws.slam / config.gt_layer / f"{d}.ply")
+        from dcslam.report.layers import slam_outputs
+
+        scores = {d: score_map(slam_outputs(ws, config.layer, d)["map"], slam_outputs(ws, config.gt_layer, d)["map"])
                   for d in select_drives(ws, config.drive)}
     else:
         scores = {config.map_path.stem: score_map(config.map_path, config.gt)}

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -69,6 +70,10 @@ class SlamStageConfig(SlamSettings):
         "measured LiDAR pixels behind it and flag the run when its trajectory leaves that companion's by more than "
         "the companion's own uncertainty allows; none: no companion (the summary says that no evidence bounds "
         "the drift). A sparse input is its own evidence."))
+    record: bool = option(False, help=(
+        "Also write a Rerun recording <out>/<drive>.rrd per drive: per frame the camera image, input depth, points, "
+        "ICP sources, map and step verdict, and the trajectories; open it with `dcslam view`. Needs rerun-sdk "
+        "(pip install 'dcslam[viz]', Python >= 3.11)."))
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -116,9 +121,6 @@ class SlamDriveResult:
 
 def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[SlamDriveResult]:
     """SLAM over every selected drive; all outputs are checked not to exist (without ``force``) before any work."""
-    from dcslam.allocator import fix_mmap_threshold
-    from dcslam.slam.config import build_slam
-    from dcslam.stages.config import to_dict
     from dcslam.workspace import drive_file, layer_reference, output_folder, resolve_layer, select_drives
 
     names = select_drives(ws, config.drive)  # an empty test split is an error, not a run over nothing
@@ -129,10 +131,27 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
     from dcslam.device import resolve_device
 
     resolve_device(config.device)  # a GPU asked for on a CPU-only torch: one line, before any work
+    if config.record:
+        from dcslam.slam.record import require_rerun
+
+        require_rerun()  # rerun-sdk missing: one line, before any work
+    from dcslam.io.lineage import check_layer_folder
+    from dcslam.locks import output_lock
+
+    check_layer_folder(layer.folder)  # a layer made from an input that changed since is refused
+    with output_lock(out_dir, "SLAM output"):  # before anything is checked or written: one writer at a time
+        return _run_drives(config, layer, paths, out_dir, force)
+
+
+def _run_drives(config: SlamStageConfig, layer, paths: list[Path], out_dir: Path,
+                force: bool) -> list[SlamDriveResult]:
+    """SLAM over the drive files ``paths`` with depth from ``layer``, into ``out_dir`` (its lock held)."""
+    from dcslam.allocator import fix_mmap_threshold
+
     jobs = []
     for path in paths:
         source = layer.require(path.stem)
-        check_outputs(out_dir, path.stem, force)
+        check_outputs(out_dir, path.stem, force, config.record)
         if config.min_confidence > 0 and not has_confidence(source):
             raise DcslamError(f"--min-confidence {config.min_confidence}: {source} holds no confidence (only layers "
                               f"predicted by a confidence-aware model such as `dcslam train --model nconv` have one); "
@@ -142,22 +161,59 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
     # a fixed mmap threshold keeps a long run's peak memory flat (glibc's own one lets the heap fragment: +16 % peak
     # from frame 200 to 1,000); MALLOC_MMAP_THRESHOLD_ in the environment overrides it (dcslam.allocator)
     fix_mmap_threshold()
+    from dcslam import interrupt
+    from dcslam.io.lineage import made_from
+
+    interrupt.keep(lambda: _kept_line(out_dir, [path.stem for path, _, _ in jobs]))
+
     with torch_threads(config.threads):
         for path, source, measured in jobs:
-            with companion_evidence(path, source, config, measured) as evidence:   # beside the main run
-                drive_run = run_drive_file(path, source, build_slam(config.settings()), config.frames or None,
-                                           config.device, settings={**to_dict(config), "source": str(source)},
-                                           confidence=config.confidence_use(), sources_kind=measured)
-                drive_run.name = path.stem
-                drive_run.evidence = evidence(drive_run)
-            written = write_outputs(drive_run, out_dir, force)
-            results.append(SlamDriveResult(path.stem, drive_run.summary(), written))
+            inputs = made_from({"depth": source if isinstance(source, Path) else None}, out_dir)  # as it is read
+            results.append(slam_drive(path, source, measured, config, out_dir, force, inputs))
     suspect = [r for r in results if r.summary["health"]["suspect"]]
     if config.strict and suspect:
         raise DcslamError("suspect trajectories (--strict): " + "; ".join(
             f"{r.drive}: {', '.join(r.summary['health']['reasons'])}" for r in suspect)
             + f"; outputs written under {out_dir}")
     return results
+
+
+def _kept_line(out_dir: Path, drives: list[str]) -> str | None:
+    """What an interrupt leaves: the drives whose outputs are committed in ``out_dir`` (None: none of them)."""
+    from dcslam.io.atomic import is_committed
+
+    done = [drive for drive in drives if is_committed(out_dir / f"{drive}.done")]
+    if not done:
+        return None
+    return (f"the SLAM outputs of {', '.join(done)} are kept, complete, in {out_dir} (the drive being run left "
+            "none that a reader takes); rerun with --drive naming the others, or the same command with --force")
+
+
+def slam_drive(path: Path, source: str | Path, measured: str | None, config: SlamStageConfig, out_dir: Path,
+               force: bool, made_from: dict | None = None) -> SlamDriveResult:
+    """One drive: SLAM over it, its companion evidence and its outputs (``made_from``: its inputs' identities,
+    :func:`write_outputs`); with ``config.record`` also its recording (:mod:`dcslam.slam.record`), which a
+    companion run adds its trajectory to."""
+    from dcslam.slam.config import build_slam
+    from dcslam.slam.record import drive_recording, recording_path
+    from dcslam.stages.config import to_dict
+
+    recording = recording_path(out_dir, path.stem)
+    with drive_recording(recording, force) if config.record else contextlib.nullcontext() as recorder:
+        companions: list[DriveRun] = []
+        with companion_evidence(path, source, config, measured, companions.append) as evidence:  # beside the run
+            drive_run = run_drive_file(path, source, build_slam(config.settings()), config.frames or None,
+                                       config.device, settings={**to_dict(config), "source": str(source)},
+                                       confidence=config.confidence_use(), sources_kind=measured,
+                                       on_step=None if recorder is None else recorder.step)
+            drive_run.name = path.stem
+            drive_run.evidence = evidence(drive_run)
+        written = write_outputs(drive_run, out_dir, force, made_from)
+        if recorder is not None:
+            recorder.finish(drive_run, companions[0] if companions else None)
+    if config.record:
+        written["recording"] = recording
+    return SlamDriveResult(path.stem, drive_run.summary(), written)
 
 
 def measured_sources(config: SlamStageConfig, source: str | Path, drive_path: Path) -> str | None:
@@ -220,13 +276,13 @@ def run_drive_file(drive_path: Path, source: str | Path, slam, frames: int | Non
 
 @contextlib.contextmanager
 def companion_evidence(drive_path: Path, source: str | Path, config: SlamStageConfig,
-                       sources_kind: str | None = None):
+                       sources_kind: str | None = None, keep: Callable[[DriveRun], None] | None = None):
     """A function of ``main`` (the run over ``source`` on ``drive_path``) giving its evidence verdict:
     :func:`dcslam.slam.drive.companion_verdict` against a companion run with the same settings and frames on the
     measured depth kind behind ``source`` (:func:`dcslam.io.drive.measured_kind`; with measured ICP sources,
     ``sources_kind``, the kind they came from, so that exact depth aligned by 16-beam points is checked against
-    16-beam SLAM); ``own`` for a sparse input, ``off`` with ``--evidence none``, ``unavailable`` when no measured
-    kind can be named or the drive lacks it.
+    16-beam SLAM), the companion run (without its map) handed to ``keep`` when given; ``own`` for a sparse input,
+    ``off`` with ``--evidence none``, ``unavailable`` when no measured kind can be named or the drive lacks it.
 
     The companion depends on the drive alone, so it starts on entering the block, in a spawned worker process when
     a core is free (:func:`companion_beside`), and runs while the block runs the main one: its wall time hides on
@@ -256,14 +312,20 @@ def companion_evidence(drive_path: Path, source: str | Path, config: SlamStageCo
     import torch
 
     args = (drive_path, kind, config, torch.get_num_threads(), f"{drive_path.stem} companion {kind}")
+
+    def verdict(main: DriveRun, companion: DriveRun) -> dict:
+        if keep is not None:
+            keep(companion)
+        return companion_verdict(main, companion, kind)
+
     if not companion_beside(config, min(config.frames or frames, frames) * height * width):
-        yield lambda main: companion_verdict(main, companion_run(*args), kind)
+        yield lambda main: verdict(main, companion_run(*args))
         return
     from dcslam.workers import process_pool
 
     with process_pool(1, 1) as pool:
         companion = pool.submit(companion_run, *args, progress=False)
-        yield lambda main: companion_verdict(main, companion.result(), kind)
+        yield lambda main: verdict(main, companion.result())
 
 
 #: Pixels (frames x height x width) a companion run must cover before it goes to a worker process of its own: a
@@ -301,39 +363,51 @@ def companion_run(drive_path: Path, kind: str, config: SlamStageConfig, threads:
     torch.set_num_threads(threads)
     run = run_drive_file(drive_path, kind, build_slam(config.settings()), config.frames or None, config.device,
                          description=description)
-    run.map = None                      # only its poses and steps are judged: no map to carry back from a worker
+    run.map = None       # only its poses and steps are judged and recorded: no map to carry back from a worker
     return run
 
 
 def output_paths(out_dir: Path, name: str) -> dict[str, Path]:
+    """A drive's SLAM outputs; ``done`` is the marker that commits them (written last,
+    :class:`dcslam.io.atomic.CommittedSet`): readers take only a committed set."""
     return {"trajectory": out_dir / f"{name}.txt", "kitti_poses": out_dir / f"{name}.kitti.txt",
-            "map": out_dir / f"{name}.ply", "summary": out_dir / f"{name}.json"}
+            "map": out_dir / f"{name}.ply", "summary": out_dir / f"{name}.json", "done": out_dir / f"{name}.done"}
 
 
-def check_outputs(out_dir: Path, name: str, force: bool) -> None:
-    """Fail before any work if an output exists and ``force`` is false."""
-    for path in output_paths(out_dir, name).values():
+def check_outputs(out_dir: Path, name: str, force: bool, record: bool = False) -> None:
+    """Fail before any work if an output (with ``record``, the recording too) exists and ``force`` is false."""
+    from dcslam.slam.record import recording_path
+
+    for path in [*output_paths(out_dir, name).values(), *([recording_path(out_dir, name)] if record else [])]:
         if path.exists() and not force:
             raise DcslamError(f"{path} exists; pass --force to overwrite it")
 
 
-def write_outputs(run: DriveRun, out_dir: Path, force: bool = False) -> dict[str, Path]:
-    """Write ``run``'s trajectory (TUM with the drive's own timestamps, and KITTI poses), map and summary; fails
-    before writing anything when the timestamps are not strictly increasing (:func:`check_timestamps`)."""
+def write_outputs(run: DriveRun, out_dir: Path, force: bool = False, made_from: dict | None = None) -> dict[str, Path]:
+    """Write ``run``'s trajectory (TUM with the drive's own timestamps, and KITTI poses), map and summary as one
+    committed set (``<drive>.done`` written last: a failed write leaves none of them for a reader to take); fails
+    before writing anything when the timestamps are not strictly increasing (:func:`check_timestamps`).
+    ``made_from``: the identities of the inputs (:func:`dcslam.io.lineage.made_from`), kept in the summary."""
+    from dcslam.io.atomic import CommittedSet, write_json_atomic
     from dcslam.io.kitti_poses import write_kitti_poses
+    from dcslam.io.lineage import MADE_FROM
     from dcslam.io.ply import write_ply
     from dcslam.io.tum import write_tum
-    from dcslam.io.atomic import write_json_atomic
     from dcslam.workspace import stage_config
 
     paths = output_paths(out_dir, run.name)
     check_outputs(out_dir, run.name, force)
     timestamps = check_timestamps(run.timestamps, run.name)
-    write_tum(paths["trajectory"], timestamps, run.T_world_cam, force=force)
-    write_kitti_poses(paths["kitti_poses"], run.T_world_cam, force=force)
-    pm = run.map
-    write_ply(paths["map"], pm.points.numpy(), pm.normals.numpy(), pm.colors.clamp(0, 1).numpy(), force=force)
     record = stage_config("slam", run.settings)
     record.update(run.summary())
-    write_json_atomic(paths["summary"], record, force=force)
+    if made_from:
+        record[MADE_FROM] = made_from
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with CommittedSet(paths["done"]) as files:
+        write_tum(files.stage(paths["trajectory"]), timestamps, run.T_world_cam, force=True)
+        write_kitti_poses(files.stage(paths["kitti_poses"]), run.T_world_cam, force=True)
+        pm = run.map
+        write_ply(files.stage(paths["map"]), pm.points.numpy(), pm.normals.numpy(), pm.colors.clamp(0, 1).numpy(),
+                  force=True)
+        write_json_atomic(files.stage(paths["summary"]), record, force=True)
     return paths

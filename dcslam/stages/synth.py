@@ -1,6 +1,7 @@
 """``dcslam synth``: generate KITTI-format drives (or ICL-NUIM-layout indoor sequences) from procedural scenes."""
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -66,13 +67,45 @@ def out_root(ws: Workspace, config: SynthConfig) -> Path:
     return ws.root / "tum" if config.indoor else ws.kitti
 
 
+@contextlib.contextmanager
+def _no_debris(root: Path):
+    """On a failed or interrupted run, remove the calibration files and the still-empty folders this run made under
+    the KITTI root ``root`` (the drives are written whole or not at all by the generator), so that no tree is left
+    that looks like a dataset."""
+    from dcslam.io.kitti_calib import CALIB_FILES
+    from dcslam.synth.street.generate import DATE
+
+    date_dir = root / "raw" / DATE
+    files = [date_dir / name for name in CALIB_FILES]
+    folders = [date_dir, root / "raw", root / "depth_completion" / "train", root / "depth_completion", root]
+    before = {path for path in (*files, *folders) if path.exists()}
+    try:
+        yield
+    except BaseException:
+        for path in files:
+            if path not in before:
+                path.unlink(missing_ok=True)
+        for folder in folders:
+            if folder not in before:
+                with contextlib.suppress(OSError):  # not empty: it holds something this run did not make
+                    folder.rmdir()
+        raise
+
+
 def run(ws: Workspace, config: SynthConfig, *, force: bool = False) -> SynthResult:
     """Generate the drives (or sequences) of ``config`` under :func:`out_root`."""
-    from dcslam.progress import Bar
-
     from dcslam.workspace import output_folder
 
+    from dcslam.locks import output_lock
+
     root = output_folder(out_root(ws, config), "--out")
+    with output_lock(root, "synthetic dataset"):  # one writer at a time, before anything is removed or written
+        return _generate(root, config, force)
+
+
+def _generate(root: Path, config: SynthConfig, force: bool) -> SynthResult:
+    from dcslam.progress import Bar
+
     if config.indoor:
         from dcslam.synth.indoor import generate_indoor
 
@@ -83,7 +116,7 @@ def run(ws: Workspace, config: SynthConfig, *, force: bool = False) -> SynthResu
     from dcslam.synth import generate
 
     notes: list[str] = []
-    with Bar("synth", total=config.drives * config.frames) as bar:
+    with Bar("synth", total=config.drives * config.frames) as bar, _no_debris(root):
         reports = generate(root, drives=config.drives, frames=config.frames, seed=config.seed, force=force,
                            lidar_azimuth_step_deg=config.azimuth_step, on_frame=bar.advance, jobs=config.jobs)
     return SynthResult(root, False, reports, notes)

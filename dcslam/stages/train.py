@@ -12,14 +12,17 @@ import os
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
-from dcslam.depth.config import TrainConfig, TrainSettings
+from dcslam.depth.config import TrainConfig, TrainSettings, check_choice
+from dcslam.depth.models.scaffold import FILL_OUTPUTS, FILLS
 from dcslam.depth.recipes import geometry_terms, run_name, selection_key
 from dcslam.errors import DcslamError
 from dcslam.stages.config import option
 from dcslam.io.atomic import write_json_atomic
+from dcslam.locks import output_lock
 from dcslam.workspace import Workspace, stage_config
 
 CORRECTABLE = ("sparse-conv", "nconv", "nconv-guided")  # the networks with a correct_fill option
+LOGS = ("jsonl", "tensorboard")  # --log: metrics.jsonl alone, or TensorBoard's event files beside it
 
 
 @dataclass(frozen=True)
@@ -35,10 +38,22 @@ class TrainStageConfig(TrainSettings):
                                 help="sparse-conv, nconv, nconv-guided: output a correction of the nearest-neighbour "
                                      "fill of the input, learned from the network's own output (untrained: the "
                                      "fill); off: the network's own depth.")
+    fill: str = option("nearest", choices=FILLS,
+                       help="With --correct-fill: what the corrected start is made from: nearest (the nearest-"
+                            "neighbour fill of the input), scanline or planefit (the fill of a surface-preserving "
+                            "scaffold: that completer's output, its holes taking the nearest scaffold pixel's depth).")
+    fill_output: str = option("depth", choices=FILL_OUTPUTS,
+                              help="With --correct-fill: depth (the correction is added to the start's depth) or "
+                                   "inverse-residual (to its inverse depth, in which a plane is affine in the pixel "
+                                   "coordinates).")
     name: str | None = option(None, help="Run name (default: mse-dense, mse-sparse, chamfer-1, ...; with another "
                                          "input or target, e.g. mse-dense-sparse16, mse-dense-to-exact; with "
                                          "geometry terms, e.g. mse-dense-normal-plane).")
     resume: bool = option(False, flags=("--resume",), help="Continue an interrupted run from last.pt.")
+    log: str = option("jsonl", choices=LOGS,
+                      help="Where the training curves go as the run trains: jsonl (metrics.jsonl, always written) "
+                           "or tensorboard (also event files in runs/<name>/tensorboard/, for `tensorboard --logdir "
+                           "runs`; needs pip install 'dcslam[tensorboard]').")
     nproc: int = option(1, help="Processes for distributed data-parallel training (launches torchrun).")
     init: str | None = option(None, help="Start from the best model of this run (runs/<INIT>/model.pt): "
                                          "fine-tuning, e.g. --loss pose --init chamfer-8.")
@@ -51,6 +66,12 @@ class TrainStageConfig(TrainSettings):
             raise DcslamError(f"--fill-holes is an option of sparse-conv, not of {self.model}")
         if self.correct_fill and self.model not in CORRECTABLE:
             raise DcslamError(f"--correct-fill is an option of {', '.join(CORRECTABLE)}, not of {self.model}")
+        check_choice(self, "fill", FILLS)
+        check_choice(self, "log", LOGS)
+        check_choice(self, "fill_output", FILL_OUTPUTS)
+        if (self.fill, self.fill_output) != ("nearest", "depth") and not self.correct_fill:
+            raise DcslamError(f"--fill {self.fill} --fill-output {self.fill_output} are options of --correct-fill; "
+                              "add --correct-fill")
         from dcslam.workspace import plain_name
 
         for name in ("name", "init"):
@@ -72,7 +93,9 @@ class TrainStageConfig(TrainSettings):
     def model_hparams(self) -> dict:
         """The network's options that differ from its defaults (recorded in its model file)."""
         return {**({"fill_holes": True} if self.fill_holes else {}),
-                **({"correct_fill": True} if self.correct_fill else {})}
+                **({"correct_fill": True} if self.correct_fill else {}),
+                **({"fill": self.fill} if self.fill != "nearest" else {}),
+                **({"fill_output": self.fill_output} if self.fill_output != "depth" else {})}
 
     def train_config(self, train_drives: list[Path], val_drives: list[Path],
                      init_model: Path | None = None) -> TrainConfig:
@@ -243,15 +266,26 @@ def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resu
     first); ``resume`` continues it from ``last.pt`` with its own settings (only the number of epochs and the device
     are taken from ``config``). ``hooks``: :class:`dcslam.depth.hooks.Hook` objects added to the loop's own.
     """
-    import torch
-
-    from dcslam.depth.train import barrier, rank_and_world, seed_all, train_loop
+    from dcslam.depth.train import rank_and_world
     from dcslam.device import resolve_device
-    from dcslam.report.plots import plot_training_curves
 
     run_dir = Path(run_dir)
     rank, world = rank_and_world()
     device = resolve_device(config.device)  # before the run's folder is made: a missing GPU leaves nothing behind
+    # one writer at a time, from before --force removes the run's files to the end; the processes of a distributed
+    # run are one writer, whose launcher (:func:`run`) holds the lock
+    with output_lock(run_dir, "run") if world == 1 else contextlib.nullcontext():
+        return _train(run_dir, config, device, force, resume, map_builder, hooks)
+
+
+def _train(run_dir: Path, config: TrainConfig, device, force: bool, resume: bool, map_builder, hooks):
+    """:func:`train` with the run's lock held."""
+    import torch
+
+    from dcslam.depth.train import barrier, rank_and_world, seed_all, train_loop
+    from dcslam.report.plots import plot_training_curves
+
+    rank, world = rank_and_world()
     made = not run_dir.exists()
     if rank == 0:
         _prepare_run_dir(run_dir, force, resume)
@@ -276,9 +310,14 @@ def train(run_dir: Path | str, config: TrainConfig, *, force: bool = False, resu
         if resume and rank == 0:  # only once the epochs are trained
             _record_resume(run_dir, config)
         return result
-    except BaseException:
+    except BaseException as exc:
         if rank == 0 and not resume and not (run_dir / "last.pt").exists():
             _discard_unstarted(run_dir, made)  # failed before its first epoch: its rerun must not find "run exists"
+        elif rank == 0 and isinstance(exc, KeyboardInterrupt):
+            from dcslam import interrupt
+
+            interrupt.keep(f"the run folder {run_dir} is kept with last.pt (the last saved point of the training); "
+                           "continue it with the same command and --resume, or start again with --force")
         raise
     finally:
         for frames in open_drives:
@@ -308,20 +347,36 @@ def read_result(run_dir: Path):
                        last_val=val[-1] if val else None)
 
 
+def log_hooks(log: str) -> list:
+    """The hooks of ``--log``: none for ``jsonl`` (the loop writes metrics.jsonl itself), a
+    :class:`dcslam.depth.hooks.TensorBoardLog` for ``tensorboard``; a missing package fails here, before any work."""
+    if log != "tensorboard":
+        return []
+    import importlib.util
+
+    if importlib.util.find_spec("tensorboard") is None:
+        from dcslam.depth.tensorboard import INSTALL
+
+        raise DcslamError(f"--log tensorboard needs the tensorboard package: {INSTALL}")
+    from dcslam.depth.hooks import TensorBoardLog
+
+    return [TensorBoardLog()]
+
+
 def run(ws: Workspace, config: TrainStageConfig, *, force: bool = False):
     """Train ``config``'s run into ``runs/<name>/``; returns a :class:`dcslam.depth.train.TrainResult` (on every
     rank of a distributed run; only rank 0 writes files)."""
     from dcslam.depth import distributed
 
     run_dir = ws.runs / config.run_name
+    hooks = log_hooks(config.log)  # a missing package fails before any work
     if config.nproc > 1 and not distributed.in_torchrun():
         import tempfile
 
-        _check_run_dir(run_dir, force, config.resume)  # here, not in every worker
-
         from dcslam.stages.config import to_toml
 
-        with tempfile.TemporaryDirectory() as tmp:
+        with output_lock(run_dir, "run"), tempfile.TemporaryDirectory() as tmp:
+            _check_run_dir(run_dir, force, config.resume)  # here, not in every worker
             path = Path(tmp) / "train.toml"
             path.write_text(to_toml(config))
             args = ["--workspace", str(ws.root), "--config", str(path)] + (["--force"] if force else [])
@@ -343,7 +398,7 @@ def run(ws: Workspace, config: TrainStageConfig, *, force: bool = False):
     if distributed.in_torchrun():
         distributed.init_from_env(resolve_device(config.device).type)
     try:
-        return train(run_dir, train_config, force=force, resume=config.resume)
+        return train(run_dir, train_config, force=force, resume=config.resume, hooks=hooks)
     finally:
         distributed.shutdown()
 

@@ -8,6 +8,7 @@ from scipy.spatial.transform import Rotation
 from dcslam.io.drive import DriveFrame, DriveWriter, Layer, write_layer
 from dcslam.io.kitti_poses import write_kitti_poses
 from dcslam.io.tum import read_tum, write_tum
+from tests.fixtures.slam_outputs import commit_slam
 
 K = np.array([[20.0, 0, 12], [0, 20.0, 8], [0, 0, 1]])
 H, W, N = 16, 24, 4
@@ -67,6 +68,7 @@ def ws(tmp_path):
             T[:, 0, 3] += shift * np.arange(3)
             write_tum(root / "slam" / layer / f"{name}.txt", 10 + 0.1 * np.arange(3), T)
             write_ply(root / "slam" / layer / f"{name}.ply", [[0, 0, shift], [1, 0, 0], [0, 1, 0]])
+            commit_slam(root / "slam" / layer, name)
     (root / "filtered" / "mse-dense+range" / "config.json").write_text(
         json.dumps({"stage": "filter", "settings": {"source_layer": "mse-dense"}}))
     return root
@@ -162,7 +164,8 @@ def test_score_depth_reports_the_surface_against_exact_depth(cli, step_ws):
 def test_score_trajectory_layer_and_files(cli, ws):
     result = cli("score", "trajectory", "-w", ws, "--layer", "sparse")
     assert result.exit_code == 0, result.output
-    rows = read_csv(ws / "results" / "trajectory_sparse.csv")
+    assert "ATE aligned" in result.stdout and "ate_aligned_rmse" not in result.stdout  # headers read by people
+    rows = read_csv(ws / "results" / "trajectory_sparse.csv")  # keys, read by programs
     assert [r["trajectory"] for r in rows] == ["d0", "d1"] and rows[0]["poses"] == "3"
     # x drifts by 0, 1, 2 m: unaligned ATE errors 0, 1, 2 → rmse sqrt(5/3); RPE translation 1 m every step
     assert float(rows[0]["ate_rmse"]) == pytest.approx(np.sqrt(5 / 3), rel=1e-6)
@@ -293,6 +296,7 @@ def _write_summary(ws, layer, drive, frames, rejected=()):
     record = {"stage": "slam", "settings": {"odometry": "icp", "mapper": "pointfusion", "frames": frames},
               "frames": frames, "rejected_steps": [{"frame": i, "reason": "test"} for i in rejected]}
     (ws / "slam" / layer / f"{drive}.json").write_text(json.dumps(record))
+    commit_slam(ws / "slam" / layer, drive)
 
 
 def test_tables_show_rows_made_with_other_settings_and_refuse_mixed_rows(cli, ws):

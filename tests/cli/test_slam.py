@@ -123,7 +123,8 @@ def test_confidence_use_is_applied_and_recorded(cli, workspace, confident_layer,
     result = cli("slam", "--depth", path, "--confidence", use, "--min-confidence", minimum, "-w", workspace,
                  "--out", out, "--frames", "3")
     assert result.exit_code == 0, result.output
-    assert {p.name for p in out.iterdir()} == {f"street_0001{s}" for s in (".txt", ".kitti.txt", ".ply", ".json")}
+    assert {p.name for p in out.iterdir()} == {f"street_0001{s}" for s in (".txt", ".kitti.txt", ".ply", ".json",
+                                                                            ".done")}
     record = json.loads((out / "street_0001.json").read_text())
     assert record["settings"]["confidence"] == use and record["settings"]["min_confidence"] == minimum
     used = record["confidence"]

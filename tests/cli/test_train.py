@@ -91,6 +91,8 @@ def test_help_lists_the_geometry_terms(cli):
     result = cli("train", "--help")
     assert result.exit_code == 0
     assert all(flag in result.output for flag in ("--normal-weight", "--plane-weight", "--edge-weight"))
+    summary = result.output.split("Examples:")[0]
+    assert all(loss in summary for loss in ("MSE", "chamfer", "pose"))  # the summary names every --loss
     result = cli("train", "--edge-weight", "much")
     assert result.exit_code == 2 and "--edge-weight" in result.output  # not a number: a usage error
 
@@ -126,8 +128,10 @@ GIVEN = [("--loss", "pose", "loss", "pose"), ("--mask", "sparse", "mask", "spars
          ("--pose-grad-iterations", "2", "pose_grad_iterations", 2),
          ("--pose-max-sources", "100", "pose_max_sources", 100),
          ("--pose-source-voxel", "0.1", "pose_source_voxel", 0.1), ("--pose-weights", "none", "pose_weights", "none"),
-         ("--correct-fill", None, "correct_fill", True), ("--name", "mine", "name", "mine"),
-         ("--resume", None, "resume", True), ("--nproc", "2", "nproc", 2), ("--init", "first", "init", "first")]
+         ("--correct-fill", None, "correct_fill", True), ("--fill", "planefit", "fill", "planefit"),
+         ("--fill-output", "inverse-residual", "fill_output", "inverse-residual"), ("--name", "mine", "name", "mine"),
+         ("--resume", None, "resume", True), ("--log", "tensorboard", "log", "tensorboard"),
+         ("--nproc", "2", "nproc", 2), ("--init", "first", "init", "first")]
 
 
 def test_print_config_shows_every_option_under_its_key(cli, tmp_path):
@@ -142,7 +146,8 @@ def test_print_config_shows_every_option_under_its_key(cli, tmp_path):
     assert printed == {**{key: value for _, _, key, value in GIVEN}, "fill_holes": False}
     config = from_mapping(TrainStageConfig, printed).train_config([], [])  # what the training is given
     assert all(getattr(config, key) == value for _, _, key, value in GIVEN if hasattr(config, key))
-    assert config.model_hparams == {"correct_fill": True} and not (tmp_path / "ws").exists()
+    assert config.model_hparams == {"correct_fill": True, "fill": "planefit", "fill_output": "inverse-residual"}
+    assert not (tmp_path / "ws").exists()
     sparse_conv = cli("train", "-w", tmp_path / "ws", "--fill-holes", "--print-config")
     assert tomllib.loads(sparse_conv.stdout)["fill_holes"] is True
 

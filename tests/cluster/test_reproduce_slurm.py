@@ -47,7 +47,7 @@ mem_gb = 1
 """
 SETTINGS = tomllib.loads(SLURM_CONFIG)["slurm"]
 JOB_STAGES = ("train-", "predict-", "filter-", "slam-")  # what runs through the executor; the rest in reproduce
-MESSAGE = "interrupted: no partial output was kept; rerun the command to finish"
+MESSAGE = "interrupted: the stages that finished are kept in "
 
 
 def _env() -> dict:
@@ -152,7 +152,8 @@ def test_a_job_that_can_never_start_is_a_failure_not_a_wait(runs, tmp_path):
     stage = Stage("slam-huge", slam.run, slam.SlamStageConfig(drive=["absent_drive"], frames=2),
                   outputs=lambda: [tmp_path / "slam" / "dense" / "absent_drive.json"], kind="slam")
     with pytest.raises(DcslamError, match=r"stage slam-huge failed \(job \S+ can never start: Slurm says \w+ "
-                                          r"\(it asks 4096 CPUs|sbatch refused the slam jobs"):
+                                          r"\(it asks 4096 CPUs|sbatch refused the slam jobs|the slam jobs ask 4096 "
+                                          r"CPUs, .* more CPUs than a node of partition"):
         pipe.run_all([stage])
     assert not json.loads((tmp_path / ".reproduce" / "slam-huge.json").read_text())["complete"]
     assert queued() == []
@@ -177,7 +178,7 @@ def test_sigterm_cancels_the_jobs_and_the_rerun_submits_only_what_is_missing(run
                 proc.kill()
     log = err.read_text()
     assert proc.returncode == 143, log
-    assert log.strip().splitlines()[-1] == MESSAGE and "Traceback" not in log, log
+    assert log.strip().splitlines()[-1].startswith(MESSAGE) and "Traceback" not in log, log
     assert queued() == []  # cancelled, and gone from the queue before reproduce exited
     assert submitted and "[slurm] cancelled" in log
     made = stamps(tmp_path)

@@ -35,13 +35,34 @@ def test_depth_examples_dilate_the_input_and_share_the_error_range(tmp_path, mon
     plt = plots.pyplot()
     monkeypatch.setattr(plt, "close", figures.append)
     plots.plot_depth_examples(tmp_path / "ex.png", rows)
-    images = [ax.images[0] for ax in figures[0].axes if ax.images]
-    inputs = [im for im in images if "input" in im.axes.get_title()]
+    panels = [ax for ax in figures[0].axes if ax.images]  # row by row: input, prediction, ground truth, error
+    images = [ax.images[0] for ax in panels]
+    inputs, errors = images[0::4], images[3::4]
+    assert "input" in panels[0].get_title() and "error" in panels[3].get_title()
     assert np.count_nonzero(np.isfinite(np.asarray(inputs[0].get_array(), float))) == 25  # one point, 5 × 5
-    errors = [im for im in images if "error" in im.axes.get_title()]
     assert len(errors) == 2 and errors[0].get_clim() == errors[1].get_clim() == (0, 3.0)
     monkeypatch.undo()
     plt.close(figures[0])
+
+
+def test_depth_examples_name_each_row_once_and_give_every_panel_a_colour_bar(tmp_path, monkeypatch):
+    gt = np.full((20, 30), 10.0)
+    label = "chamfer multi-frame + best filter (range 0.5-60 m)"
+    rows = [(label, gt, gt + 0.1, gt), ("sparse", gt, gt, gt)]
+    figures = []
+    plt = plots.pyplot()
+    monkeypatch.setattr(plt, "close", figures.append)
+    plots.plot_depth_examples(tmp_path / "ex.png", rows)
+    fig = figures[0]
+    panels = [ax for ax in fig.axes if ax.images]
+    bars = [ax for ax in fig.axes if not ax.images]
+    assert len(panels) == 8 and len(bars) == 8  # depth columns too, not only the error
+    assert [ax.get_title() for ax in panels[4:]] == ["", "", "", ""]  # column names once, above the first row
+    assert panels[0].get_ylabel().replace("\n", " ") == label and panels[4].get_ylabel() == "sparse"
+    assert max(len(line) for line in panels[0].get_ylabel().splitlines()) <= 18
+    assert all(label not in ax.get_title() for ax in panels)
+    monkeypatch.undo()
+    plt.close(fig)
 
 
 def test_trajectory_styles_never_repeat_and_a_static_trajectory_is_marked(tmp_path):
@@ -57,3 +78,19 @@ def test_trajectory_styles_never_repeat_and_a_static_trajectory_is_marked(tmp_pa
     assert all("marker" not in s and "(static)" not in s["label"] for s in styles[:-1])
     out = plots.plot_trajectories(tmp_path / "t.png", T_gt, estimates)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_trajectory_legend_lies_beside_the_curves(tmp_path, monkeypatch):
+    T_gt = np.tile(np.eye(4), (20, 1, 1))
+    T_gt[:, 2, 3] = np.arange(20.0)
+    estimates = {f"method {i}": T_gt + 0.05 * i for i in range(15)}
+    figures = []
+    plt = plots.pyplot()
+    monkeypatch.setattr(plt, "close", figures.append)
+    plots.plot_trajectories(tmp_path / "t.png", T_gt, estimates)
+    (ax,) = figures[0].axes
+    figures[0].canvas.draw()
+    legend, axes = ax.get_legend().get_window_extent(), ax.get_window_extent()
+    assert legend.x0 >= axes.x1 and len(ax.get_legend().get_texts()) == 16
+    monkeypatch.undo()
+    plt.close(figures[0])

@@ -9,6 +9,7 @@ from dcslam.report.layers import TrajectoryPair
 from dcslam.report.results import LayerResult
 from dcslam.report.table_5_2_long import layer_label, long_layers, table_5_2_long
 from dcslam.report.tables import RunSummary
+from tests.fixtures.slam_outputs import commit_slam
 
 DRIVES = ["d1", "d2", "d3", "d4"]
 
@@ -106,6 +107,7 @@ def test_results_read_from_slam_long_and_build_report_prints_the_table(tmp_path)
     shifted[:, 0, 3] += 0.5
     for layer, T in (("dense", shifted), ("sparse", T_gt)):
         write_tum(ws.slam_long / layer / "drive_d.txt", stamps, T)
+        commit_slam(ws.slam_long / layer, "drive_d")
     (ws.slam_long / "ip-basic-fast").mkdir()  # no trajectory: not a row
 
     results = table_5_2_long_results(ws, [], ["drive_d"])

@@ -12,6 +12,7 @@ from dcslam.report.layers import TrajectoryPair
 from dcslam.report.results import LayerResult
 from dcslam.report.table_beams import (INPUTS, MEASURED, layer_name, per_drive_table, plot_localisation_vs_beams,
                                        slam_name, sparse_kind, table_beams)
+from tests.fixtures.slam_outputs import commit_slam
 
 DRIVES = ["d0", "d1", "d2", "d3"]
 PER_BEAM = sum(i.per_beam for i in INPUTS)  # rows per beam count: 9 layers, 8 of them again with measured sources
@@ -225,6 +226,7 @@ def test_a_measured_row_reads_its_own_slam_folder_and_the_layer_s_depth(tmp_path
         write_tum(ws.slam / name / "drive_d.txt", t, moved)
         (ws.slam / name / "drive_d.json").write_text(json.dumps(
             {"settings": dict(SETTINGS), "sources": sources, "rejected_steps": [], "health": {"suspect": False}}))
+        commit_slam(ws.slam / name, "drive_d")
     own = score_layer(ws, "exact", "exact", ["drive_d"], surface_frames=0)
     measured = score_layer(ws, "exact, measured sources", "exact", ["drive_d"], surface_frames=0,
                            slam_name="exact+measured-sparse16")
@@ -263,6 +265,7 @@ def test_a_measured_row_over_training_seeds_reads_each_seed_s_slam_folder(tmp_pa
             moved = T.copy()
             moved[:, 0, 3] += offset
             write_tum(ws.slam / name / "drive_d.txt", t, moved)
+            commit_slam(ws.slam / name, "drive_d")
     results = beams_results(ws, [16], ["drive_d"])
     row = results[(16, "nconv, measured sources")]
     assert isinstance(row, SeedResults) and [m.seed for m in row.members] == [0, 1]

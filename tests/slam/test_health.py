@@ -129,12 +129,14 @@ class TestDriftSigma:
         assert drift_sigma_m(reports) == pytest.approx(expected, rel=1e-6)
 
     def test_slow_drift_no_step_shows_makes_a_run_suspect(self):
-        """Every step accepted, each a little uncertain: 100 steps of 0.06 m add up to 0.6 m (0.15 m with
-        0.015 m steps), and three sigma of that is past the 0.5 m bound (0.45 m is not)."""
-        slow = [_report(i, "accepted", 0.06, 0.0, float(i)) for i in range(101)]
-        fine = [_report(i, "accepted", 0.015, 0.0, float(i)) for i in range(101)]
+        """Every step accepted, each a little uncertain: the drift bound adds the steps' errors as correlated
+        ones, so 30 steps of 8 mm reach 0.24 m and 2.5 sigma of that is past the 0.5 m bound (30 steps of 6 mm,
+        0.45 m, are not), where a random walk would have said 0.11 m."""
+        slow = [_report(i, "accepted", 0.008, 0.0, float(i)) for i in range(31)]
+        fine = [_report(i, "accepted", 0.006, 0.0, float(i)) for i in range(31)]
         s = summarise(slow)
-        assert s["suspect"] and "3 sigma" in s["reasons"][0] and s["accepted"] == 100
+        assert s["suspect"] and "2.5 sigma" in s["reasons"][0] and s["accepted"] == 30
+        assert s["drift"]["bound_m"] == pytest.approx(0.6, rel=1e-3) and s["drift_sigma_m"] < 0.05
         assert not summarise(fine)["suspect"]
         assert not summarise(slow, HealthRules(max_drift_m=0))["suspect"]
 

@@ -123,7 +123,10 @@ def test_smoke_profile_runs_every_stage_and_writes_the_tables(cli, tmp_path):
     processes of --jobs are tested on their own, below)."""
     import csv
 
-    result = cli("reproduce", "--profile", "smoke", "--workspace", tmp_path)
+    from dcslam.stages.slam import torch_threads
+
+    with torch_threads(1):  # the cost model's CPU seconds are one thread's, as the probe measures them
+        result = cli("reproduce", "--profile", "smoke", "--workspace", tmp_path)
     assert result.exit_code == 0, result.output
     results = tmp_path / "results"
     for name in ("table_5_1.md", "table_5_1.csv", "table_5_2.md", "table_5_2.csv", "table_5_2_per_drive.csv",
@@ -159,6 +162,38 @@ def test_smoke_profile_runs_every_stage_and_writes_the_tables(cli, tmp_path):
     again = cli("reproduce", "--profile", "smoke", "--workspace", tmp_path)
     assert again.exit_code == 0, again.output
     assert "[run]" not in again.stderr and again.stderr.count("[skip]") >= 20
+    _estimate_is_within_1_5_of_the_measured_cost(tmp_path)
+
+
+def _estimate_is_within_1_5_of_the_measured_cost(root):
+    """The cost the dry run estimates for the smoke profile, from the unit costs the probe measures on this machine
+    (``--calibrate``), is within x1.5 of the CPU seconds the smoke run's stamps recorded; an estimate 3x too high
+    fails the same check."""
+    from dcslam.stages.reproduce_cost import UnitCosts, estimate, measure, planned_drives, unit_costs
+    from dcslam.stages.reproduce_plan import planned_splits
+    from dcslam.stages.reproduce_probe import calibrate
+
+    stamps = [json.loads(p.read_text()) for p in (root / ".reproduce").glob("*.json") if p.stem != "splits"]
+    assert all(isinstance(s["cpu_seconds"], float) and s["cpu_seconds"] > 0 for s in stamps)
+    measured = measure(root)
+    total = sum(seconds for seconds, _, _ in measured.values())
+    probe = Workspace(root.parent / f"{root.name}-probe")
+    calibrate(probe, PROFILES["smoke"])
+    costs = unit_costs(probe.root, profile="smoke")
+    assert costs.source.startswith("dcslam reproduce --calibrate --profile smoke")
+    plan = Workspace(root.parent / f"{root.name}-plan")  # the plan as the dry run sees it, before anything ran
+    stages = planned_stages(plan, PROFILES["smoke"])
+    drives = planned_drives(plan, PROFILES["smoke"], None, planned_splits(plan, PROFILES["smoke"]))
+    estimated = estimate(stages, drives, costs)
+
+    def within(seconds: float) -> bool:
+        return 1 / 1.5 <= seconds / total <= 1.5
+
+    per_kind = {kind: (round(estimated.rows[kind][2], 1), round(measured[kind][0], 1)) for kind in measured}
+    assert within(estimated.total_seconds), (estimated.total_seconds, total, per_kind)
+    wrong = UnitCosts({k: 3 * v for k, v in costs.per_unit.items()}, "3x",
+                      {k: 3 * v for k, v in costs.per_stage.items()})
+    assert not within(estimate(stages, drives, wrong).total_seconds)
 
 
 def test_quick_profile_has_four_test_drives_and_profiles_check_their_split():
@@ -189,6 +224,35 @@ def test_independent_slam_stages_run_in_worker_processes(tmp_path):
     assert not json.loads((tmp_path / ".reproduce" / "fail.json").read_text())["complete"]  # claims nothing
 
 
+def test_stamps_record_the_cpu_seconds_of_the_process_that_ran_the_stage(tmp_path):
+    """A stage that computes for 0.3 s and one that sleeps 0.3 s, in this process and in worker processes: both
+    stamps record ~0.3 wall seconds, only the first ~0.3 CPU seconds (measured where the stage ran)."""
+    for jobs in (1, 2):
+        ws = Workspace(tmp_path / f"jobs{jobs}")
+        stages = [Stage(f"{what}-{jobs}", _busy, SlamStageConfig(frames=frames, out=ws.root / f"{what}.txt"),
+                        outputs=lambda p=ws.root / f"{what}.txt": [p])
+                  for what, frames in (("compute", 1), ("sleep", 2))]
+        Pipeline(ws).run_all(stages, jobs=jobs)
+        compute, sleep = (json.loads((ws.root / ".reproduce" / f"{s.name}.json").read_text()) for s in stages)
+        assert compute["seconds"] >= 0.3 and sleep["seconds"] >= 0.3
+        assert compute["cpu_seconds"] >= 0.25, (jobs, compute)  # in a worker: its CPU, not the parent's idle wait
+        assert sleep["cpu_seconds"] < 0.2, (jobs, sleep)
+
+
+def _busy(ws, config, *, force=False):
+    """A stage that computes (frames 1) or sleeps (frames 2) for 0.3 s (module level, for a spawned worker)."""
+    import time
+
+    if config.frames == 1:
+        start = time.process_time()
+        while time.process_time() - start < 0.3:
+            pass
+    else:
+        time.sleep(0.3)
+    config.out.parent.mkdir(parents=True, exist_ok=True)
+    config.out.write_text("done")
+
+
 def _touch(ws, config, *, force=False):
     """A stage for the worker test (module level, so a spawned worker can import it)."""
     import torch
@@ -206,7 +270,7 @@ def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(cli, tmp
     assert result.exit_code == 0, result.output
     printed = tomllib.loads(result.stdout)  # still a --config file of reproduce: the stages are comments
     assert printed == {"table": "5.2", "profile": "quick", "seed": 0, "force": False, "jobs": 1, "executor": "local",
-                       "slurm": {}, "dry_run": False}
+                       "slurm": {}, "dry_run": False, "calibrate": False}
     assert not ws.exists()  # nothing run, nothing written
     stages = read_stage_configs(result.stdout)
     names = list(stages)

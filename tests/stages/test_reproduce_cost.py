@@ -6,8 +6,8 @@ import pytest
 from dcslam.errors import DcslamError
 from dcslam.stages.experiments.table_5_2 import PROFILES
 from dcslam.stages.reproduce import ReproduceConfig
-from dcslam.stages.reproduce_cost import (DriveFrames, estimate, measure, plan_text, planned_drives, shipped_costs,
-                                          stage_work, unit_costs)
+from dcslam.stages.reproduce_cost import (CALIBRATION, DriveFrames, UnitCosts, estimate, measure, plan_text,
+                                          planned_drives, read_costs, shipped_costs, stage_work, unit_costs)
 from dcslam.stages.reproduce_plan import planned_splits, planned_stages
 from dcslam.workspace import Workspace
 
@@ -19,10 +19,14 @@ def test_work_of_each_stage_kind():
     assert stage_work("synth", {"drives": 4, "frames": 42}, DRIVES, 0) == ("synth", 168.0)
     assert stage_work("prepare-kitti", {}, DRIVES, 0) == ("prepare-kitti", 124.0)
     train = {"loss": "chamfer", "epochs": 2, "max_frames": 25, "stride": 1, "scale": 0.5}
-    assert stage_work("train-chamfer-8", train, DRIVES, 0) == ("train-chamfer", 2 * (25 + 25 + 20) * 0.25)
+    # training steps: a step's cost at the profile's scale is what its unit cost measures
+    assert stage_work("train-chamfer-8", train, DRIVES, 0) == ("train-chamfer", 2 * (25 + 25 + 20))
     assert stage_work("predict-nconv", {"run": "nconv", "model": None}, DRIVES, 0) == ("predict", 44.0)
     assert stage_work("predict-ip-basic-fast", {"run": None, "model": "ip-basic-fast"}, DRIVES, 0)[0] == \
         "predict-classical"
+    # every other classical completer a kind of its own (planefit costs ten times scanline)
+    assert stage_work("predict-planefit-sparse16", {"run": None, "model": "planefit"}, DRIVES, 0) == \
+        ("predict-planefit", 44.0)
     assert stage_work("slam-sparse-t1", {"drive": ["t1"], "frames": 30}, DRIVES, 0) == ("slam", 30.0)
     assert stage_work("slam-sparse-t2", {"drive": ["t2"], "frames": 30}, DRIVES, 0) == ("slam", 12.0)
     assert stage_work("slam-long-sparse-t1", {"drive": ["t1"], "frames": 0}, DRIVES, 0) == ("slam-long", 32.0)
@@ -39,14 +43,15 @@ def test_unit_costs_are_measured_from_the_stamps_of_finished_stages(tmp_path):
     state.mkdir()
     slam = {"drive": ["drive_d"], "frames": 4}
     (state / "slam-sparse-drive_d.json").write_text(json.dumps({"config": slam, "complete": True, "seconds": 2.0}))
-    (state / "slam-dense-drive_d.json").write_text(json.dumps({"config": slam, "complete": True, "seconds": 6.0}))
+    (state / "slam-dense-drive_d.json").write_text(json.dumps({"config": slam, "complete": True, "seconds": 9.0,
+                                                               "cpu_seconds": 6.0}))  # CPU seconds where recorded
     (state / "slam-x-drive_d.json").write_text(json.dumps({"config": slam, "complete": False}))  # interrupted
     (state / "broken.json").write_text("{")
-    assert measure(root) == {"slam": (8.0, 8.0)}  # 2 runs of 4 frames in 8 s: 1 s per SLAM frame
+    assert measure(root) == {"slam": (8.0, 8.0, 2)}  # 2 runs of 4 frames in 8 s: 1 s per SLAM frame
     costs = unit_costs(root)
-    assert costs.per_unit["slam"] == 1.0 and str(state) in costs.source
+    assert costs.per_unit["slam"] == 1.0 and costs.per_stage["slam"] == 0.0 and str(state) in costs.source
     assert costs.per_unit["synth"] == shipped_costs().per_unit["synth"]  # the kinds it lacks: the shipped ones
-    assert unit_costs(tmp_path / "empty").source == shipped_costs().source
+    assert unit_costs(tmp_path / "empty", profile="smoke").source == shipped_costs("smoke").source
     with pytest.raises(DcslamError, match="--costs-from .* no finished stage"):
         unit_costs(root, costs_from=tmp_path / "empty")
     plan = Workspace(tmp_path / "plan")
@@ -55,6 +60,8 @@ def test_unit_costs_are_measured_from_the_stamps_of_finished_stages(tmp_path):
     assert set(drives.frames.values()) == {12 - 10}  # the frames of a generated drive that have depth
     rows = estimate(stages, drives, costs).rows
     assert rows["slam"][:2] == (14, 28.0) and rows["slam"][2] == 28.0  # 14 SLAM runs of 2 frames at 1 s each
+    fixed = UnitCosts({"slam": 1.0}, "test", {"slam": 0.5})
+    assert estimate(stages, drives, fixed).rows["slam"][2] == 14 * 0.5 + 28.0  # each stage's fixed part, then units
 
 
 def test_plan_counts_stages_per_seed_and_writes_nothing(tmp_path):
@@ -77,3 +84,39 @@ def test_dry_run_prints_the_plan_and_exits_0_without_writing(cli, tmp_path):
     bad = cli("reproduce", "--dry-run", "--costs-from", str(tmp_path), "-w", str(tmp_path / "ws"))
     assert bad.exit_code == 1 and "--costs-from" in bad.stderr
     assert cli("reproduce", "--seeds", "0", "--dry-run", "-w", str(tmp_path)).exit_code == 2
+
+
+def _costs_file(path, profile="smoke", kinds=None):
+    kinds = kinds or {"slam": {"stage_s": 0.5, "unit_s": 0.25}, "synth": {"stage_s": 1.0, "unit_s": 0.75}}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"profiles": {profile: {"source": "a probe", "kinds": kinds}}}))
+    return path
+
+
+def test_costs_file_round_trip_and_malformed_files(tmp_path):
+    costs = read_costs(_costs_file(tmp_path / "costs.json"), "smoke")
+    assert costs.per_unit == {"slam": 0.25, "synth": 0.75} and costs.per_stage == {"slam": 0.5, "synth": 1.0}
+    assert costs.source == "a probe" and costs.seconds("slam", 2, 8.0) == 2 * 0.5 + 8 * 0.25
+    assert costs.seconds("filter", 1, 1.0) is None  # a kind not measured
+    assert read_costs(tmp_path / "costs.json", "quick") is None  # no figures for that profile
+    for text in ("{", "[]", '{"profiles": {"smoke": {"kinds": {}}}}', '{"profiles": {"smoke": {"source": "x", '
+                 '"kinds": {"slam": {"unit_s": "fast"}}}}}'):
+        (tmp_path / "bad.json").write_text(text)
+        with pytest.raises(DcslamError, match="bad.json: cannot read the unit costs"):
+            read_costs(tmp_path / "bad.json", "smoke")
+    shipped = shipped_costs("smoke")  # the packaged figures: measured by the probe, a fixed and a unit part per kind
+    assert {"synth", "train-chamfer", "slam", "score"} <= set(shipped.per_unit) and "probe" in shipped.source
+    assert "not thesis's" in shipped_costs("thesis").source  # measured at another profile's settings, and says so
+    (tmp_path / "none.json").write_text('{"profiles": {}}')
+    with pytest.raises(DcslamError, match="none.json: cannot read the unit costs"):
+        shipped_costs("thesis", path=tmp_path / "none.json")
+
+
+def test_a_calibration_is_the_estimate_of_its_profile(tmp_path):
+    ws = Workspace(tmp_path / "ws")
+    _costs_file(ws.root / ".reproduce" / CALIBRATION)
+    costs = unit_costs(ws.root, profile="smoke")
+    assert costs.per_unit["slam"] == 0.25 and costs.per_stage["synth"] == 1.0 and costs.source.startswith("a probe")
+    assert costs.per_unit["train-mse"] == shipped_costs("smoke").per_unit["train-mse"]  # the rest: shipped
+    assert unit_costs(ws.root, profile="quick").source == shipped_costs("quick").source  # not quick's
+    assert "unit costs measured from a probe" in plan_text(ws, ReproduceConfig(profile="smoke"))

@@ -16,7 +16,8 @@ def test_gt_slam_over_the_test_drive_writes_outputs_and_config(ws):
     results = run(ws, config)
     assert [r.drive for r in results] == ["drive_d"] and results[0].summary["frames"] == 2
     out = ws.slam / "dense"
-    assert {p.name for p in out.iterdir()} == {"drive_d.txt", "drive_d.kitti.txt", "drive_d.ply", "drive_d.json"}
+    assert {p.name for p in out.iterdir()} == {"drive_d.txt", "drive_d.kitti.txt", "drive_d.ply", "drive_d.json",
+                                               "drive_d.done"}
     _, T_tum = read_tum(out / "drive_d.txt")
     T_kitti = read_kitti_poses(out / "drive_d.kitti.txt")
     assert T_kitti.shape == (2, 4, 4) and np.allclose(T_kitti, T_tum, atol=1e-9)

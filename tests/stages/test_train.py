@@ -143,7 +143,7 @@ def test_the_stage_declares_only_what_the_training_does_not():
     from dcslam.stages.config import options_of
 
     own = {f.name for f in dataclasses.fields(TrainStageConfig)} - {f.name for f in dataclasses.fields(TrainSettings)}
-    assert own == {"fill_holes", "correct_fill", "name", "resume", "nproc", "init"}
+    assert own == {"fill_holes", "correct_fill", "fill", "fill_output", "name", "resume", "log", "nproc", "init"}
     assert not own & {f.name for f in dataclasses.fields(TrainConfig)}
     assert {f.name for f in dataclasses.fields(TrainSettings)} <= {f.name for f in options_of(TrainStageConfig)}
     config = TrainStageConfig(loss="pose", lr=0.02, pose_frames=3, input_mix=["sparse"], correct_fill=True,
@@ -202,3 +202,40 @@ def test_a_fine_tuned_run_records_its_start_relative_to_the_workspace(ws):
     assert tuned.run_dir == ws.runs / "pose-from-first"
     assert json.loads((tuned.run_dir / "config.json").read_text())["settings"]["init"] == "runs/first/model.pt"
     assert recorded_config(tuned.run_dir).init_model == ws.runs / "first" / "model.pt"
+
+
+@pytest.mark.skipif(__import__("importlib").util.find_spec("tensorboard") is None,
+                    reason="tensorboard not installed (pip install 'dcslam[tensorboard]')")
+def test_log_tensorboard_writes_the_metrics_rows_as_they_come_and_a_resume_replaces_the_tail(ws):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    def curves():
+        events = EventAccumulator(str(ws.runs / "mse-dense" / "tensorboard"))
+        events.Reload()
+        return {tag: [(e.step, e.value) for e in events.Scalars(tag)] for tag in events.Tags()["scalars"]}
+
+    def rows(kind):
+        lines = (ws.runs / "mse-dense" / "metrics.jsonl").read_text().splitlines()
+        return [row for row in map(json.loads, lines) if row["kind"] == kind]
+
+    config = TrainStageConfig(max_frames=2, scale=0.5, device="cpu", batch_size=2, log="tensorboard")
+    run(ws, config)
+    first = curves()
+    assert first["train/loss"] == [(r["step"], pytest.approx(r["loss"])) for r in rows("train")]
+    assert [step for step, _ in first["val/mae_mm"]] == [r["step"] for r in rows("val")]
+    run(ws, dataclasses.replace(config, epochs=2, resume=True))
+    resumed = curves()
+    assert resumed["train/loss"] == [(r["step"], pytest.approx(r["loss"])) for r in rows("train")]
+    assert [step for step, _ in resumed["train/loss"]] == [0, 1, 2, 3]  # no step plotted twice
+    run(ws, config, force=True)  # a fresh run starts the folder empty
+    assert curves()["train/loss"] == [(r["step"], pytest.approx(r["loss"])) for r in rows("train")]
+
+
+def test_log_tensorboard_without_the_package_fails_before_any_work(ws, monkeypatch):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "tensorboard" else real(name, *a))
+    with pytest.raises(DcslamError, match="dcslam\\[tensorboard\\]"):
+        run(ws, TrainStageConfig(max_frames=2, scale=0.5, device="cpu", log="tensorboard"))
+    assert not (ws.runs / "mse-dense").exists()

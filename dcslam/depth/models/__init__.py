@@ -103,10 +103,22 @@ def model_record(model, meta: dict | None = None) -> dict:
 
 def save_model(path: Path | str, model, meta: dict | None = None, force: bool = True) -> Path:
     """Write ``model`` with its architecture name and hyperparameters, atomically."""
+    return save_torch(path, model_record(model, meta), force)
+
+
+def save_torch(path: Path | str, obj, force: bool = True) -> Path:
+    """``torch.save`` of ``obj`` to ``path``, atomically. The bytes are made in memory and written by Python, so a
+    full disk or a read-only filesystem is one :class:`DcslamError` line naming ``path`` and the reason (torch's
+    own writer reports it as "unexpected pos ...", without the reason)."""
+    import io
+
     import torch
 
+    buffer = io.BytesIO()
+    torch.save(obj, buffer)
     with atomic_output(path, force=force) as tmp:
-        torch.save(model_record(model, meta), tmp)
+        with open(tmp, "wb") as f:
+            f.write(buffer.getbuffer())
     return Path(path)
 
 

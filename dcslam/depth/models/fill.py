@@ -11,6 +11,11 @@ The head's last layer starts at zero, so the untrained network IS the fill, and 
 improving on it: it corrects the measured pixels as well as the filled ones (a depth-correction model, the thesis's
 assignment's wording). The fill keeps depth edges sharp where the networks' averaging blurs them (the reason the
 plain networks lost to it on MAE), and the head learns where the network's smoother estimate is the better one.
+
+With ``fill`` other than ``nearest`` the fill starts from a surface-preserving scaffold instead (the scanline or
+plane-fit completion of the input, its holes filled from the nearest scaffold pixel), and the head is given the
+scaffold's mask too; with ``output="inverse-residual"`` the head's correction is added to the start's inverse depth,
+where a plane is affine in the pixel coordinates (:mod:`dcslam.depth.models.scaffold`).
 """
 from __future__ import annotations
 
@@ -18,6 +23,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from dcslam.depth.models.scaffold import FILLS, FILL_OUTPUTS, inverse_residual, scaffold
 from dcslam.errors import DcslamError
 
 
@@ -78,20 +84,26 @@ def depth_scale(sparse: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
 
 
 class FillCorrection(nn.Module):
-    """The correction head: ``features`` channels of the network's own (scale-free) output, plus the fill, the input
-    mask and log(1 + how many pixels the fill carried each value), through four 3 × 3 convolutions (dilations 1, 2,
-    4, 1: a 17-pixel window) to a correction of the fill and a gate logit (for a confidence). Untrained: correction
-    0, gate logit 4 (sigmoid 0.98).
+    """The correction head: ``features`` channels of the network's own (scale-free) output, plus the start (the
+    nearest fill of the ``fill`` scaffold: its depth divided by the scale, or for ``output="inverse-residual"`` the
+    scale divided by its depth), the input mask, the scaffold's mask (``fill`` other than ``nearest`` only) and log(1 +
+    how many pixels the fill carried each value), through four 3 × 3 convolutions (dilations 1, 2, 4, 1: a 17-pixel
+    window) to a correction of the start (of its depth, or of its inverse depth:
+    :func:`dcslam.depth.models.scaffold.inverse_residual`) and a gate logit (for a confidence). Untrained:
+    correction 0 (the output is the start, exactly), gate logit 4 (sigmoid 0.98).
 
     Shape:
         sparse, mask: (B, 1, H, W); features: (B, ``features``, H, W) → depth (B, 1, H, W), gate logit (B, 1, H, W)
     """
 
-    def __init__(self, features: int, width: int = 16):
+    def __init__(self, features: int, width: int = 16, fill: str = "nearest", output: str = "depth"):
         super().__init__()
-        self.features, self.width = int(features), int(width)
+        if fill not in FILLS or output not in FILL_OUTPUTS:
+            raise DcslamError(f"fill {fill!r}, output {output!r}: expected a fill of {', '.join(FILLS)} and an "
+                              f"output of {', '.join(FILL_OUTPUTS)}")
+        self.features, self.width, self.fill, self.output = int(features), int(width), fill, output
         layers: list[nn.Module] = []
-        channels = 3 + self.features
+        channels = 3 + self.features + (fill != "nearest")
         for dilation in (1, 2, 4):
             layers += [nn.Conv2d(channels, self.width, 3, padding=dilation, dilation=dilation), nn.ReLU()]
             channels = self.width
@@ -100,6 +112,13 @@ class FillCorrection(nn.Module):
         with torch.no_grad():
             self.net[-1].weight.zero_()
             self.net[-1].bias.copy_(torch.tensor([0.0, 4.0]))
+
+    def start(self, sparse: torch.Tensor, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The start (the nearest fill of the scaffold), the scaffold's mask and how far the fill carried each value
+        in pixels, (B, 1, H, W) each."""
+        placed, placed_mask = scaffold(sparse, mask, self.fill)
+        start, distance = nearest_fill_with_distance(placed, placed_mask)
+        return start, placed_mask, distance
 
     def forward(self, sparse: torch.Tensor, mask: torch.Tensor, features: torch.Tensor,
                 scale: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
@@ -111,8 +130,31 @@ class FillCorrection(nn.Module):
         mask = mask.to(sparse.dtype)
         if scale is None:
             scale = depth_scale(sparse, mask)
-        fill, distance = nearest_fill_with_distance(sparse, mask)
-        correction, gate = self.net(torch.cat([fill / scale, mask, torch.log1p(distance), features.to(sparse.dtype)],
-                                              1)).unbind(1)
-        return fill + scale * correction[:, None], gate[:, None]
+        start, placed_mask, distance = self.start(sparse, mask)
+        if self.output == "depth":
+            level = start / scale
+        else:  # scale-free inverse depth, the quantity the correction is added to (affine on a plane)
+            has = start > 0
+            level = torch.where(has, scale / torch.where(has, start, torch.ones_like(start)), torch.zeros_like(start))
+        inputs = [level, mask, *([placed_mask] if self.fill != "nearest" else []), torch.log1p(distance),
+                  features.to(sparse.dtype)]
+        correction, gate = self.net(torch.cat(inputs, 1)).unbind(1)
+        if self.output == "depth":
+            return start + scale * correction[:, None], gate[:, None]
+        return inverse_residual(start, correction[:, None], scale), gate[:, None]
 
+
+def correction_options(correct_fill: bool, fill: str = "nearest", fill_output: str = "depth") -> dict:
+    """The hyperparameters a network records for its fill correction: each only when it is not the default, so that
+    model files written before an option existed stay as they were. ``fill`` and ``fill_output`` other than the
+    defaults need ``correct_fill``."""
+    if fill not in FILLS or fill_output not in FILL_OUTPUTS:
+        raise DcslamError(f"fill {fill!r}, fill_output {fill_output!r}: expected a fill of {', '.join(FILLS)} and an "
+                          f"output of {', '.join(FILL_OUTPUTS)}")
+    if not correct_fill:
+        if (fill, fill_output) != ("nearest", "depth"):
+            raise DcslamError(f"fill {fill!r} and fill_output {fill_output!r} are options of correct_fill, which is "
+                              "off")
+        return {}
+    return {"correct_fill": True, **({"fill": fill} if fill != "nearest" else {}),
+            **({"fill_output": fill_output} if fill_output != "depth" else {})}

@@ -15,7 +15,8 @@ result is brought up (nearest) and fused with the finer one by a 3 × 3 normaliz
 1 × 1 one makes one depth channel. Its output confidence is what lets later stages drop what the network guessed.
 With ``correct_fill`` (both networks; not the paper's) the depth and confidence feed
 :class:`dcslam.depth.models.fill.FillCorrection`: the network outputs a correction of the nearest-neighbour fill of
-its input (untrained: the fill itself), and its confidence gated by the head.
+its input, or with ``fill`` of its scanline or plane-fit scaffold, in depth or (``fill_output``) in inverse depth
+(untrained: the fill itself), and its confidence gated by the head.
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from dcslam.depth.models.fill import FillCorrection, depth_scale
+from dcslam.depth.models.fill import FillCorrection, correction_options, depth_scale
 from dcslam.depth.models.sparse_conv import _check_pair
 from dcslam.errors import DcslamError
 
@@ -74,16 +75,16 @@ class NConvCNN(nn.Module):
     ARCH = "nconv"
 
     def __init__(self, channels: int = 2, kernel_size: int = 5, scales: int = 3, eps: float = 1e-8,
-                 correct_fill: bool = False):
+                 correct_fill: bool = False, fill: str = "nearest", fill_output: str = "depth"):
         super().__init__()
         if channels < 1 or scales < 0:
             raise DcslamError(f"nconv needs channels >= 1 and scales >= 0, got {channels} and {scales}")
         self.hparams = {"channels": int(channels), "kernel_size": int(kernel_size), "scales": int(scales),
                         "eps": float(eps)}
-        if correct_fill:  # recorded only when set, so that earlier model files stay as they were
-            self.hparams["correct_fill"] = True
+        # recorded only when set, so that earlier model files stay as they were
+        self.hparams.update(correction_options(correct_fill, fill, fill_output))
         # the network's depth (scale-free) and confidence
-        self.correction = FillCorrection(2) if correct_fill else None
+        self.correction = FillCorrection(2, fill=fill, output=fill_output) if correct_fill else None
         self.scales = int(scales)
         self.encode = nn.ModuleList([NConv2d(1, channels, kernel_size, eps), NConv2d(channels, channels, kernel_size,
                                                                                      eps),
@@ -141,14 +142,14 @@ class GuidedNConvCNN(nn.Module):
     GUIDED = True
 
     def __init__(self, channels: int = 2, kernel_size: int = 5, scales: int = 3, features: int = 8,
-                 eps: float = 1e-8, correct_fill: bool = False):
+                 eps: float = 1e-8, correct_fill: bool = False, fill: str = "nearest", fill_output: str = "depth"):
         super().__init__()
         self.hparams = {"channels": int(channels), "kernel_size": int(kernel_size), "scales": int(scales),
                         "features": int(features), "eps": float(eps)}
         self.nconv = NConvCNN(channels, kernel_size, scales, eps)
+        self.hparams.update(correction_options(correct_fill, fill, fill_output))
         if correct_fill:  # the colour image, the unguided depth (scale-free) and confidence correct the fill
-            self.hparams["correct_fill"] = True
-            self.correction = FillCorrection(5)
+            self.correction = FillCorrection(5, fill=fill, output=fill_output)
             return
         self.correction = None
         self.refine = nn.Sequential(nn.Conv2d(5, features, 3, padding=1), nn.ReLU(),

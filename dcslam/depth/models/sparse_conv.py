@@ -22,7 +22,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from dcslam.depth.models.fill import FillCorrection, depth_scale
+from dcslam.depth.models.fill import FillCorrection, correction_options, depth_scale
 from dcslam.errors import DcslamError
 
 
@@ -121,8 +121,9 @@ class SparseConvNet(nn.Module):
     """The paper's six-layer network: sparse depth and its mask in, dense depth out (same units as the input);
     with ``fill_holes``, what lies beyond its receptive field is filled by :func:`fill_from_coarser` and what lies
     above the topmost measured pixel of each column (:func:`below_topmost`, measurements widened by the first
-    kernel's width) is left empty (0); with ``correct_fill``, the nearest-neighbour fill of the input corrected by a
-    head that sees the network's output (:mod:`dcslam.depth.models.fill`).
+    kernel's width) is left empty (0); with ``correct_fill``, the nearest-neighbour fill of the input (or, with
+    ``fill``, of its scanline or plane-fit scaffold; with ``fill_output="inverse-residual"`` corrected in inverse
+    depth) corrected by a head that sees the network's output (:mod:`dcslam.depth.models.fill`).
 
     Shape:
         sparse: (B, 1, H, W) depth (0 where unknown), mask: (B, 1, H, W) → (B, 1, H, W)
@@ -131,19 +132,19 @@ class SparseConvNet(nn.Module):
     ARCH = "sparse-conv"
 
     def __init__(self, channels: int = 16, kernels: tuple[int, ...] = (11, 7, 5, 3, 3, 1), eps: float = 1e-8,
-                 fill_holes: bool = False, correct_fill: bool = False):
+                 fill_holes: bool = False, correct_fill: bool = False, fill: str = "nearest",
+                 fill_output: str = "depth"):
         super().__init__()
         kernels = tuple(int(k) for k in kernels)
         sizes = [1] + [channels] * (len(kernels) - 1) + [1]
         self.hparams = {"channels": int(channels), "kernels": list(kernels), "eps": float(eps)}
         if fill_holes:  # recorded only when set, so that model files of the paper's network stay as they were
             self.hparams["fill_holes"] = True
-        if correct_fill:  # likewise
-            self.hparams["correct_fill"] = True
+        self.hparams.update(correction_options(correct_fill, fill, fill_output))  # likewise
         self.fill_holes = bool(fill_holes)
         self.layers = nn.ModuleList(SparseConv(sizes[i], sizes[i + 1], k, eps=eps) for i, k in enumerate(kernels))
         # the network's depth (scale-free) and where it reached
-        self.correction = FillCorrection(2) if correct_fill else None
+        self.correction = FillCorrection(2, fill=fill, output=fill_output) if correct_fill else None
 
     def forward(self, sparse: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
         if mask is None:

@@ -315,7 +315,8 @@ def make_slam_stages(ws: Workspace, profile, test: list[Path], exact: bool, seed
                 mode = ({"sources": MEASURED, "measured": sparse_kind(b), "out": ws.slam / name}
                         if item.sources == MEASURED else {})
                 for drive in test:
-                    made = [ws.slam / name / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt")]
+                    made = [ws.slam / name / f"{drive.stem}{suffix}"
+                            for suffix in (".json", ".txt", ".kitti.txt", ".done")]
                     config = slam.SlamStageConfig(**{"odometry": "icp", **profile.slam}, depth=reference,
                                                   drive=[drive.stem], frames=profile.slam_frames, **mode)
                     source = [] if folder is None else [folder / layer / drive.name]

@@ -220,7 +220,7 @@ def _slam_stage(ws: Workspace, profile: Profile, layer: str, reference: str, dri
     out = (ws.slam_long if whole else ws.slam) / layer
     config = slam.SlamStageConfig(**{"odometry": "icp", **profile.slam}, depth=reference, drive=[drive.stem],
                                   frames=0 if whole else profile.slam_frames, out=out if whole else None)
-    made = [out / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt")]
+    made = [out / f"{drive.stem}{suffix}" for suffix in (".json", ".txt", ".kitti.txt", ".done")]
     return Stage(f"{'slam-long' if whole else 'slam'}-{layer}-{drive.stem}", slam.run, config,
                  outputs=lambda: made, inputs=lambda: [drive, source], seed=seed, kind="slam")
 

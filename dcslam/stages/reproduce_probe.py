@@ -1,0 +1,164 @@
+"""``dcslam reproduce --calibrate``: the unit costs of the estimate (:mod:`dcslam.stages.reproduce_cost`) measured on
+this machine by a short probe.
+
+The probe runs a sample of Table 5.2's stages at a profile's settings (its image scale, learning rate, SLAM settings,
+filters): synth, prepare-kitti, one training of each loss (mse, chamfer, pose), a prediction by a trained run and by
+IP-Basic and by each other classical completer (:data:`PROBE_COMPLETERS`), a filter, SLAM of a sparse and a predicted
+layer and over a whole drive, and the tables; twice, on 3 generated drives of :data:`PROBE_SIZES` frames with depth
+(training and SLAM on as many frames; the larger sample runs SLAM on two more layers, so that the tables score more
+runs), each in a temporary workspace, with one torch thread; the trainings are measured on a second run, as the first
+training of a process also sets torch up. Each stage's stamp records its CPU seconds; the two samples of each kind
+give its fixed part per stage (``stage_s``) and its part per unit (``unit_s``) by a line through the two
+(:func:`fit`), written for the profile into ``<workspace>/.reproduce/calibration.json`` (``reproduce_costs.json``'s
+layout), which the estimate then uses.
+"""
+from __future__ import annotations
+
+import os
+import platform
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
+
+from dcslam.errors import DcslamError
+from dcslam.stages.pipeline import Pipeline, Stage
+from dcslam.stages.reproduce_cost import CALIBRATION, UNDEPTHED_FRAMES, measure
+from dcslam.workspace import Workspace
+
+PROBE_SIZES = (2, 4)  # frames with depth per generated drive (and frames trained on, SLAM frames) of the 2 samples
+PROBE_STAGES = ("synth", "prepare-kitti", "train-mse-dense", "train-chamfer-8", "train-pose", "predict-mse-dense",
+                "predict-ip-basic-fast", "score-tables")
+PROBE_SLAM = (("sparse", "mse-dense"), ("sparse", "mse-dense", "dense", "ip-basic-fast"))  # layers, per sample
+# classical completers other than IP-Basic (which the experiment predicts with): each predicts the test drive too
+PROBE_COMPLETERS = ("ip-basic-multiscale", "scanline", "planefit")
+# imported before the samples run: otherwise the first stage of a kind in the first sample pays them (1-2 s of CPU),
+# which the fit would take for a fixed part of every stage of that kind
+WARM_IMPORTS = ("torch", "matplotlib.pyplot", "dcslam.depth.train", "dcslam.depth.train_pose", "dcslam.depth.chamfer",
+                "dcslam.slam.drive", "dcslam.report.plots")
+
+
+class _Sample(Pipeline):
+    """A pipeline that runs, in this process, only the stages ``wanted`` (a predicate on stage names) accepts."""
+
+    def __init__(self, workspace: Workspace, wanted: Callable[[str], bool], log: Callable[[str], None]):
+        super().__init__(workspace, log, force=True)
+        self.wanted = wanted
+        self.ran: list = []
+
+    def run(self, stage):
+        if not self.wanted(stage.name):
+            return None
+        self.ran.append(stage)
+        return super().run(stage)
+
+    def run_all(self, stages, jobs: int = 1) -> None:
+        super().run_all([s for s in stages if self.wanted(s.name)], 1)
+
+
+def probe_profile(profile, frames: int):
+    """``profile`` (of Table 5.2) shrunk to a probe sample: 3 generated drives of ``frames`` frames with depth, one
+    epoch on at most ``frames`` frames of each, SLAM on ``frames`` frames, one seed; every other setting kept."""
+    return replace(profile, name=f"{profile.name}-probe", drives=3, frames=frames + UNDEPTHED_FRAMES, split=(1, 1, 1),
+                   slam_frames=frames, seeds=1, train=profile.train | {"max_frames": frames, "epochs": 1},
+                   pose=profile.pose | {"max_frames": frames, "epochs": 1})
+
+
+def _wanted(profile, layers: tuple[str, ...]) -> Callable[[str], bool]:
+    names = set(PROBE_STAGES) | {f"filter-mse-dense+{name}" for name in list(profile.filters)[:1]} \
+        | {f"predict-{name}" for name in PROBE_COMPLETERS}
+    prefixes = tuple(f"slam-{layer}-" for layer in layers) + tuple(f"slam-long-{layer}-" for layer in
+                                                                     profile.long_layers if layer in layers)
+    return lambda name: name in names or name.startswith(prefixes)
+
+
+def sample(profile, frames: int, layers: tuple[str, ...], root: Path,
+           log: Callable[[str], None] = lambda line: None) -> dict[str, tuple[float, float, int]]:
+    """Run one probe sample of ``profile`` (:func:`probe_profile` of ``frames``; SLAM of ``layers``) in the empty
+    folder ``root``; ``{kind: (CPU seconds, units, stages)}`` its stamps measured (:func:`measure`)."""
+    from dcslam.stages import predict
+    from dcslam.stages.experiments.table_5_2 import compose
+    from dcslam.stages.slam import torch_threads
+
+    small = probe_profile(profile, frames)
+    ws = Workspace(root)
+    with torch_threads(1):
+        pipe = _Sample(ws, _wanted(small, layers), log)
+        compose(pipe, small)
+        for name in PROBE_COMPLETERS:
+            made = ws.predictions / name
+            pipe.run(Stage(f"predict-{name}", predict.run, predict.PredictConfig(model=name),
+                           outputs=lambda made=made: [made], kind="predict"))
+        for stage in [s for s in pipe.ran if s.name.startswith("train-")]:  # measured again: the first training of
+            (ws.root / ".reproduce" / f"{stage.name}.json").unlink()      # a process also sets torch up (~1 s)
+            pipe.run(stage)
+    return measure(root)
+
+
+def fit(small: dict[str, tuple[float, float, int]], large: dict[str, tuple[float, float, int]]) -> dict[str, dict]:
+    """Each kind's ``{"stage_s", "unit_s", "samples"}`` from its two samples ``(CPU seconds, units, stages)``: the
+    line through the two per-stage points; a negative part (noise) is 0 and the other fits both samples' sums."""
+    fitted = {}
+    for kind in sorted(small.keys() & large.keys()):
+        (s1, u1, n1), (s2, u2, n2) = small[kind], large[kind]
+        x1, y1, x2, y2 = u1 / n1, s1 / n1, u2 / n2, s2 / n2
+        unit = (y2 - y1) / (x2 - x1) if x2 != x1 else 0.0
+        stage = y1 - unit * x1
+        if unit < 0 or x2 == x1:  # no slope to measure: the mean per stage
+            unit, stage = 0.0, (s1 + s2) / (n1 + n2)
+        elif stage < 0:
+            unit, stage = (s1 + s2) / (u1 + u2), 0.0
+        fitted[kind] = {"stage_s": round(stage, 4), "unit_s": round(unit, 4),
+                        "samples": [[round(s1, 3), u1, n1], [round(s2, 3), u2, n2]]}
+    return fitted
+
+
+def machine() -> str:
+    """This machine in words: its processor, cores and load (what a calibration's source names)."""
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{model}, {os.cpu_count()} CPU cores, load {os.getloadavg()[0]:.1f}"
+
+
+def calibrate(ws: Workspace, profile, log: Callable[[str], None] = lambda line: None) -> Path:
+    """Run the probe of ``profile`` (of Table 5.2; its name keys the result) and write its unit costs into
+    ``<workspace>/.reproduce/calibration.json`` (other profiles' kept); returns that file."""
+    import json
+
+    from dcslam.io.atomic import write_json_atomic
+
+    import importlib
+
+    for name in WARM_IMPORTS:
+        importlib.import_module(name)
+    began, start = machine(), time.perf_counter()
+    samples = []
+    for frames, layers in zip(PROBE_SIZES, PROBE_SLAM):
+        with tempfile.TemporaryDirectory(prefix="dcslam-probe-") as folder:
+            log(f"[calibrate] probe sample of {frames} frames with depth per drive")
+            samples.append(sample(profile, frames, layers, Path(folder) / "ws", log))
+    kinds = fit(*samples)
+    if not kinds:
+        raise DcslamError(f"profile {profile.name}: the probe measured no stage; rerun `dcslam reproduce --calibrate`")
+    path = ws.root / ".reproduce" / CALIBRATION
+    data = {"profiles": {}}
+    if path.exists():
+        try:
+            data = json.loads(path.read_text())
+            data["profiles"].items()
+        except (json.JSONDecodeError, KeyError, TypeError, AttributeError):
+            data = {"profiles": {}}  # an unreadable calibration is measured again, not kept
+    source = (f"dcslam reproduce --calibrate --profile {profile.name} on {began} (after: load "
+              f"{os.getloadavg()[0]:.1f}), {time.strftime('%Y-%m-%d')}, probe {time.perf_counter() - start:.0f} s")
+    data["profiles"][profile.name] = {"source": source, "kinds": kinds}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(path, data)
+    log(f"[calibrate] unit costs of profile {profile.name} written to {path}")
+    return path

@@ -1,0 +1,152 @@
+"""The degeneracy analysis of ICP steps and the drift bound it feeds (dcslam.slam.health): a direction the scan
+leaves unconstrained is found, named, and carried into a bound that flags the run."""
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from dcslam.geometry.se3 import pose_error
+from dcslam.slam.health import (AXIS_NAMES, HealthRules, _position_covariances, axis_name, drift_bound,
+                                step_degeneracy, summarise)
+from dcslam.slam.pipeline import StepReport
+
+#: Rules whose drift bound is three standard deviations, so that the expected bounds below are round numbers.
+THREE = HealthRules(drift_sigmas=3.0)
+
+
+def _report(index, z, covariance=None, information=None, verdict="accepted"):
+    """A step at (0, 0, z), camera axes along the world's. Shape: covariance, information (6, 6) or None."""
+    T = torch.eye(4, dtype=torch.float64)
+    T[2, 3] = z
+    return StepReport(index, T, verdict != "rejected", "", 0, 0, 0.0, 0, 0.0, verdict, (),
+                      covariance=None if covariance is None else torch.as_tensor(covariance, dtype=torch.float64),
+                      information=None if information is None else torch.as_tensor(information,
+                                                                                  dtype=torch.float64))
+
+
+def _corridor_information(along: float = 0.0):
+    """J^T J of point-to-plane pairs on two walls (normals +-x), a road (normal y) and, with ``along`` > 0, that
+    many pairs on something facing the direction of travel (normal z): 100 pairs each on walls and road."""
+    rng = np.random.default_rng(0)
+    normals = [np.array([1.0, 0, 0])] * 100 + [np.array([0, -1.0, 0])] * 100 + [np.array([0, 0, 1.0])] * int(along)
+    H = np.zeros((6, 6))
+    for n in normals:
+        s = rng.uniform([-5, -2, 2], [5, 2, 30])
+        j = np.concatenate([n, np.cross(s, n)])
+        H += np.outer(j, j)
+    return H
+
+
+def test_a_corridor_leaves_the_road_direction_unconstrained():
+    d = step_degeneracy(_corridor_information())
+    assert d["translation"] == pytest.approx(0.0, abs=1e-12)
+    assert abs(d["translation_direction"][2]) == pytest.approx(1.0)
+    assert axis_name(d["translation_direction"]) == "along the road (camera z)"
+    some = step_degeneracy(_corridor_information(along=10))
+    assert some["translation"] == pytest.approx(10 / 210, rel=1e-6)      # its share of the pairs' normal weight
+    assert step_degeneracy(None) is None and step_degeneracy(np.full((6, 6), np.nan)) is None
+
+
+def test_position_covariance_is_the_linearised_position_error():
+    """a + b x d for a twist (a, b) of covariance C: the map [I, -[d]x] applied to C."""
+    rng = np.random.default_rng(1)
+    M = rng.normal(size=(6, 6))
+    C = M @ M.T
+    d = np.array([3.0, -1.0, 7.0])
+    skew = np.array([[0, -d[2], d[1]], [d[2], 0, -d[0]], [-d[1], d[0], 0]])
+    J = np.hstack([np.eye(3), -skew])
+    got = _position_covariances(C[None, :3, :3], C[None, :3, 3:], C[None, 3:, 3:], d[None])[0]
+    assert np.allclose(got, J @ C @ J.T)
+    b = rng.normal(size=3)                                    # the lever's sign: a rotation b moves d to d + b x d
+    assert np.allclose(J @ np.concatenate([np.zeros(3), b]), np.cross(b, d))
+
+
+def test_steps_add_as_correlated_errors_and_rejected_ones_add_nothing():
+    """Four steps of 1 cm along x: 3 x 4 x 1 cm, not 3 x sqrt(4) x 1 cm; a rejected step adds nothing."""
+    C = np.diag([1e-4, 1e-8, 1e-8, 0, 0, 0])
+    reports = [_report(0, 0.0)] + [_report(i, float(i), C) for i in range(1, 5)]
+    bound = drift_bound(reports, THREE)
+    assert bound["bound_m"] == pytest.approx(0.12, rel=1e-3) and bound["sigmas"] == 3.0
+    assert bound["direction"] == "across the road (camera x)"
+    with_rejected = reports + [_report(5, 5.0, np.eye(6), verdict="rejected")]
+    assert drift_bound(with_rejected, THREE)["bound_m"] == pytest.approx(0.12, rel=1e-3)
+    assert drift_bound([_report(0, 0.0)])["bound_m"] == 0.0
+    assert drift_bound(reports)["bound_m"] == pytest.approx(HealthRules().drift_sigmas * 0.04, rel=1e-3)
+
+
+def test_a_heading_error_moves_the_road_still_to_drive():
+    """A yaw error (about camera y) at step i moves the last position across the road by the road from frame i."""
+    s = math.radians(0.1)
+    C = np.diag([0, 0, 0, 0, s * s, 0])
+    reports = [_report(0, 0.0)] + [_report(i, float(i), C) for i in range(1, 5)]
+    bound = drift_bound(reports, THREE)
+    assert bound["bound_m"] == pytest.approx(3 * s * (3 + 2 + 1 + 0), rel=1e-3)
+    assert bound["direction"] == "across the road (camera x)"
+
+
+def test_a_degenerate_direction_carries_the_predictions_uncertainty():
+    """The corridor's steps are precise on paper (1 mm) but say nothing along the road: the bound there is the
+    prediction's (0.5 m at the first step, which has no velocity, 0.05 m later), it names the direction, and it
+    says from which frame the run may be past 0.5 m."""
+    C = np.diag([1e-6] * 3 + [1e-10] * 3)
+    corridor = _corridor_information()
+    reports = [_report(0, 0.0)] + [_report(i, float(i), C, corridor) for i in range(1, 6)]
+    bound = drift_bound(reports, THREE)
+    assert bound["bound_m"] == pytest.approx(3 * (0.5 + 4 * 0.05), rel=1e-2)
+    assert bound["direction"] == "along the road (camera z)" and bound["weakest_direction"] == bound["direction"]
+    s = summarise(reports, THREE)
+    assert s["suspect"] and s["drift"]["from_frame"] == 1
+    assert "along the road (camera z) left unconstrained, past 0.5 m from frame 1" in s["reasons"][-1]
+    walled = [_report(0, 0.0)] + [_report(i, float(i), C, _corridor_information(along=50)) for i in range(1, 6)]
+    assert not summarise(walled, THREE)["suspect"] and summarise(walled, THREE)["drift"]["bound_m"] < 0.05
+    late = [_report(0, 0.0), _report(1, 1.0, C, _corridor_information(along=50))] + \
+        [_report(i, float(i), C, corridor) for i in range(2, 5)]
+    assert not summarise(late, THREE)["suspect"]                            # 3 x 3 x 0.05 m
+    longer = late + [_report(i, float(i), C, corridor) for i in range(5, 8)]
+    assert summarise(longer, THREE)["suspect"] and summarise(longer, THREE)["drift"]["from_frame"] == 5  # 3 x 4 x 0.05
+    assert not summarise(reports, HealthRules(max_drift_m=0))["suspect"]
+    assert json.loads(json.dumps(s))["drift"] == s["drift"]                 # written as is in the run's summary
+
+
+def test_axis_names():
+    assert [axis_name(v) for v in np.eye(3)] == list(AXIS_NAMES)
+    assert axis_name([0.1, -0.9, 0.3]) == "vertical (camera y)"
+
+
+def _walled_road(frames: int, H: int, W: int, rows: int):
+    """A straight road between two parallel walls, 8 m apart, with a thin post on one side every 10 m (the only
+    thing facing the direction of travel), seen through ``rows`` scan lines while the car drives 1 m per frame
+    down the middle -> (depth (frames, 1, H, W), K (3, 3), T_world_cam (frames, 4, 4))."""
+    from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask
+
+    scene = StreetScene.__new__(StreetScene)   # the analytic street's ray caster, with these boxes
+    scene.ground_y = 1.65
+    boxes = [[4.0, -4.0, -20.0, 5.0, 1.65, 200.0], [-5.0, -4.0, -20.0, -4.0, 1.65, 200.0]]
+    boxes += [[3.6, -3.0, z, 4.0, 1.65, z + 0.4] for z in np.arange(6.0, 200.0, 10.0)]
+    scene.boxes = torch.tensor(boxes, dtype=torch.float64)
+    K = kitti_K(H, W)
+    T = torch.eye(4, dtype=torch.float64).repeat(frames, 1, 1)
+    T[:, 2, 3] = torch.arange(frames, dtype=torch.float64)
+    mask = lidar_mask(H, W, H // rows, 2)
+    depth = torch.stack([scene.render(T[i], K, H, W, mask=mask) for i in range(frames)]).float()[:, None]
+    return depth, K, T
+
+
+def test_an_8_beam_drive_between_two_walls_is_flagged_along_the_road():
+    """Eight scan lines see the walls and the road, which constrain everything but the direction of travel; the
+    posts barely do. The run ends off along the road, and its summary says so and from which frame."""
+    from dcslam.slam.config import SlamSettings, build_slam
+
+    depth, K, T = _walled_road(8, 96, 320, 8)
+    slam = build_slam(SlamSettings())
+    poses = slam.run(depth, K)
+    dt, _ = pose_error(poses.double(), T)
+    error = (poses[-1, :3, 3].double() - T[-1, :3, 3]).abs()
+    assert float(dt[-1]) > 0.5 and int(error.argmax()) == 2        # it drifted, along the road
+    s = slam.health_summary()
+    assert s["suspect"] and s["drift"]["bound_m"] > 0.5
+    assert s["drift"]["direction"] == "along the road (camera z)" and s["drift"]["from_frame"] is not None
+    reason = [r for r in s["reasons"] if r.startswith("accumulated uncertainty")]
+    assert reason and "along the road (camera z) left unconstrained, past 0.5 m from frame" in reason[0]

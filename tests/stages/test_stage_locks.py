@@ -1,0 +1,86 @@
+"""One writer at a time in the stages: a second process holding an output's lock makes train, slam, predict and
+reproduce refuse in one line naming it, before anything of the output is removed or written."""
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dcslam.errors import DcslamError
+from dcslam.locks import lock_path
+
+HOLD = """
+import sys, time
+from dcslam.locks import output_lock
+with output_lock(sys.argv[1], sys.argv[2]):
+    print("held", flush=True)
+    sys.stdin.readline()
+"""
+
+
+@pytest.fixture
+def hold():
+    """``hold(path, what)``: another process holds ``path``'s lock until the test ends; returns its PID."""
+    holders = []
+
+    def start(path: Path, what: str) -> int:
+        env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+        process = subprocess.Popen([sys.executable, "-c", HOLD, str(path), what], stdin=subprocess.PIPE,
+                                   stdout=subprocess.PIPE, text=True, env=env)
+        holders.append(process)
+        assert process.stdout.readline().strip() == "held"
+        return process.pid
+
+    yield start
+    for process in holders:
+        process.stdin.close()
+        process.wait(timeout=30)
+
+
+def test_train_force_never_deletes_a_run_another_process_is_writing(ws, hold, cli):
+    run_dir = ws.runs / "mse-dense"
+    run_dir.mkdir(parents=True)
+    (run_dir / "last.pt").write_bytes(b"the other process's checkpoint")
+    pid = hold(run_dir, "run")
+    result = cli("train", "-w", ws.root, "--max-frames", 2, "--scale", 0.5, "--device", "cpu", "--force")
+    assert result.exit_code == 1 and result.output.count("\n") == 1
+    assert f"error: run {run_dir} is being written by PID {pid} (" in result.output
+    assert "wait for it or stop it" in result.output
+    assert (run_dir / "last.pt").read_bytes() == b"the other process's checkpoint"
+
+
+def test_slam_refuses_an_output_folder_another_process_is_writing(ws, hold, cli):
+    out = ws.slam / "dense"
+    pid = hold(out, "SLAM output")
+    result = cli("slam", "-w", ws.root, "--odometry", "gt", "--frames", 2, "--force")
+    assert result.exit_code == 1 and f"SLAM output {out} is being written by PID {pid}" in result.output
+    assert not out.exists()
+
+
+def test_predict_refuses_a_layer_another_process_is_writing(ws, hold):
+    from dcslam.stages.predict import PredictConfig, run
+
+    pid = hold(ws.predictions / "ip-basic-fast", "layer")
+    with pytest.raises(DcslamError, match=f"layer .*ip-basic-fast is being written by PID {pid}"):
+        run(ws, PredictConfig(model="ip-basic", device="cpu"))
+
+
+def test_a_second_reproduce_of_one_workspace_is_refused_before_it_touches_the_workspace(tmp_path, hold):
+    from dcslam.stages.experiments.table_5_2 import PROFILES
+    from dcslam.stages.reproduce import reproduce
+    from dcslam.workspace import Workspace
+
+    ws = Workspace(tmp_path / "ws")
+    pid = hold(ws.root, "workspace")
+    with pytest.raises(DcslamError, match=f"workspace {ws.root} is being written by PID {pid}"):
+        reproduce(ws, PROFILES["smoke"])
+    assert not ws.root.exists() and lock_path(ws.root).parent == tmp_path
+
+
+def test_the_lock_is_released_when_the_stage_ends(ws):
+    from dcslam.stages.slam import SlamStageConfig, run
+
+    run(ws, SlamStageConfig(odometry="gt", frames=2, evidence="none"))
+    assert not lock_path(ws.slam / "dense").exists()
+    assert {p.name for p in ws.slam.iterdir()} == {"dense"}
