@@ -175,5 +175,6 @@ def test_interrupted_reproduce_then_rerun_gives_the_same_table(baseline):
         fraction /= 4
     assert leftovers(ws) == []
     again, _ = dcslam(*args)
-    assert again == table
+    # the same table; the paths it names are each run's own workspace
+    assert again.replace(str(ws), "<workspace>") == table.replace(str(straight), "<workspace>")
     assert (ws / "results" / "table_5_2.csv").read_text() == (straight / "results" / "table_5_2.csv").read_text()

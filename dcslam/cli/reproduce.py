@@ -124,8 +124,6 @@ reproduce_command = stage_command(app, "reproduce", reproduce.ReproduceConfig, r
                                   examples=("dcslam reproduce --profile smoke -w /tmp/check    # a few minutes",
                                             "dcslam reproduce --table beams --jobs 2 --print-config   # its stages, "
                                             "then drop --print-config to run it (make reproduce-beams)",
-                                            "dcslam reproduce --profile study --dry-run   # what 3 seeds x 8 drives "
-                                            "will run and cost",
-                                            "dcslam reproduce --profile study --dry-run --calibrate   # its cost "
-                                            "measured on this machine"),
+                                            "dcslam reproduce --profile study --dry-run --calibrate   # what 3 seeds x "
+                                            "8 drives will run, its cost measured on this machine"),
                                   describe=stage_configs_toml)

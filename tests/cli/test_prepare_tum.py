@@ -58,7 +58,8 @@ def test_prepare_slam_score(cli, workspace, tmp_path):
 
     slam = cli("slam", "--workspace", workspace, "--depth", "dense")
     assert slam.exit_code == 0, slam.output
-    assert _files(workspace / "slam" / "dense") == [f"{SEQ}.json", f"{SEQ}.kitti.txt", f"{SEQ}.ply", f"{SEQ}.txt"]
+    assert _files(workspace / "slam" / "dense") == [f"{SEQ}.done", f"{SEQ}.json", f"{SEQ}.kitti.txt", f"{SEQ}.ply",
+                                                     f"{SEQ}.txt"]
     summary = json.loads((workspace / "slam" / "dense" / f"{SEQ}.json").read_text())
     assert summary["frames"] == 6 and not summary["rejected_steps"]
     assert summary["translation_error_m"]["max"] < 0.02

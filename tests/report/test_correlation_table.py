@@ -151,10 +151,12 @@ def test_the_beams_builder_writes_the_correlation_files(tmp_path):
 def test_reproduce_prints_the_correlation_table_after_its_table(tmp_path, capsys):
     from dcslam.cli.reproduce import report
 
-    (tmp_path / "table_beams.md").write_text("### The beams experiment\n")
+    (tmp_path / "table_beams.md").write_text("### The beams experiment\n\n| input | localisation |\n| --- | --- |\n"
+                                             "| sparse | 0.1 |\n")
     report((tmp_path / "table_beams.md", 60.0))
-    assert "depth metrics" not in capsys.readouterr().out  # a table without one (Table 5.1) prints alone
-    (tmp_path / "table_beams_correlation.md").write_text("### depth metrics against localisation\n")
+    assert "rank correlations" not in capsys.readouterr().out  # a table without one (Table 5.1) prints alone
+    (tmp_path / "table_beams_correlation.md").write_text("### depth metrics against localisation\n\n"
+                                                         "| depth metric | rho |\n| --- | --- |\n| MAE (mm) | +0.3 |\n")
     report((tmp_path / "table_beams.md", 60.0))
     out = capsys.readouterr().out
-    assert out.index("The beams experiment") < out.index("depth metrics against localisation")
+    assert out.index("sparse") < out.index("full table") < out.index("MAE (mm)") < out.index("rank correlations")

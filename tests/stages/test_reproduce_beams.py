@@ -11,6 +11,7 @@ from dcslam.errors import DcslamError
 from dcslam.stages.experiments import beams as reproduce_beams
 from dcslam.stages.experiments.beams import PROFILES, BeamsProfile
 from tests.fixtures import depth as depth_fixtures
+from tests.fixtures.slam_outputs import commit_slam
 
 ARGS = ["reproduce", "--table", "beams", "--profile", "smoke"]
 
@@ -101,6 +102,7 @@ def test_smoke_profile_writes_the_table_the_per_drive_csv_and_the_plot(cli, tmp_
     record = json.loads(summary.read_text())
     record["settings"]["voxel_size"] = 0.5
     summary.write_text(json.dumps(record))
+    commit_slam(summary.parent, "drive_d")  # a committed set, made otherwise: the settings check is what refuses it
     mixed = cli(*ARGS, "--workspace", tmp_path)
     assert mixed.exit_code == 1
     assert "different settings" in mixed.stderr and "voxel_size=0.5 for nconv at 16 beams" in mixed.stderr
