@@ -12,19 +12,12 @@ from dcslam.errors import DcslamError
 from dcslam.eval.depth import DepthErrors
 from dcslam.eval.surface import SurfaceErrors
 from dcslam.report.correlation_table import METRICS, correlation_table
-from dcslam.report.layers import TrajectoryPair, surface_frames
+from dcslam.report.layers import surface_frames
 from dcslam.report.results import LayerResult
+from tests.fixtures.trajectories import offset_pair
 
 DRIVES = ["d0", "d1", "d2", "d3"]
 
-
-def _pair(offset_m: float, n: int = 4) -> TrajectoryPair:
-    """A straight drive and an estimate ``offset_m`` to its side at every pose: localisation = offset."""
-    T_gt = np.repeat(np.eye(4)[None], n, axis=0)
-    T_gt[:, 2, 3] = np.arange(n, dtype=float)
-    T_est = T_gt.copy()
-    T_est[:, 0, 3] += offset_m
-    return TrajectoryPair(timestamps=np.arange(n, dtype=float), T_gt=T_gt, T_est=T_est)
 
 
 def _surface(value: float, flying: float = math.nan) -> SurfaceErrors:
@@ -38,7 +31,7 @@ def _row(name: str, offsets: list[float], mae: list[float], normal: list[float])
         return DepthErrors(mae_mm=m, rmse_mm=2 * m, imae_per_km=1.0, irmse_per_km=1.0, pixels=10, coverage=1.0)
 
     return LayerResult(label=name, layer=name, depth={d: depth(m) for d, m in zip(DRIVES, mae)},
-                       pairs={d: _pair(o) for d, o in zip(DRIVES, offsets)},
+                       pairs={d: offset_pair(o, 4) for d, o in zip(DRIVES, offsets)},
                        settings={d: {"suspect": False} for d in DRIVES},
                        surface={d: _surface(v) for d, v in zip(DRIVES, normal)},
                        surface_frames={d: 5 for d in DRIVES}, surface_target="exact")

@@ -4,14 +4,13 @@ fails on, left out of those columns and named in the notes."""
 import csv
 import io
 
-import numpy as np
 import pytest
 
 from dcslam.eval.depth import DepthErrors
-from dcslam.report.layers import TrajectoryPair
 from dcslam.report.results import LayerResult, SeedResults
 from dcslam.report.robust_rows import compare, drive_localisation, robust_columns
 from dcslam.report.table_beams import per_drive_table, table_beams
+from tests.fixtures.trajectories import offset_pair
 
 DRIVES = [f"d{i}" for i in range(7)]
 SETTINGS = {"frames": 5, "odometry": "icp", "mapper": "pointfusion", "voxel_size": 0.2}
@@ -21,20 +20,12 @@ NCONV = [s + d for s, d in zip(SPARSE, [0.05, -0.04, 0.03, -0.02, 0.01, -0.06])]
 EXACT = [0.02] * 6 + [4.0]
 
 
-def _pair(offset_m: float, n: int = 5) -> TrajectoryPair:
-    """A straight drive along z and an estimate ``offset_m`` to its side at every pose: localisation = offset."""
-    T_gt = np.repeat(np.eye(4)[None], n, axis=0)
-    T_gt[:, 2, 3] = np.arange(n, dtype=float)
-    T_est = T_gt.copy()
-    T_est[:, 0, 3] += offset_m
-    return TrajectoryPair(timestamps=np.arange(n, dtype=float), T_gt=T_gt, T_est=T_est)
-
 
 def _result(label: str, layer: str, offsets: list[float], seed=None) -> LayerResult:
     drives = DRIVES[:len(offsets)]
     errors = DepthErrors(mae_mm=100.0, rmse_mm=200.0, imae_per_km=1.0, irmse_per_km=2.0, pixels=10, coverage=1.0)
     return LayerResult(label=label, layer=layer, depth={d: errors for d in drives},
-                       pairs={d: _pair(o) for d, o in zip(drives, offsets)},
+                       pairs={d: offset_pair(o) for d, o in zip(drives, offsets)},
                        settings={d: dict(SETTINGS, suspect=False) for d in drives}, seed=seed)
 
 

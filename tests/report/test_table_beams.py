@@ -3,16 +3,15 @@ spread, the verdict against the sparse input, the share of the gap closed, and t
 import csv
 import io
 
-import numpy as np
 import pytest
 
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import DepthErrors
-from dcslam.report.layers import TrajectoryPair
 from dcslam.report.results import LayerResult
 from dcslam.report.table_beams import (INPUTS, MEASURED, layer_name, per_drive_table, plot_localisation_vs_beams,
                                        slam_name, sparse_kind, table_beams)
 from tests.fixtures.slam_outputs import commit_slam
+from tests.fixtures.trajectories import offset_pair
 
 DRIVES = ["d0", "d1", "d2", "d3"]
 PER_BEAM = sum(i.per_beam for i in INPUTS)  # rows per beam count: 9 layers, 8 of them again with measured sources
@@ -20,19 +19,11 @@ ROWS = 2 * PER_BEAM + 2
 SETTINGS = {"frames": 5, "odometry": "icp", "mapper": "pointfusion", "voxel_size": 0.2}
 
 
-def _pair(offset_m: float, n: int = 5) -> TrajectoryPair:
-    """A straight drive along z and an estimate ``offset_m`` to its side at every pose: localisation = offset."""
-    T_gt = np.repeat(np.eye(4)[None], n, axis=0)
-    T_gt[:, 2, 3] = np.arange(n, dtype=float)
-    T_est = T_gt.copy()
-    T_est[:, 0, 3] += offset_m
-    return TrajectoryPair(timestamps=np.arange(n, dtype=float), T_gt=T_gt, T_est=T_est)
-
 
 def _result(label: str, layer: str, offsets: list[float], mae: float = 100.0, settings=SETTINGS) -> LayerResult:
     errors = DepthErrors(mae_mm=mae, rmse_mm=2 * mae, imae_per_km=1.0, irmse_per_km=2.0, pixels=10, coverage=1.0)
     return LayerResult(label=label, layer=layer, depth={d: errors for d in DRIVES},
-                       pairs={d: _pair(o) for d, o in zip(DRIVES, offsets)},
+                       pairs={d: offset_pair(o) for d, o in zip(DRIVES, offsets)},
                        settings={d: dict(settings, suspect=False) for d in DRIVES})
 
 
