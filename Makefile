@@ -27,13 +27,16 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e '.[test]'
 	touch $(STAMP)
 
-# every test, the slow end-to-end ones and the cluster ones included (CI runs this); PYTEST_ARGS='-m "not slow"'
+# every test, the slow end-to-end ones and the cluster ones included (CI runs this), a worker per core; PYTEST_ARGS='-m "not slow"'
 # leaves the slow ones out. The cluster tests start a single-node Slurm here (tests/cluster/slurm.sh installs
 # slurm-wlm and munge with apt-get when missing, as root; skipped with the reason elsewhere, failed under CI=true)
+# TEST_JOBS: pytest-xdist workers, one per core by default; each test file runs whole on one worker, so module-wide
+# fixtures (a smoke reproduction, the Slurm runs) are built once. TEST_JOBS=0 runs everything in this process.
 PYTEST_ARGS ?=
+TEST_JOBS   ?= auto
 test: setup
 	$(PY) -m ruff check dcslam tests benchmarks examples
-	$(PY) -m pytest -q $(PYTEST_ARGS) tests
+	$(PY) -m pytest -q $(if $(filter 0,$(TEST_JOBS)),,-n $(TEST_JOBS) --dist loadfile) $(PYTEST_ARGS) tests
 
 # only the tests on Slurm (dcslam reproduce --executor slurm), a few minutes
 test-cluster: setup
