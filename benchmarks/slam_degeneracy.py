@@ -45,10 +45,10 @@ def judge_run(path: Path, kind: str, frames: int) -> dict:
     """SLAM at the defaults over the first ``frames`` frames of ``kind`` on a drive -> one row."""
     from dcslam.slam.config import build_slam
     from dcslam.slam.health import HealthRules, drift_sigma_m, summarise
-    from dcslam.stages.slam import SlamStageConfig, run_drive
+    from dcslam.stages.slam import SlamStageConfig, run_drive_file
 
     config = SlamStageConfig(depth=kind, frames=frames, evidence="none")
-    run = run_drive(path, kind, build_slam(config.settings()), frames)
+    run = run_drive_file(path, kind, build_slam(config.settings()), frames)
     summary = run.summary()
     health = summary["health"]
     without = summarise(run.reports, HealthRules(max_drift_m=0))
