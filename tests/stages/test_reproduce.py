@@ -117,7 +117,8 @@ def test_unknown_profile_and_table_fail_with_exit_code(cli, tmp_path):
     assert result.exit_code == 1 and "does not exist" in result.stderr
 
 
-@pytest.mark.slow  # every stage of Table 5.1 and 5.2, end to end
+@pytest.mark.slow  # every stage of Table 5.1 and 5.2, end to end, then the cost probe: ~2 min quiet, 10+ loaded
+@pytest.mark.timeout(1500)
 def test_smoke_profile_runs_every_stage_and_writes_the_tables(cli, tmp_path):
     """The whole experiment on a few tiny generated drives: every stage, then a rerun that skips them all (the worker
     processes of --jobs are tested on their own, below)."""
