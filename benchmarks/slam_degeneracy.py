@@ -1,13 +1,13 @@
-"""Measure the drift bound (dcslam.slam.health.drift_bound) on generated drives: SLAM at the defaults on each drive's
-depth kinds, and per run its final error, the verdict of the health rules as they are, the verdict without the
-drift bound and with the former random-walk bound (three times ``drift_sigma_m``), and the bound's size, direction
-and frame.
+"""Measure the health verdict on generated drives: SLAM at the defaults on each drive's depth kinds, and per run its
+final error, the verdict as dcslam writes it (the step rules, the road figure, the drift bound where a step left a
+direction degenerate), the verdict of the previous rule (the step rules and the drift bound on every run, no road),
+the road figure and the bound's size, direction and frame.
 
 The drives are the street generator's (``dcslam synth``'s scenes and sensors) at half KITTI size, written straight
 to drive files with ``sparse`` (64 beams), ``sparse@<beams>`` and ``exact`` depth (tests/fixtures/street.py), so
 that a few drives of a seed no test uses cost minutes, not the hour of full-size ``synth`` + ``prepare-kitti``.
 
-    python benchmarks/slam_degeneracy.py /tmp/degeneracy --seeds 7171-7178 --beams 8,16 --frames 32 --slam-frames 30
+    python benchmarks/slam_degeneracy.py /tmp/degeneracy --seeds 7171-7186 --beams 8,16 --frames 32 --slam-frames 30
 """
 from __future__ import annotations
 
@@ -44,20 +44,18 @@ def make_drives(folder: Path, seeds: list[int], beams: int, frames: int) -> list
 def judge_run(path: Path, kind: str, frames: int) -> dict:
     """SLAM at the defaults over the first ``frames`` frames of ``kind`` on a drive -> one row."""
     from dcslam.slam.config import build_slam
-    from dcslam.slam.health import HealthRules, drift_sigma_m, summarise
+    from dcslam.slam.health import HealthRules, summarise
     from dcslam.stages.slam import SlamStageConfig, run_drive_file
 
     config = SlamStageConfig(depth=kind, frames=frames, evidence="none")
     run = run_drive_file(path, kind, build_slam(config.settings()), frames)
     summary = run.summary()
     health = summary["health"]
-    without = summarise(run.reports, HealthRules(max_drift_m=0))
-    random_walk = 3 * drift_sigma_m(run.reports)
+    without = summarise(run.reports, HealthRules(max_drift_m=0, max_road_drift_m=0))
+    previous = bool(without["suspect"]) or health["drift"]["bound_m"] > HealthRules().max_drift_m
     return {"drive": path.stem, "kind": kind, "final_m": summary["translation_error_m"]["final"],
             "flagged": bool(health["suspect"]), "reasons": health["reasons"], "drift": health["drift"],
-            "flagged_without_bound": bool(without["suspect"]),
-            "flagged_before": bool(without["suspect"]) or (random_walk > HealthRules().max_drift_m),
-            "random_walk_bound_m": round(random_walk, 4),
+            "road": health["road"], "flagged_without_bound": bool(without["suspect"]), "flagged_before": previous,
             "seconds": round(run.seconds, 2)}
 
 
@@ -105,7 +103,8 @@ def table(rows: list[dict], truth: float) -> list[str]:
     groups = defaultdict(list)
     for r in rows:
         groups[r["kind"]].append(r)
-    lines = [f"| input | runs | > {truth:g} m | flagged of those: before / now | flagged of the others: before / now |",
+    lines = [f"| input | runs | > {truth:g} m | flagged of those: previous / new | flagged of the others: previous / "
+             "new |",
              "| --- | --- | --- | --- | --- |"]
     for kind in sorted(groups) + ["all"]:
         rs = rows if kind == "all" else groups[kind]
@@ -154,8 +153,10 @@ def main(argv=None) -> int:
                 rows.append(row)
                 d = row["drift"]
                 print(f"{kind:10s} {path.stem} final {row['final_m']:6.3f} {'FLAG' if row['flagged'] else 'ok  '} "
-                      f"before {'FLAG' if row['flagged_before'] else 'ok  '} bound {d['bound_m']:.2f} m "
-                      f"{d['direction']} from {d['from_frame']} | {'; '.join(row['reasons'])[:160]}", flush=True)
+                      f"previous {'FLAG' if row['flagged_before'] else 'ok  '} bound {d['bound_m']:.2f} m "
+                      f"{'counted' if d['counted'] else 'not counted'} road {row['road']['drift_m']:.2f} m "
+                      f"{row['road']['vertical']} ({row['road']['frames_seen']} frames) | "
+                      f"{'; '.join(row['reasons'])[:160]}", flush=True)
         for kind in ([f"sparse@{beams}"] + (["sparse"] if k == 0 else [])) if args.ip_basic else []:
             for path in drives:
                 row = judge_completed(path, kind, args.slam_frames, args.out / f"beams{beams}")

@@ -11,7 +11,9 @@ Each odometry step gets one verdict:
 
 :func:`summarise` turns a run's reports into counts and a ``suspect`` flag with its reasons: a run is suspect when
 any step was rejected, when more than a small fraction of its steps were degraded, when two consecutive steps were,
-or when its drift bound (:func:`drift_bound`) says it may end more than ``max_drift_m`` from the truth.
+when its road figure (:func:`dcslam.slam.road.road_drift`: the road plane of each frame's depth, step by step) says
+it sank or rose more than ``max_road_drift_m``, or when some step left a translation direction degenerate and its
+drift bound (:func:`drift_bound`) says it may end more than ``max_drift_m`` from the truth.
 
 The drift bound is the degeneracy analysis of Zhang & Singh (ICRA 2016) carried along a run: each measured step's
 point-to-plane information J^T W J says how well its pairs constrain each direction of motion (its smallest
@@ -53,9 +55,16 @@ class HealthRules:
         two in a row mean the tracker has lost the scene).
     max_rejected: a run with more rejected steps than this is suspect.
     max_drift_m: a run whose drift bound (:func:`drift_bound`, ``drift_sigmas`` times its correlated standard
-        deviation) exceeds this may end further than this from the truth, and is suspect (0: never). The bound is
-        absolute, as the question it answers ("may this trajectory be more than 0.5 m off?"): a longer drive
-        accumulates more and is flagged sooner.
+        deviation) exceeds this may end further than this from the truth, and is suspect (0: never) when some step
+        left a translation direction degenerate (its weakest share below ``degenerate_share``; or, without the
+        steps' information, always): where every direction was measured the bound overstates the drift (at 8
+        beams it exceeded 0.5 m on every run, of runs ending 0.09-0.41 m off) and the road figure judges the
+        vertical. The bound is absolute, as the question it answers ("may this trajectory be more than 0.5 m
+        off?"): a longer drive accumulates more and is flagged sooner.
+    max_road_drift_m: a run whose road figure (:func:`dcslam.slam.road.road_drift`) exceeds this is suspect
+        (0: never, and no road is fitted). The figure estimates the run's vertical error (median 0.015-0.028 m
+        from the truth on the calibration drives), so its threshold is ``max_drift_m``'s goal: 0.5 m. It needs a
+        road below the camera; frames without one are skipped and counted.
     drift_sigmas: standard deviations of the drift bound. 2.5: on the calibration drives it flags every run that
         ends more than 0.5 m off (those only it flags have bounds of 0.90-0.96 m at 3 sigma) and 1 of 14 16-beam
         runs that end within 0.5 m (4 at 3 sigma, bounds 0.51-0.88 m); at 8 beams it flags every run, whatever
@@ -78,6 +87,7 @@ class HealthRules:
     max_degraded_run: int = 1
     max_rejected: int = 0
     max_drift_m: float = 0.5
+    max_road_drift_m: float = 0.5
     drift_sigmas: float = 2.5
     degenerate_share: float = 0.02
     prior_sigma_m: float = 0.05
@@ -300,7 +310,8 @@ def summarise(reports, rules: HealthRules = HealthRules()) -> dict:
 
     Returns ``{"accepted": n, "degraded": n, "rejected": n, "suspect": bool, "reasons": [str],
     "flagged_steps": [{"frame": i, "verdict": v, "why": [str]}], "drift_sigma_m": s (:func:`drift_sigma_m`),
-    "drift": :func:`drift_bound`}``.
+    "drift": :func:`drift_bound` with ``counted`` (whether it took part in the verdict), "road":
+    :func:`dcslam.slam.road.road_drift` of the reports' ``road`` planes (None when ``max_road_drift_m`` is 0)}``.
     """
     steps = [r for r in reports if r.index > 0]
     counts = {v: sum(r.verdict == v for r in steps) for v in VERDICTS}
@@ -316,16 +327,44 @@ def summarise(reports, rules: HealthRules = HealthRules()) -> dict:
         longest = max(longest, run)
     if longest > rules.max_degraded_run:
         reasons.append(f"{longest} consecutive steps degraded")
-    sigma = drift_sigma_m(reports)
-    drift, curve = _drift(reports, rules)
-    if rules.max_drift_m > 0 and drift["bound_m"] > rules.max_drift_m:
-        drift["from_frame"] = _first_frame_over(curve, rules.drift_sigmas, rules.max_drift_m, reports)
-        reasons.append(f"accumulated uncertainty {drift['bound_m']:.2f} m ({rules.drift_sigmas:g} sigma, steps "
-                       f"correlated) exceeds {rules.max_drift_m:g} m: {drift['direction']} left unconstrained, "
-                       f"past {rules.max_drift_m:g} m from frame {drift['from_frame']} (most from step "
-                       f"{drift['largest_frame']})")
-    drift["bound_m"] = round(drift["bound_m"], 4)
+    road = _road(reports, rules, reasons)
+    drift = _drift_verdict(reports, rules, reasons)
     flagged = [{"frame": r.index, "verdict": r.verdict, "why": list(r.health)} for r in steps
                if r.verdict != "accepted"]
     return {**counts, "suspect": bool(reasons), "reasons": reasons, "flagged_steps": flagged,
-            "drift_sigma_m": round(sigma, 4), "drift": drift}
+            "drift_sigma_m": round(drift_sigma_m(reports), 4), "drift": drift, "road": road}
+
+
+def _drift_verdict(reports, rules: HealthRules, reasons: list[str]) -> dict:
+    """The drift bound of :func:`summarise`; counted (and, past ``max_drift_m``, a reason appended to ``reasons``)
+    only when some step left a translation direction degenerate, or no step's information says."""
+    drift, curve = _drift(reports, rules)
+    share = drift["weakest_share"]
+    drift["counted"] = bool(rules.max_drift_m > 0 and (share is None or share < rules.degenerate_share))
+    if rules.max_drift_m > 0 and drift["bound_m"] > rules.max_drift_m:
+        drift["from_frame"] = _first_frame_over(curve, rules.drift_sigmas, rules.max_drift_m, reports)
+        if drift["counted"]:
+            reasons.append(f"accumulated uncertainty {drift['bound_m']:.2f} m ({rules.drift_sigmas:g} sigma, steps "
+                           f"correlated) exceeds {rules.max_drift_m:g} m: {drift['direction']} left unconstrained, "
+                           f"past {rules.max_drift_m:g} m from frame {drift['from_frame']} (most from step "
+                           f"{drift['largest_frame']})")
+    drift["bound_m"] = round(drift["bound_m"], 4)
+    return drift
+
+
+def _road(reports, rules: HealthRules, reasons: list[str]) -> dict | None:
+    """The road figure of :func:`summarise` (None when ``max_road_drift_m`` is 0 or there are no reports), a
+    reason appended to ``reasons`` when it exceeds ``max_road_drift_m``."""
+    if rules.max_road_drift_m <= 0 or not reports:
+        return None
+    from dcslam.slam.road import road_drift
+
+    T = np.stack([_numpy(r.T_world_cam) for r in reports])
+    road = road_drift(T, [getattr(r, "road", None) for r in reports], rules.max_road_drift_m)
+    if road["from_frame"] is not None:
+        road["from_frame"] = int(reports[road["from_frame"]].index)
+    if road["drift_m"] > rules.max_road_drift_m:
+        reasons.append(f"the road says the run {road['vertical']} {road['drift_m']:.2f} m (vertical, camera y), "
+                       f"past {rules.max_road_drift_m:g} m from frame {road['from_frame']} (road seen in "
+                       f"{road['frames_seen']} of {len(reports)} frames)")
+    return road

@@ -18,6 +18,7 @@ from dcslam.slam.health import HealthRules, assess, summarise
 from dcslam.slam.odometry import OdometryResult
 from dcslam.slam.parts import Mapper, Odometry
 from dcslam.slam.pointmap import PointMap
+from dcslam.slam.road import RoadPlane, frame_road
 
 
 def build_map(depth: torch.Tensor, K: torch.Tensor, T_world_cam: torch.Tensor, rgb: torch.Tensor | None = None,
@@ -59,7 +60,8 @@ class StepReport:
     the estimate from the constant-velocity prediction; sigma_m / sigma_deg: the step's first-order standard
     deviation of position / rotation along its worst direction (``PointToPlane.covariance``; NaN when not measured);
     information / covariance: the step's (6, 6) ``OdometryResult.information`` and ``covariance`` (None when not
-    measured).
+    measured); road: the frame's road plane (:func:`dcslam.slam.road.frame_road`; None when it saw no road or the
+    rules do not ask for it).
     """
 
     index: int
@@ -81,6 +83,7 @@ class StepReport:
     sigma_deg: float = math.nan
     information: torch.Tensor | None = None
     covariance: torch.Tensor | None = None
+    road: RoadPlane | None = None
 
 
 class SLAM:
@@ -197,6 +200,7 @@ class SLAM:
         step_frame would compute. The odometry's part waits until the first frame has fixed the scene scale (until
         then step_frame computes it itself)."""
         self.mapper.precompute(frame)
+        self._road(frame)
         scale = self.scale
         if scale is not None:
             self.odometry.precompute(frame if source_frame is None else source_frame, scale)
@@ -237,9 +241,19 @@ class SLAM:
         report = StepReport(index, result.T_world_cam, result.accepted, result.reason, result.iterations,
                             result.inliers, result.rmse, len(self.mapper.map), time.perf_counter() - start,
                             verdict, tuple(why), result.sources, result.conditioning, gap_m, gap_deg,
-                            result.sigma_m, result.sigma_deg, result.information, result.covariance)
+                            result.sigma_m, result.sigma_deg, result.information, result.covariance,
+                            self._road(frame))
         self.reports.append(report)
         return report
+
+    def _road(self, frame: Frame) -> RoadPlane | None:
+        """The frame's road plane, fitted once (kept in :attr:`Frame.cache`); None when the health rules do not
+        ask for it (``max_road_drift_m`` 0) or the frame saw no road."""
+        if self.health.max_road_drift_m <= 0:
+            return None
+        if "road" not in frame.cache:
+            frame.cache["road"] = frame_road(frame.vertex)
+        return frame.cache["road"]
 
     def run(self, depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None = None,
             T_gt: torch.Tensor | None = None, weight: torch.Tensor | None = None) -> torch.Tensor:

@@ -54,6 +54,7 @@ def test_good_drive_is_not_flagged(street_drive):
     assert float(dt.max()) < 0.2
     assert not summary["suspect"], summary
     assert summary["accepted"] == len(T) - 1
+    assert summary["road"]["frames_seen"] == len(T) and summary["road"]["drift_m"] < 0.1   # the road, every frame
 
 
 def test_too_few_pairs_to_measure_is_flagged(street_drive):
