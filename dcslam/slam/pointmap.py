@@ -96,16 +96,37 @@ def voxel_representatives(points: torch.Tensor, voxel_size: float) -> torch.Tens
 class ModelView:
     """A point map rendered into a camera: per pixel the map point nearest to the camera.
 
-    Shape: index (H, W) int64 (-1 = empty), vertex (H, W, 3) and normal (H, W, 3) in the world frame,
-    valid (H, W) bool; T_world_cam (4, 4) and K (3, 3) of the rendering camera.
+    Shape: index (H, W) int64 into ``points`` and ``normals`` (-1 = empty); points (Q, 3) and normals (Q, 3) in the
+    world frame (a map's points, or a frame's pixels); valid (H, W) bool (index >= 0); T_world_cam (4, 4) and
+    K (3, 3) of the rendering camera. :attr:`vertex` and :attr:`normal` are the (H, W, 3) images, made on demand:
+    ICP gathers its targets through ``index`` and never needs them (making them cost a SLAM step about a tenth of
+    its time).
     """
 
     index: torch.Tensor
-    vertex: torch.Tensor
-    normal: torch.Tensor
+    points: torch.Tensor
+    normals: torch.Tensor
     valid: torch.Tensor
     T_world_cam: torch.Tensor
     K: torch.Tensor
+
+    def _image(self, values: torch.Tensor) -> torch.Tensor:
+        """(H, W, 3): ``values`` at each pixel's index, zero where empty."""
+        H, W = self.index.shape
+        flat = self.index.reshape(-1)
+        pix = torch.nonzero(flat >= 0).squeeze(1)
+        image = torch.zeros(H * W, 3, dtype=values.dtype, device=values.device)
+        return image.index_copy(0, pix, values.index_select(0, flat.index_select(0, pix))).view(H, W, 3)
+
+    @property
+    def vertex(self) -> torch.Tensor:
+        """The point at each pixel, (H, W, 3) world frame (zero where empty)."""
+        return self._image(self.points)
+
+    @property
+    def normal(self) -> torch.Tensor:
+        """The normal at each pixel, (H, W, 3) world frame (zero where empty)."""
+        return self._image(self.normals)
 
 
 def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
@@ -118,22 +139,18 @@ def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int
     in from outside) and a (2 splat + 1)^2 minimum filter in image space: the map's size costs one scatter, not
     one per pixel of the square.
 
-    Shape: T_world_cam (4, 4), K (3, 3) -> :class:`ModelView` of (H, W).
+    Shape: T_world_cam (4, 4), K (3, 3) -> :class:`ModelView` of (H, W) whose points are the map's.
     """
     if T_world_cam.shape != (4, 4):
         raise DcslamError(f"T_world_cam has shape {tuple(T_world_cam.shape)}, expected (4, 4)")
     K = check_K(K)[0]
     device, dtype = pm.points.device, pm.points.dtype
     index = torch.full((height * width,), -1, dtype=torch.int64, device=device)
-    vertex = torch.zeros(height * width, 3, dtype=dtype, device=device)
-    normal = torch.zeros(height * width, 3, dtype=dtype, device=device)
-    if len(pm):                                   # gather at the covered pixels only (few for a sparse map)
+    if len(pm):                                   # the index at the covered pixels only (few for a sparse map)
         pix, hit = _zbuffer(pm, T_world_cam, K, height, width, splat)
-        index = index.index_copy(0, pix, hit)          # index_copy: 1.5-2.5x faster than index_put here
-        vertex = vertex.index_copy(0, pix, pm.points.index_select(0, hit))
-        normal = normal.index_copy(0, pix, pm.normals.index_select(0, hit))
-    index, vertex, normal = index.view(height, width), vertex.view(height, width, 3), normal.view(height, width, 3)
-    return ModelView(index, vertex, normal, index >= 0, T_world_cam.to(dtype), K.to(dtype))
+        index.index_copy_(0, pix, hit)
+    index = index.view(height, width)
+    return ModelView(index, pm.points, pm.normals, index >= 0, T_world_cam.to(dtype), K.to(dtype))
 
 
 def _zbuffer(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
