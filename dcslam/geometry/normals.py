@@ -143,9 +143,25 @@ def _scan_line_normals(vertex: torch.Tensor, valid: torch.Tensor, search: int,
     idx = torch.nonzero(valid.reshape(-1)).squeeze(1)                 # (b, v, u) raster order
     if idx.numel() == 0:
         return torch.zeros_like(vertex), torch.zeros_like(valid)
+    points = vertex.permute(0, 2, 3, 1).reshape(-1, 3)[idx]
+    n, ok = point_normals(points, idx, (B, H, W), search, max_relative_gap)
+    normals = torch.zeros(B * H * W, 3, dtype=vertex.dtype, device=vertex.device).index_put((idx,), n)
+    mask = torch.zeros(B * H * W, dtype=torch.bool, device=vertex.device).index_put((idx,), ok)
+    return normals.view(B, H, W, 3).permute(0, 3, 1, 2), mask.view(B, 1, H, W)
+
+
+def point_normals(points: torch.Tensor, idx: torch.Tensor, shape: tuple[int, int, int], search: int,
+                  max_relative_gap: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`vertex_normals` of the valid pixels alone, given as their points and flat indices: the values at those
+    pixels, bit for bit (the work follows the number of points, never the image size).
+
+    Shape: points (N, 3) camera frame, idx (N,) int64 flat indices into (B, H, W) in increasing (raster) order,
+    shape (B, H, W) -> (normals (N, 3), ok (N,) bool)."""
+    B, H, W = shape
+    if idx.numel() == 0:
+        return points.new_zeros(0, 3), torch.zeros(0, dtype=torch.bool, device=points.device)
     b, rem = torch.div(idx, H * W, rounding_mode="floor"), idx % (H * W)
     v, u = torch.div(rem, W, rounding_mode="floor"), rem % W
-    points = vertex.permute(0, 2, 3, 1).reshape(-1, 3)[idx]
     # Rows: the raster order of idx is already scan-line order. Columns: sorted by (b, u, v); every key is unique,
     # so the order is the same however it is found: for dense depth, by transposing the mask (linear in the image
     # size), for sparse depth by sorting the few valid pixels' keys.
@@ -155,10 +171,8 @@ def _scan_line_normals(vertex: torch.Tensor, valid: torch.Tensor, search: int,
     else:
         rank = torch.empty(B * H * W, dtype=torch.int64, device=idx.device).index_put_(
             (idx,), torch.arange(idx.numel(), device=idx.device))
+        mask = torch.zeros(B * H * W, dtype=torch.bool, device=idx.device).index_fill_(0, idx, True)
         raster = torch.arange(B * H * W, device=idx.device).view(B, H, W).transpose(1, 2)
-        order = rank[raster[valid[:, 0].transpose(1, 2)]]
+        order = rank[raster[mask.view(B, H, W).transpose(1, 2)]]
     ty, ok_y = _tangent(points, order, (b * W + u)[order], v[order], search, max_relative_gap)
-    n, ok = _unit_normals(tx, ty, ok_x & ok_y, points)
-    normals = torch.zeros(B * H * W, 3, dtype=vertex.dtype, device=vertex.device).index_put((idx,), n)
-    mask = torch.zeros(B * H * W, dtype=torch.bool, device=vertex.device).index_put((idx,), ok)
-    return normals.view(B, H, W, 3).permute(0, 3, 1, 2), mask.view(B, 1, H, W)
+    return _unit_normals(tx, ty, ok_x & ok_y, points)

@@ -7,8 +7,8 @@ import torch
 
 from dcslam.constants import MIN_DEPTH_M
 from dcslam.errors import DcslamError
-from dcslam.geometry.camera import backproject, check_depth, check_K
-from dcslam.geometry.normals import vertex_normals
+from dcslam.geometry.camera import backproject, backproject_pixels, check_depth, check_K
+from dcslam.geometry.normals import point_normals, vertex_normals
 
 
 #: Normal search (pixels) for sparse depth: far enough to reach the next LiDAR scan line at 64 beams (a shorter
@@ -112,23 +112,56 @@ def prepare_frame(depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None
     depth = torch.where(in_range, depth, torch.zeros((), dtype=depth.dtype, device=depth.device))
     search = settings.normal_search
     if search <= 0:
-        search = normal_search_for(float(in_range.float().mean()))
-    vertex = backproject(depth, K)
-    normal, ok = vertex_normals(vertex, in_range, search=search, max_relative_gap=settings.max_relative_gap)
+        # the float32 mean of the mask, as an exact count divided once: no float image of it
+        search = normal_search_for(float(torch.tensor(int(in_range.sum()), dtype=torch.float32) / in_range.numel()))
+    pixels = None
+    if search == 1 and H > 1 and W > 1:   # dense: one pass over the pixel grid
+        vertex, normal, ok = _grid_surfels(depth, in_range, K, settings.max_relative_gap)
+    else:
+        vertex, normal, ok, pixels, points = _pixel_surfels(depth, in_range, K, search, settings.max_relative_gap)
     if rgb is not None:
         if rgb.ndim == 3:
             rgb = rgb[None]
         if rgb.shape != (1, 3, H, W):
             raise DcslamError(f"rgb has shape {tuple(rgb.shape)}, expected (1, 3, {H}, {W})")
         rgb = rgb[0].permute(1, 2, 0).to(depth.dtype).contiguous()
-    valid = ok[0, 0]
+    valid = ok
     if weight is not None:
         weight = _check_weight(weight, H, W).to(depth.dtype)
         valid = valid & (weight.detach() > 0)
+    frame = Frame(depth, vertex, normal, valid, rgb, K, weight)
+    if pixels is not None:        # the valid pixels and their points are at hand: valid_points need not search
+        keep = torch.nonzero(valid.reshape(-1).index_select(0, pixels)).squeeze(1)
+        frame.cache["valid-points"] = (pixels.index_select(0, keep), points.index_select(0, keep))
+    return frame
+
+
+def _grid_surfels(depth: torch.Tensor, in_range: torch.Tensor, K: torch.Tensor,
+                  max_relative_gap: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Vertex and normal maps (H, W, 3) and the pixels with a normal (H, W) of dense depth (1, 1, H, W), in range at
+    ``in_range`` (1, 1, H, W): back-projection and the normals of the pixel grid."""
+    vertex = backproject(depth, K)
+    normal, ok = vertex_normals(vertex, in_range, search=1, max_relative_gap=max_relative_gap)
     # (H, W, 3) maps stored point by point: odometry and fusion gather whole points from them, which is an order
-    # of magnitude slower from the channel-first layout backproject gives (a no-op where already so stored)
-    return Frame(depth, vertex[0].permute(1, 2, 0).contiguous(), normal[0].permute(1, 2, 0).contiguous(), valid,
-                 rgb, K, weight)
+    # of magnitude slower from the channel-first layout backproject gives
+    return vertex[0].permute(1, 2, 0).contiguous(), normal[0].permute(1, 2, 0).contiguous(), ok[0, 0]
+
+
+def _pixel_surfels(depth: torch.Tensor, in_range: torch.Tensor, K: torch.Tensor, search: int,
+                   max_relative_gap: float) -> tuple[torch.Tensor, ...]:
+    """As :func:`_grid_surfels` for sparse depth, the work done at the pixels in range only (a few per cent of a
+    LiDAR frame's), with the values backproject and vertex_normals give there, bit for bit; also those pixels
+    (F,) flat indices and their points (F, 3)."""
+    H, W = depth.shape[-2:]
+    pixels = torch.nonzero(in_range.reshape(-1)).squeeze(1)
+    points = backproject_pixels(depth.reshape(-1).index_select(0, pixels), pixels, K, W)
+    n, ok = point_normals(points, pixels, (1, H, W), search, max_relative_gap)
+    # index_copy / index_fill: several times faster than index_put on the CPU
+    vertex = torch.zeros(H * W, 3, dtype=depth.dtype, device=depth.device).index_copy_(0, pixels, points)
+    normal = torch.zeros(H * W, 3, dtype=depth.dtype, device=depth.device).index_copy_(0, pixels, n)
+    valid = torch.zeros(H * W, dtype=torch.bool, device=depth.device).index_fill_(
+        0, pixels.index_select(0, torch.nonzero(ok).squeeze(1)), True)
+    return vertex.view(H, W, 3), normal.view(H, W, 3), valid.view(H, W), pixels, points
 
 
 def _check_weight(weight: torch.Tensor, H: int, W: int) -> torch.Tensor:
