@@ -112,6 +112,7 @@ class PointToPlane:
         self.scale = float(source.detach().norm(dim=1).mean()) if source.shape[0] else 1.0
         self.pairs = None
         self._usable = None if weights is None else weights.detach() > 0   # the weight gate, once per problem
+        self._D: tuple[torch.Tensor, torch.Tensor] | None = None            # _hold's scaling, once per problem
 
     def residuals(self, T: torch.Tensor):
         """(residuals (M,), inlier source index (M,), target points (M, 3), target normals (M, 3)) at pose T."""
@@ -191,8 +192,11 @@ class PointToPlane:
         ``hold_below``, as :meth:`ICPOdometry._conditioning` measures it), so the step leaves the pose at its
         prediction there instead of sliding along a tunnel or an open road (Zhang et al., ICRA 2016: solution
         remapping)."""
-        D = torch.tensor([1, 1, 1, self.scale, self.scale, self.scale], dtype=torch.float64, device=lin.H.device)
-        Hn = lin.H.detach() / (D[:, None] * D[None, :]) / max(lin.weight or lin.count, 1e-12)
+        if self._D is None:         # the scaling depends on the sources alone: made once per problem
+            D = torch.tensor([1, 1, 1, self.scale, self.scale, self.scale], dtype=torch.float64, device=lin.H.device)
+            self._D = D, D[:, None] * D[None, :]
+        D, DD = self._D
+        Hn = lin.H.detach() / DD / max(lin.weight or lin.count, 1e-12)
         values, vectors = torch.linalg.eigh(Hn)
         weak = values < self.hold_below
         if not bool(weak.any()):
