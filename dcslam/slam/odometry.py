@@ -19,7 +19,7 @@ from dcslam.errors import DcslamError
 from dcslam.geometry.motion import relative_motion
 from dcslam.geometry.se3 import rotate, rows_times, transform_points
 from dcslam.slam.association import ProjectiveAssociation
-from dcslam.slam.frame import DENSE_FRACTION, Frame, valid_points
+from dcslam.slam.frame import DENSE_FRACTION, Frame, valid_normals, valid_points
 from dcslam.slam.pointmap import ModelView, voxel_representatives
 from dcslam.slam.robust import Quadratic
 from dcslam.slam.solvers import GaussNewton, Linearization
@@ -72,7 +72,7 @@ class GroundTruthOdometry:
                  scale: float = 1.0) -> OdometryResult:
         if T_gt is None:
             raise DcslamError("ground-truth odometry needs the ground-truth pose of every frame")
-        return OdometryResult(T_gt.to(frame.vertex.dtype))
+        return OdometryResult(T_gt.to(frame.depth.dtype))
 
     def reset(self) -> None:
         """Nothing learnt from past steps."""
@@ -276,7 +276,7 @@ class ICPOdometry:
         """Align ``frame`` to ``model`` from ``T_init`` (4, 4), the prediction; ``T_last`` (4, 4), the previous
         frame's pose, lets the adaptive threshold tell a moving step from a standing one; ``scale``: the scene
         scale (see :class:`dcslam.slam.parts.Odometry`). ``T_gt`` is not used."""
-        T_init = T_init.to(frame.vertex.dtype)
+        T_init = T_init.to(frame.depth.dtype)
         if model is None:
             return OdometryResult(T_init, False, "empty model")
         valid, source, normals, weights = self.sources(frame, scale)
@@ -324,11 +324,11 @@ class ICPOdometry:
         key = ("icp-sources", voxel)
         if key not in frame.cache:
             pixels, source = valid_points(frame)
+            normals = valid_normals(frame)
             valid = pixels.numel()
-            if voxel > 0 and valid >= self.min_inliers:   # gather the kept pixels' normals only
+            if voxel > 0 and valid >= self.min_inliers:
                 keep = voxel_representatives(source, voxel)
-                source, pixels = source.index_select(0, keep), pixels.index_select(0, keep)
-            normals = frame.normal.reshape(-1, 3).index_select(0, pixels)
+                source, pixels, normals = (x.index_select(0, keep) for x in (source, pixels, normals))
             weights = None if frame.weight is None else frame.weight.reshape(-1).index_select(0, pixels)
             frame.cache[key] = (valid, source, normals, weights)
         return frame.cache[key]
