@@ -119,7 +119,7 @@ def valid_points(frame: Frame) -> tuple[torch.Tensor, torch.Tensor]:
     :attr:`Frame.cache`) for both the ICP sources and the surfels."""
     if "valid-points" not in frame.cache:
         pixels = torch.nonzero(frame.valid.reshape(-1)).squeeze(1)
-        frame.cache["valid-points"] = (pixels, frame.vertex.reshape(-1, 3).index_select(0, pixels))
+        frame.cache["valid-points"] = (pixels, _rows(frame, "vertex", pixels))
     return frame.cache["valid-points"]
 
 
@@ -207,14 +207,19 @@ def _colour_image(rgb: torch.Tensor, H: int, W: int, dtype: torch.dtype) -> torc
 
 
 def _grid_surfels(depth: torch.Tensor, in_range: torch.Tensor, K: torch.Tensor,
-                  max_relative_gap: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Vertex and normal maps (H, W, 3) and the pixels with a normal (H, W) of dense depth (1, 1, H, W), in range at
-    ``in_range`` (1, 1, H, W): back-projection and the normals of the pixel grid."""
+                  max_relative_gap: float) -> tuple[Deferred, Deferred, torch.Tensor]:
+    """Vertex and normal maps (H, W, 3), :class:`Deferred`, and the pixels with a normal (H, W) of dense depth
+    (1, 1, H, W), in range at ``in_range`` (1, 1, H, W): back-projection and the normals of the pixel grid."""
     vertex = backproject(depth, K)
     normal, ok = vertex_normals(vertex, in_range, search=1, max_relative_gap=max_relative_gap)
-    # (H, W, 3) maps stored point by point: odometry and fusion gather whole points from them, which is an order
-    # of magnitude slower from the channel-first layout backproject gives
-    return vertex[0].permute(1, 2, 0).contiguous(), normal[0].permute(1, 2, 0).contiguous(), ok[0, 0]
+
+    def image(grid: torch.Tensor) -> Deferred:
+        # made: stored point by point, as odometry and fusion gather whole points; read at pixels: gathered from
+        # each channel, then laid point by point (half the cost of laying out the whole image first)
+        return Deferred(lambda: grid[0].permute(1, 2, 0).contiguous(),
+                        lambda pixels: grid.reshape(3, -1).index_select(1, pixels).T.contiguous())
+
+    return image(vertex), image(normal), ok[0, 0]
 
 
 def _pixel_surfels(depth: torch.Tensor, in_range: torch.Tensor, K: torch.Tensor, search: int,

@@ -119,6 +119,12 @@ def test_a_sparse_frame_is_read_at_its_valid_pixels_only(street):
     assert torch.equal(points, eager.vertex.reshape(-1, 3)[pixels])
     half = replace(frames[0], valid=frames[0].valid & (torch.arange(W) < W // 2))
     assert torch.equal(half.vertex, eager.vertex) and not half.cache
+    dense = prepare_frame(depth, K)                                 # dense: the grid's images, read at pixels
+    pixels, points = valid_points(dense)
+    normals = valid_normals(dense)
+    assert isinstance(dense.__dict__["_vertex"], Deferred) and isinstance(dense.__dict__["_normal"], Deferred)
+    assert torch.equal(points, dense.vertex.reshape(-1, 3)[pixels]) and points.is_contiguous()
+    assert torch.equal(normals, dense.normal.reshape(-1, 3)[pixels]) and normals.is_contiguous()
 
 
 def test_a_replaced_frame_starts_with_an_empty_cache(street):
