@@ -165,6 +165,24 @@ def _zbuffer(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: i
     seen = (px[:, 0] >= -splat) & (px[:, 0] < width + splat) & (px[:, 1] >= -splat) & (px[:, 1] < height + splat)
     seen = torch.nonzero(seen).squeeze(1)
     ids, px, z = ids.index_select(0, seen), px.index_select(0, seen), z.index_select(0, seen)  # ... within reach
+    if ids.numel() == 0:
+        return ids, ids
+    # the window of the image the squares reach (rows r0.., columns c0..): outside it no pixel is covered, and
+    # inside it the same centres compete, so the z-buffer and the filter below work on it alone (a street map
+    # leaves the sky empty)
+    (c0, r0), (c1, r1) = px.amin(0).tolist(), px.amax(0).tolist()
+    c0, r0, c1, r1 = max(0, c0 - splat), max(0, r0 - splat), min(width - 1, c1 + splat), min(height - 1, r1 + splat)
+    pix, hit = _zbuffer_window(ids, px - torch.tensor([c0, r0], device=device), z, r1 - r0 + 1, c1 - c0 + 1, splat)
+    w = c1 - c0 + 1
+    return (torch.div(pix, w, rounding_mode="floor") + r0) * width + pix % w + c0, hit
+
+
+def _zbuffer_window(ids: torch.Tensor, px: torch.Tensor, z: torch.Tensor, height: int, width: int,
+                    splat: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`_zbuffer` in a window of (height, width) pixels holding every pixel the points' squares reach.
+    Shape: ids (N,) the points' indices, px (N, 2) int64 their pixels (u, v) in the window, z (N,) their depths ->
+    (pixels (C,) flat indices into the window, in raster order; points (C,) int64)."""
+    device, dtype = z.device, z.dtype
     # the z-buffer at the points' own pixels, in an image padded by splat: (Hp, Wp)
     Hp, Wp = height + 2 * splat, width + 2 * splat
     centre = (px[:, 1] + splat) * Wp + (px[:, 0] + splat)
