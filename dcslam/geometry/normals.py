@@ -52,11 +52,11 @@ def _tangent(points: torch.Tensor, order: torch.Tensor | None, line: torch.Tenso
     ``order`` puts the points in scan-line order (None: they already are); ``line`` and ``step`` are given in that
     order. Shape: points (N, 3) -> (tangents (N, 3) in the input order, ok (N,) bool)."""
     prv, nxt, prv_steps, nxt_steps = _neighbours(line, step, search)
-    p = points if order is None else points[order]
+    p = points if order is None else points.index_select(0, order)   # index_select: advanced indexing is slower
     z = p[:, 2].detach()
 
     def side(index, steps):
-        q = p[index.clamp_min(0)]
+        q = p.index_select(0, index.clamp_min(0))
         ok = (index >= 0) & ((q[:, 2].detach() - z).abs() <= max_relative_gap * steps.to(z.dtype) * z)
         return q, ok
 
@@ -202,5 +202,6 @@ def point_normals(points: torch.Tensor, idx: torch.Tensor, shape: tuple[int, int
         mask = torch.zeros(B * H * W, dtype=torch.bool, device=idx.device).index_fill_(0, idx, True)
         raster = torch.arange(B * H * W, device=idx.device).view(B, H, W).transpose(1, 2)
         order = rank[raster[mask.view(B, H, W).transpose(1, 2)]]
-    ty, ok_y = _tangent(points, order, (b * W + u)[order], v[order], search, max_relative_gap)
+    ty, ok_y = _tangent(points, order, (b * W + u).index_select(0, order), v.index_select(0, order), search,
+                        max_relative_gap)
     return _unit_normals(tx, ty, ok_x & ok_y, points)

@@ -9,7 +9,7 @@ import torch
 from dcslam.constants import MIN_DEPTH_M
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import backproject, backproject_pixels, check_depth, check_K
-from dcslam.geometry.normals import point_normals, vertex_normals
+from dcslam.geometry.normals import choose, point_normals, vertex_normals
 
 
 #: Normal search (pixels) for sparse depth: far enough to reach the next LiDAR scan line at 64 beams (a shorter
@@ -167,7 +167,7 @@ def prepare_frame(depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None
         raise DcslamError(f"one frame at a time: depth has batch {B}")
     K = check_K(K)[0].to(depth.dtype)
     in_range = (depth >= settings.min_depth) & (depth <= settings.max_depth)
-    depth = torch.where(in_range, depth, torch.zeros((), dtype=depth.dtype, device=depth.device))
+    depth = choose(in_range, depth, torch.zeros((), dtype=depth.dtype, device=depth.device))
     search = settings.normal_search
     if search <= 0:
         # the float32 mean of the mask, as an exact count divided once: no float image of it
