@@ -28,7 +28,12 @@ def choose(condition: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> torch.T
         return torch.where(condition, a, b)
     mask = condition.to(bits).neg_()            # all ones where true, zero where false
     ai, bi = a.view(bits), b.view(bits)
-    return (bi ^ ((ai ^ bi) & mask)).view(a.dtype)
+    # in place where the condition does not widen the result: one new image, as torch.where makes (each new
+    # image costs page faults as well as its writes)
+    x = torch.bitwise_xor(ai, bi)
+    wider = mask.dim() > x.dim() or any(m > n for m, n in zip(mask.shape[::-1], x.shape[::-1]))
+    x = torch.bitwise_and(x, mask) if wider else x.bitwise_and_(mask)
+    return x.bitwise_xor_(bi).view(a.dtype)
 
 
 def _neighbours(line: torch.Tensor, step: torch.Tensor, search: int):
@@ -98,7 +103,7 @@ def _grid_normals(vertex: torch.Tensor, valid: torch.Tensor,
 
     # both sides: fwd - bwd; one side: fwd - p or p - bwd; none: p - p = 0
     (fwd, ok_r), (bwd, ok_l), (down, ok_d), (up, ok_u) = side(0, 1), side(0, -1), side(1, 0), side(-1, 0)
-    n = _cross_channels(fwd - bwd, down - up)
+    n = _cross_channels(fwd.sub_(bwd), down.sub_(up))   # in place: where keeps no value of its own for backward
     norm2 = (n * n).sum(1, keepdim=True)
     ok = valid & (ok_r | ok_l) & (ok_d | ok_u) & (norm2 > 1e-20)
     m = ok.to(dtype)

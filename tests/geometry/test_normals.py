@@ -160,8 +160,9 @@ def test_choose_is_where_bit_for_bit(dtype):
     b = wide[..., 1:-1]                                                # a strided view
     cond = torch.rand(2, 1, 9, 12, generator=g) < 0.5
     bits = {torch.float32: torch.int32, torch.float64: torch.int64}[dtype]
-    for x, y in ((a, b), (b, a), (a, torch.zeros((), dtype=dtype)), (torch.full((), -0.0, dtype=dtype), b)):
-        got, expected = choose(cond, x, y), torch.where(cond, x, y)
+    pairs = ((a, b), (b, a), (a, torch.zeros((), dtype=dtype)), (torch.full((), -0.0, dtype=dtype), b))
+    for c, (x, y) in [(cond, pair) for pair in pairs] + [(cond.expand(2, 3, 9, 12), (a[:, :1], b[:1, :1]))]:
+        got, expected = choose(c, x, y), torch.where(c, x, y)
         assert got.dtype == dtype and got.shape == expected.shape
         assert torch.equal(got.view(bits), expected.view(bits))
     x = a.clone().requires_grad_()
