@@ -13,6 +13,29 @@ import torch
 from dcslam.errors import DcslamError
 
 
+#: the integer type of each floating type's bits, for :func:`choose`
+_BITS = {torch.float32: torch.int32, torch.float64: torch.int64}
+
+
+def choose(condition: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """``torch.where(condition, a, b)`` for tensors of one floating dtype (broadcast as where broadcasts), bit for
+    bit. Without a graph on the CPU it selects the bits by integer masks, ``b ^ ((a ^ b) & mask)``: three vectorised
+    passes, 2.5 times faster than torch.where's kernel on a 1242 x 375 x 3 image (0.9 against 2.3 ms); otherwise,
+    and for other dtypes, torch.where."""
+    bits = _BITS.get(a.dtype)
+    if (bits is None or b.dtype != a.dtype or a.device.type != "cpu" or b.device.type != "cpu"
+            or (torch.is_grad_enabled() and (a.requires_grad or b.requires_grad))):
+        return torch.where(condition, a, b)
+    mask = condition.to(bits).neg_()            # all ones where true, zero where false
+    ai, bi = a.view(bits), b.view(bits)
+    # in place where the condition does not widen the result: one new image, as torch.where makes (each new
+    # image costs page faults as well as its writes)
+    x = torch.bitwise_xor(ai, bi)
+    wider = mask.dim() > x.dim() or any(m > n for m, n in zip(mask.shape[::-1], x.shape[::-1]))
+    x = torch.bitwise_and(x, mask) if wider else x.bitwise_and_(mask)
+    return x.bitwise_xor_(bi).view(a.dtype)
+
+
 def _neighbours(line: torch.Tensor, step: torch.Tensor, search: int):
     """For points in scan-line order (sorted by line, then by step along the line), the previous and next point on
     the same line within ``search`` pixels. Shape: line, step (N,) -> (prev (N,), next (N,), prev_steps (N,),
@@ -34,11 +57,11 @@ def _tangent(points: torch.Tensor, order: torch.Tensor | None, line: torch.Tenso
     ``order`` puts the points in scan-line order (None: they already are); ``line`` and ``step`` are given in that
     order. Shape: points (N, 3) -> (tangents (N, 3) in the input order, ok (N,) bool)."""
     prv, nxt, prv_steps, nxt_steps = _neighbours(line, step, search)
-    p = points if order is None else points[order]
+    p = points if order is None else points.index_select(0, order)   # index_select: advanced indexing is slower
     z = p[:, 2].detach()
 
     def side(index, steps):
-        q = p[index.clamp_min(0)]
+        q = p.index_select(0, index.clamp_min(0))
         ok = (index >= 0) & ((q[:, 2].detach() - z).abs() <= max_relative_gap * steps.to(z.dtype) * z)
         return q, ok
 
@@ -58,13 +81,13 @@ def _grid_normals(vertex: torch.Tensor, valid: torch.Tensor,
     neighbours are views into one zero-padded copy of the vertex map (no sorting, gathering or shifted copies), and
     the values per valid pixel are the general path's (:func:`_tangent`, :func:`_unit_normals`), bit for bit.
 
-    Choices between finite values are made by multiplying with 0/1 masks (``x * 1 + y * 0`` is ``x`` exactly), which
-    is several times faster than ``torch.where`` on the CPU; only the input is masked with ``torch.where``, as its
-    pixels outside ``valid`` may hold anything. Shape: vertex (B, 3, H, W), valid (B, 1, H, W) ->
+    A neighbour or the pixel itself is chosen as :func:`_tangent` chooses, ``torch.where``'s values (by
+    :func:`choose`: four times faster than blending with 0/1 masks); the normalisation and the turn to the camera
+    multiply by 0/1 masks (``x * 1`` is ``x`` exactly). Shape: vertex (B, 3, H, W), valid (B, 1, H, W) ->
     (normals (B, 3, H, W), valid (B, 1, H, W))."""
     B, _, H, W = vertex.shape
     dtype = vertex.dtype
-    P = torch.where(valid, vertex, torch.zeros((), dtype=dtype, device=vertex.device))
+    P = choose(valid, vertex, torch.zeros((), dtype=dtype, device=vertex.device))
     padded = P.new_zeros(B, 3, H + 2, W + 2)
     padded[:, :, 1:-1, 1:-1] = P
     has = valid.new_zeros(B, 1, H + 2, W + 2)
@@ -76,18 +99,28 @@ def _grid_normals(vertex: torch.Tensor, valid: torch.Tensor,
         """The neighbour at (dy, dx) where it is usable, else the pixel itself: ((B, 3, H, W), ok (B, 1, H, W))."""
         q = padded[:, :, 1 + dy:1 + dy + H, 1 + dx:1 + dx + W]
         ok = has[:, :, 1 + dy:1 + dy + H, 1 + dx:1 + dx + W] & ((q[:, 2:3].detach() - z).abs() <= limit)
-        m = ok.to(dtype)
-        return q * m + P * (1 - m), ok
+        return choose(ok, q, P), ok
 
     # both sides: fwd - bwd; one side: fwd - p or p - bwd; none: p - p = 0
     (fwd, ok_r), (bwd, ok_l), (down, ok_d), (up, ok_u) = side(0, 1), side(0, -1), side(1, 0), side(-1, 0)
-    n = torch.cross(fwd - bwd, down - up, dim=1)   # torch.cross, not products by hand: its kernel rounds once (fma)
+    n = _cross_channels(fwd.sub_(bwd), down.sub_(up))   # in place: where keeps no value of its own for backward
     norm2 = (n * n).sum(1, keepdim=True)
     ok = valid & (ok_r | ok_l) & (ok_d | ok_u) & (norm2 > 1e-20)
     m = ok.to(dtype)
     n = n / torch.sqrt(norm2 * m + (1 - m)) * m
     facing = (n * P).sum(1, keepdim=True) > 0
     return n * (1 - 2 * facing.to(dtype)), ok
+
+
+def _cross_channels(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """torch.cross over the channels of (B, 3, H, W) images, each image taken as (3, H W): its kernel, the same
+    values (it rounds once, by fma: products by hand would not), three times faster here than across the channel
+    dimension of the 4-d images (3.4 against 9.9 ms at 1242 x 375)."""
+    B, _, H, W = a.shape
+    if B == 1:
+        return torch.cross(a.reshape(3, H * W), b.reshape(3, H * W), dim=0).view(1, 3, H, W)
+    return torch.stack([torch.cross(x.reshape(3, H * W), y.reshape(3, H * W), dim=0) for x, y in zip(a, b)]).view(
+        B, 3, H, W)
 
 
 def _unit_normals(tx: torch.Tensor, ty: torch.Tensor, ok: torch.Tensor,
@@ -143,9 +176,25 @@ def _scan_line_normals(vertex: torch.Tensor, valid: torch.Tensor, search: int,
     idx = torch.nonzero(valid.reshape(-1)).squeeze(1)                 # (b, v, u) raster order
     if idx.numel() == 0:
         return torch.zeros_like(vertex), torch.zeros_like(valid)
+    points = vertex.permute(0, 2, 3, 1).reshape(-1, 3)[idx]
+    n, ok = point_normals(points, idx, (B, H, W), search, max_relative_gap)
+    normals = torch.zeros(B * H * W, 3, dtype=vertex.dtype, device=vertex.device).index_put((idx,), n)
+    mask = torch.zeros(B * H * W, dtype=torch.bool, device=vertex.device).index_put((idx,), ok)
+    return normals.view(B, H, W, 3).permute(0, 3, 1, 2), mask.view(B, 1, H, W)
+
+
+def point_normals(points: torch.Tensor, idx: torch.Tensor, shape: tuple[int, int, int], search: int,
+                  max_relative_gap: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`vertex_normals` of the valid pixels alone, given as their points and flat indices: the values at those
+    pixels, bit for bit (the work follows the number of points, never the image size).
+
+    Shape: points (N, 3) camera frame, idx (N,) int64 flat indices into (B, H, W) in increasing (raster) order,
+    shape (B, H, W) -> (normals (N, 3), ok (N,) bool)."""
+    B, H, W = shape
+    if idx.numel() == 0:
+        return points.new_zeros(0, 3), torch.zeros(0, dtype=torch.bool, device=points.device)
     b, rem = torch.div(idx, H * W, rounding_mode="floor"), idx % (H * W)
     v, u = torch.div(rem, W, rounding_mode="floor"), rem % W
-    points = vertex.permute(0, 2, 3, 1).reshape(-1, 3)[idx]
     # Rows: the raster order of idx is already scan-line order. Columns: sorted by (b, u, v); every key is unique,
     # so the order is the same however it is found: for dense depth, by transposing the mask (linear in the image
     # size), for sparse depth by sorting the few valid pixels' keys.
@@ -155,10 +204,9 @@ def _scan_line_normals(vertex: torch.Tensor, valid: torch.Tensor, search: int,
     else:
         rank = torch.empty(B * H * W, dtype=torch.int64, device=idx.device).index_put_(
             (idx,), torch.arange(idx.numel(), device=idx.device))
+        mask = torch.zeros(B * H * W, dtype=torch.bool, device=idx.device).index_fill_(0, idx, True)
         raster = torch.arange(B * H * W, device=idx.device).view(B, H, W).transpose(1, 2)
-        order = rank[raster[valid[:, 0].transpose(1, 2)]]
-    ty, ok_y = _tangent(points, order, (b * W + u)[order], v[order], search, max_relative_gap)
-    n, ok = _unit_normals(tx, ty, ok_x & ok_y, points)
-    normals = torch.zeros(B * H * W, 3, dtype=vertex.dtype, device=vertex.device).index_put((idx,), n)
-    mask = torch.zeros(B * H * W, dtype=torch.bool, device=vertex.device).index_put((idx,), ok)
-    return normals.view(B, H, W, 3).permute(0, 3, 1, 2), mask.view(B, 1, H, W)
+        order = rank[raster[mask.view(B, H, W).transpose(1, 2)]]
+    ty, ok_y = _tangent(points, order, (b * W + u).index_select(0, order), v.index_select(0, order), search,
+                        max_relative_gap)
+    return _unit_normals(tx, ty, ok_x & ok_y, points)

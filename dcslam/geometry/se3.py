@@ -30,11 +30,21 @@ def skew(v: torch.Tensor) -> torch.Tensor:
     _check(v, (3,), "v")
     x, y, z = v.unbind(-1)
     o = torch.zeros_like(x)
-    return torch.stack([torch.stack([o, -z, y], -1), torch.stack([z, o, -x], -1), torch.stack([-y, x, o], -1)], -2)
+    return torch.stack([o, -z, y, z, o, -x, -y, x, o], -1).unflatten(-1, (3, 3))   # one stack, not four
 
 
 def _coefficients(theta2: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """A = sin t / t, B = (1 - cos t) / t^2, C = (t - sin t) / t^3, with Taylor series near t = 0."""
+    if theta2.ndim == 0 and theta2.device.type == "cpu" and not theta2.requires_grad:
+        # one angle (a solver's step, dozens a frame): only the branch it takes, by the same operations as below,
+        # so the same values in a third of the calls (tensors of one element cost their calls, not their sums);
+        # with a graph, the one below (its gradients summed in its own order)
+        if bool(theta2 < _SMALL):
+            return (1 - theta2 / 6 + theta2 ** 2 / 120, 0.5 - theta2 / 24 + theta2 ** 2 / 720,
+                    1.0 / 6 - theta2 / 120 + theta2 ** 2 / 5040)
+        t = torch.sqrt(theta2)
+        sin = torch.sin(t)
+        return sin / t, (1 - torch.cos(t)) / theta2, (t - sin) / (theta2 * t)
     small = theta2 < _SMALL
     t2 = torch.where(small, torch.ones_like(theta2), theta2)
     t = torch.sqrt(t2)

@@ -8,22 +8,20 @@ from __future__ import annotations
 
 import torch
 
-from dcslam.geometry.camera import project
-from dcslam.geometry.se3 import inverse, rotate, transform_points
+from dcslam.geometry.se3 import inverse, rotate, rows_times, transform_points
 from dcslam.slam.frame import Frame
 from dcslam.slam.pointmap import ModelView
 
 
 def view_from_frame(frame: Frame, T_world_cam: torch.Tensor) -> ModelView:
-    """A frame's vertex and normal maps as an ICP target seen from ``T_world_cam`` (frame-to-frame ICP)."""
+    """A frame's vertex and normal maps as an ICP target seen from ``T_world_cam`` (frame-to-frame ICP): its points
+    are the frame's pixels, each pixel's index its own (-1 where invalid)."""
     T = T_world_cam.to(frame.vertex.dtype)
     H, W = frame.shape
     flat = frame.valid.reshape(-1)
     index = torch.where(flat, torch.arange(H * W, device=flat.device), torch.full_like(flat, -1, dtype=torch.int64))
-    vertex = torch.where(frame.valid[..., None], transform_points(T, frame.vertex.reshape(-1, 3)).reshape(H, W, 3),
-                         torch.zeros((), dtype=T.dtype, device=T.device))
-    normal = rotate(T, frame.normal.reshape(-1, 3)).reshape(H, W, 3)
-    return ModelView(index.view(H, W), vertex, normal, frame.valid, T, frame.K)
+    points = transform_points(T, frame.vertex.reshape(-1, 3))
+    return ModelView(index.view(H, W), points, rotate(T, frame.normal.reshape(-1, 3)), frame.valid, T, frame.K)
 
 
 class ProjectiveAssociation:
@@ -38,23 +36,34 @@ class ProjectiveAssociation:
             self.target = target
             self.T_ref_world = inverse(target.T_world_cam)
             self.height, self.width = target.valid.shape
-            self.valid = target.valid.reshape(-1)
-            # point and normal side by side: one gather per iteration fetches both
-            self.table = torch.cat([target.vertex.reshape(-1, 3), target.normal.reshape(-1, 3)], 1)
+            self.index = target.index.reshape(-1)
+            # point and normal side by side: one gather per iteration fetches both (the target's points, not an
+            # image of them: a map has a few times fewer points than the image has pixels)
+            self.table = torch.cat([target.points, target.normals], 1)
+            # what transform_points and project take from the pose and K on every call, taken once: the same
+            # products in the same order (an ICP iteration costs its calls more than its arithmetic). rows_times
+            # makes the rotation contiguous on the CPU, where it is so made here once; elsewhere it stays the view
+            R_T = self.T_ref_world[:3, :3].transpose(-1, -2)
+            self.R_T, self.t = (R_T.contiguous() if R_T.device.type == "cpu" else R_T), self.T_ref_world[:3, 3]
+            # K's entries as numbers: a number meets a tensor in the tensor's dtype, as K.to(points' dtype) does
+            self.fx, self.fy, self.cx, self.cy = (float(target.K[i, j]) for i, j in ((0, 0), (1, 1), (0, 2), (1, 2)))
+            self.few_pixels = self.height * self.width <= 2 ** 24     # v * width + u exact in float32
 
         def __call__(self, points_world: torch.Tensor):
             """points_world (F, 3) -> (source index (M,), target points (M, 3), target normals (M, 3)); the targets
-            are views into one (M, 6) tensor."""
-            uv, z = project(transform_points(self.T_ref_world, points_world.detach()), self.target.K)
-            px = torch.round(uv)
-            inside = (z > 0) & (px[:, 0] >= 0) & (px[:, 0] <= self.width - 1) & (px[:, 1] >= 0) & \
-                     (px[:, 1] <= self.height - 1)
-            # every point's pixel (0 outside the image), then one nonzero over inside & valid (gathers with
-            # index_select: several times faster than boolean masks and advanced indexing on the CPU)
-            pix = torch.where(inside[:, None], px, torch.zeros((), dtype=px.dtype, device=px.device)).to(torch.int64)
-            lin = pix[:, 1] * self.width + pix[:, 0]
-            src = torch.nonzero(inside & self.valid.index_select(0, lin)).squeeze(1)
-            pairs = self.table.index_select(0, lin.index_select(0, src))
+            are views into one (M, 6) tensor. The pixels are :func:`~dcslam.geometry.camera.project`'s of
+            ``transform_points(T_ref_world, points_world)``, rounded."""
+            x, y, z = (rows_times(points_world.detach(), self.R_T) + self.t).unbind(1)
+            z_safe = torch.where(z.abs() > 1e-9, z, 1e-9)
+            u, v = torch.round(self.fx * x / z_safe + self.cx), torch.round(self.fy * y / z_safe + self.cy)
+            inside = (z > 0) & (u >= 0) & (u <= self.width - 1) & (v >= 0) & (v <= self.height - 1)
+            # every point's pixel (0 outside the image) and its target's index, then one nonzero over inside & a
+            # target (gathers with index_select: several times faster than boolean masks and advanced indexing)
+            exact = v.dtype == torch.float64 or (v.dtype == torch.float32 and self.few_pixels)
+            lin = v * self.width + u if exact else v.double() * self.width + u.double()
+            target = self.index.index_select(0, torch.where(inside, lin, 0).to(torch.int64))
+            src = torch.nonzero(inside & (target >= 0)).squeeze(1)
+            pairs = self.table.index_select(0, target.index_select(0, src))
             return src, pairs[:, :3], pairs[:, 3:]
 
 
@@ -72,9 +81,10 @@ class NearestNeighbourAssociation:
         def __init__(self, target: ModelView, workers: int):
             from scipy.spatial import cKDTree
 
-            flat = target.valid.reshape(-1)
-            self.points = target.vertex.reshape(-1, 3)[flat]
-            self.normals = target.normal.reshape(-1, 3)[flat]
+            index = target.index.reshape(-1)
+            index = index.index_select(0, torch.nonzero(index >= 0).squeeze(1))
+            self.points = target.points.index_select(0, index)
+            self.normals = target.normals.index_select(0, index)
             self.workers = workers
             self.tree = cKDTree(self.points.detach().cpu().double().numpy()) if len(self.points) else None
 

@@ -36,7 +36,7 @@ class ICPSLAM(MapperBase):
     def integrate(self, frame: Frame, T_world_cam: torch.Tensor, scale: float = 1.0) -> PointMap:
         """Add one frame seen from ``T_world_cam`` (4, 4) at the voxel size ``voxel_size * scale`` (``scale``: the
         scene scale, see :class:`dcslam.slam.parts.Mapper`); returns the new map."""
-        dtype, device = frame.vertex.dtype, frame.vertex.device
+        dtype, device = frame.depth.dtype, frame.depth.device
         pm = self.map if self.map is not None else PointMap.empty(dtype, device)
         pixels, p_w, n_w, colors, radius, _ = frame_surfels(frame, T_world_cam)
         voxel = self.voxel_size * scale

@@ -19,7 +19,7 @@ from dcslam.errors import DcslamError
 from dcslam.geometry.motion import relative_motion
 from dcslam.geometry.se3 import rotate, rows_times, transform_points
 from dcslam.slam.association import ProjectiveAssociation
-from dcslam.slam.frame import DENSE_FRACTION, Frame, valid_points
+from dcslam.slam.frame import DENSE_FRACTION, Frame, valid_normals, valid_points
 from dcslam.slam.pointmap import ModelView, voxel_representatives
 from dcslam.slam.robust import Quadratic
 from dcslam.slam.solvers import GaussNewton, Linearization
@@ -72,7 +72,7 @@ class GroundTruthOdometry:
                  scale: float = 1.0) -> OdometryResult:
         if T_gt is None:
             raise DcslamError("ground-truth odometry needs the ground-truth pose of every frame")
-        return OdometryResult(T_gt.to(frame.vertex.dtype))
+        return OdometryResult(T_gt.to(frame.depth.dtype))
 
     def reset(self) -> None:
         """Nothing learnt from past steps."""
@@ -112,6 +112,7 @@ class PointToPlane:
         self.scale = float(source.detach().norm(dim=1).mean()) if source.shape[0] else 1.0
         self.pairs = None
         self._usable = None if weights is None else weights.detach() > 0   # the weight gate, once per problem
+        self._D: tuple[torch.Tensor, torch.Tensor] | None = None            # _hold's scaling, once per problem
 
     def residuals(self, T: torch.Tensor):
         """(residuals (M,), inlier source index (M,), target points (M, 3), target normals (M, 3)) at pose T."""
@@ -191,8 +192,11 @@ class PointToPlane:
         ``hold_below``, as :meth:`ICPOdometry._conditioning` measures it), so the step leaves the pose at its
         prediction there instead of sliding along a tunnel or an open road (Zhang et al., ICRA 2016: solution
         remapping)."""
-        D = torch.tensor([1, 1, 1, self.scale, self.scale, self.scale], dtype=torch.float64, device=lin.H.device)
-        Hn = lin.H.detach() / (D[:, None] * D[None, :]) / max(lin.weight or lin.count, 1e-12)
+        if self._D is None:         # the scaling depends on the sources alone: made once per problem
+            D = torch.tensor([1, 1, 1, self.scale, self.scale, self.scale], dtype=torch.float64, device=lin.H.device)
+            self._D = D, D[:, None] * D[None, :]
+        D, DD = self._D
+        Hn = lin.H.detach() / DD / max(lin.weight or lin.count, 1e-12)
         values, vectors = torch.linalg.eigh(Hn)
         weak = values < self.hold_below
         if not bool(weak.any()):
@@ -272,7 +276,7 @@ class ICPOdometry:
         """Align ``frame`` to ``model`` from ``T_init`` (4, 4), the prediction; ``T_last`` (4, 4), the previous
         frame's pose, lets the adaptive threshold tell a moving step from a standing one; ``scale``: the scene
         scale (see :class:`dcslam.slam.parts.Odometry`). ``T_gt`` is not used."""
-        T_init = T_init.to(frame.vertex.dtype)
+        T_init = T_init.to(frame.depth.dtype)
         if model is None:
             return OdometryResult(T_init, False, "empty model")
         valid, source, normals, weights = self.sources(frame, scale)
@@ -320,11 +324,11 @@ class ICPOdometry:
         key = ("icp-sources", voxel)
         if key not in frame.cache:
             pixels, source = valid_points(frame)
+            normals = valid_normals(frame)
             valid = pixels.numel()
-            if voxel > 0 and valid >= self.min_inliers:   # gather the kept pixels' normals only
+            if voxel > 0 and valid >= self.min_inliers:
                 keep = voxel_representatives(source, voxel)
-                source, pixels = source.index_select(0, keep), pixels.index_select(0, keep)
-            normals = frame.normal.reshape(-1, 3).index_select(0, pixels)
+                source, pixels, normals = (x.index_select(0, keep) for x in (source, pixels, normals))
             weights = None if frame.weight is None else frame.weight.reshape(-1).index_select(0, pixels)
             frame.cache[key] = (valid, source, normals, weights)
         return frame.cache[key]

@@ -217,7 +217,7 @@ class SLAM:
         measurements while the map fuses ``frame``; the report's sources and inliers are then its points. ``frame``
         alone fixes the scene scale and is fused. None: ``frame`` serves both."""
         start = time.perf_counter() if start is None else start
-        T_init = self._prediction(frame.vertex.dtype, frame.vertex.device, T_gt)
+        T_init = self._prediction(frame.depth.dtype, frame.depth.device, T_gt)
         index = len(self.poses)
         if index == 0 and T_gt is not None:
             self._T_gt0 = T_gt.detach()

@@ -96,16 +96,37 @@ def voxel_representatives(points: torch.Tensor, voxel_size: float) -> torch.Tens
 class ModelView:
     """A point map rendered into a camera: per pixel the map point nearest to the camera.
 
-    Shape: index (H, W) int64 (-1 = empty), vertex (H, W, 3) and normal (H, W, 3) in the world frame,
-    valid (H, W) bool; T_world_cam (4, 4) and K (3, 3) of the rendering camera.
+    Shape: index (H, W) int64 into ``points`` and ``normals`` (-1 = empty); points (Q, 3) and normals (Q, 3) in the
+    world frame (a map's points, or a frame's pixels); valid (H, W) bool (index >= 0); T_world_cam (4, 4) and
+    K (3, 3) of the rendering camera. :attr:`vertex` and :attr:`normal` are the (H, W, 3) images, made on demand:
+    ICP gathers its targets through ``index`` and never needs them (making them cost a SLAM step about a tenth of
+    its time).
     """
 
     index: torch.Tensor
-    vertex: torch.Tensor
-    normal: torch.Tensor
+    points: torch.Tensor
+    normals: torch.Tensor
     valid: torch.Tensor
     T_world_cam: torch.Tensor
     K: torch.Tensor
+
+    def _image(self, values: torch.Tensor) -> torch.Tensor:
+        """(H, W, 3): ``values`` at each pixel's index, zero where empty."""
+        H, W = self.index.shape
+        flat = self.index.reshape(-1)
+        pix = torch.nonzero(flat >= 0).squeeze(1)
+        image = torch.zeros(H * W, 3, dtype=values.dtype, device=values.device)
+        return image.index_copy(0, pix, values.index_select(0, flat.index_select(0, pix))).view(H, W, 3)
+
+    @property
+    def vertex(self) -> torch.Tensor:
+        """The point at each pixel, (H, W, 3) world frame (zero where empty)."""
+        return self._image(self.points)
+
+    @property
+    def normal(self) -> torch.Tensor:
+        """The normal at each pixel, (H, W, 3) world frame (zero where empty)."""
+        return self._image(self.normals)
 
 
 def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
@@ -118,22 +139,18 @@ def render(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int
     in from outside) and a (2 splat + 1)^2 minimum filter in image space: the map's size costs one scatter, not
     one per pixel of the square.
 
-    Shape: T_world_cam (4, 4), K (3, 3) -> :class:`ModelView` of (H, W).
+    Shape: T_world_cam (4, 4), K (3, 3) -> :class:`ModelView` of (H, W) whose points are the map's.
     """
     if T_world_cam.shape != (4, 4):
         raise DcslamError(f"T_world_cam has shape {tuple(T_world_cam.shape)}, expected (4, 4)")
     K = check_K(K)[0]
     device, dtype = pm.points.device, pm.points.dtype
     index = torch.full((height * width,), -1, dtype=torch.int64, device=device)
-    vertex = torch.zeros(height * width, 3, dtype=dtype, device=device)
-    normal = torch.zeros(height * width, 3, dtype=dtype, device=device)
-    if len(pm):                                   # gather at the covered pixels only (few for a sparse map)
+    if len(pm):                                   # the index at the covered pixels only (few for a sparse map)
         pix, hit = _zbuffer(pm, T_world_cam, K, height, width, splat)
-        index = index.index_copy(0, pix, hit)          # index_copy: 1.5-2.5x faster than index_put here
-        vertex = vertex.index_copy(0, pix, pm.points.index_select(0, hit))
-        normal = normal.index_copy(0, pix, pm.normals.index_select(0, hit))
-    index, vertex, normal = index.view(height, width), vertex.view(height, width, 3), normal.view(height, width, 3)
-    return ModelView(index, vertex, normal, index >= 0, T_world_cam.to(dtype), K.to(dtype))
+        index.index_copy_(0, pix, hit)
+    index = index.view(height, width)
+    return ModelView(index, pm.points, pm.normals, index >= 0, T_world_cam.to(dtype), K.to(dtype))
 
 
 def _zbuffer(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
@@ -148,6 +165,24 @@ def _zbuffer(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: i
     seen = (px[:, 0] >= -splat) & (px[:, 0] < width + splat) & (px[:, 1] >= -splat) & (px[:, 1] < height + splat)
     seen = torch.nonzero(seen).squeeze(1)
     ids, px, z = ids.index_select(0, seen), px.index_select(0, seen), z.index_select(0, seen)  # ... within reach
+    if ids.numel() == 0:
+        return ids, ids
+    # the window of the image the squares reach (rows r0.., columns c0..): outside it no pixel is covered, and
+    # inside it the same centres compete, so the z-buffer and the filter below work on it alone (a street map
+    # leaves the sky empty)
+    (c0, r0), (c1, r1) = px.amin(0).tolist(), px.amax(0).tolist()
+    c0, r0, c1, r1 = max(0, c0 - splat), max(0, r0 - splat), min(width - 1, c1 + splat), min(height - 1, r1 + splat)
+    pix, hit = _zbuffer_window(ids, px - torch.tensor([c0, r0], device=device), z, r1 - r0 + 1, c1 - c0 + 1, splat)
+    w = c1 - c0 + 1
+    return (torch.div(pix, w, rounding_mode="floor") + r0) * width + pix % w + c0, hit
+
+
+def _zbuffer_window(ids: torch.Tensor, px: torch.Tensor, z: torch.Tensor, height: int, width: int,
+                    splat: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`_zbuffer` in a window of (height, width) pixels holding every pixel the points' squares reach.
+    Shape: ids (N,) the points' indices, px (N, 2) int64 their pixels (u, v) in the window, z (N,) their depths ->
+    (pixels (C,) flat indices into the window, in raster order; points (C,) int64)."""
+    device, dtype = z.device, z.dtype
     # the z-buffer at the points' own pixels, in an image padded by splat: (Hp, Wp)
     Hp, Wp = height + 2 * splat, width + 2 * splat
     centre = (px[:, 1] + splat) * Wp + (px[:, 0] + splat)
@@ -163,13 +198,14 @@ def _zbuffer(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: i
     small = torch.uint8 if side < 256 else torch.int64     # offsets' indices: a quarter of the memory traffic
 
     def pass_(shifted: list[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
-        """(minimum, the largest k with shifted[k] at the minimum) of same-shape images."""
-        low = shifted[0]
-        for zk in shifted[1:]:
-            low = torch.minimum(low, zk)
+        """(minimum, the largest k with shifted[k] at the minimum) of same-shape images, in place after the first
+        image of each (every new image costs page faults as well as its writes)."""
+        low = torch.minimum(shifted[0], shifted[1]) if side > 1 else shifted[0].clone()
+        for zk in shifted[2:]:
+            torch.minimum(low, zk, out=low)
         k = torch.zeros(low.shape, dtype=small, device=device)
-        for j, zk in enumerate(shifted[1:], 1):
-            k = torch.maximum(k, (zk == low).to(small) * j)
+        for j, zk in enumerate(shifted[1:], 1):      # (masked_fill_ with the comparison: 2x slower on the CPU)
+            torch.maximum(k, (zk == low).to(small) * j, out=k)
         return low, k
 
     # k = offset + splat; the centre of pixel (v, u) through offset k is (v - ky + splat, u - kx + splat) in the

@@ -6,6 +6,7 @@ The 6 x 6 systems are solved in float64 whatever the input dtype.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -64,10 +65,11 @@ class GaussNewton:
             if lin.count < 6:
                 return SolveResult(T, k, lin)
             delta = _solve(lin.step_matrix, -lin.g)
-            if not bool(torch.isfinite(delta).all()):
+            step = float(delta.detach().abs().max())    # NaN or inf where delta is not finite: one test for both
+            if not math.isfinite(step):
                 return SolveResult(T, k, lin)
             T = _retract(T, delta)
-            if float(delta.detach().abs().max()) < self.tolerance:
+            if step < self.tolerance:
                 return SolveResult(T, k + 1, lin)
         return SolveResult(T, iterations, lin)
 

@@ -145,3 +145,26 @@ class TestSparseScanLines:
             return vertex_normals(backproject(d, K), mask, search=6)[0]
 
         assert torch.autograd.gradcheck(normals, (depth,), eps=1e-7, atol=1e-6)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_choose_is_where_bit_for_bit(dtype):
+    """choose selects torch.where's bits (signed zeros, infinities and NaNs included) under broadcasting, from strided
+    views, with a graph (torch.where itself, gradients included) and without one (integer masks)."""
+    from dcslam.geometry.normals import choose
+
+    g = torch.Generator().manual_seed(5)
+    a = torch.randn(2, 3, 9, 12, generator=g, dtype=dtype)
+    a[0, 0, 0, :4] = torch.tensor([-0.0, float("inf"), float("nan"), -float("inf")], dtype=dtype)
+    wide = torch.randn(2, 3, 9, 14, generator=g, dtype=dtype)
+    b = wide[..., 1:-1]                                                # a strided view
+    cond = torch.rand(2, 1, 9, 12, generator=g) < 0.5
+    bits = {torch.float32: torch.int32, torch.float64: torch.int64}[dtype]
+    pairs = ((a, b), (b, a), (a, torch.zeros((), dtype=dtype)), (torch.full((), -0.0, dtype=dtype), b))
+    for c, (x, y) in [(cond, pair) for pair in pairs] + [(cond.expand(2, 3, 9, 12), (a[:, :1], b[:1, :1]))]:
+        got, expected = choose(c, x, y), torch.where(c, x, y)
+        assert got.dtype == dtype and got.shape == expected.shape
+        assert torch.equal(got.view(bits), expected.view(bits))
+    x = a.clone().requires_grad_()
+    choose(cond, x, b).sum().backward()
+    assert torch.equal(x.grad, cond.expand_as(x).to(dtype))

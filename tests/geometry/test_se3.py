@@ -139,3 +139,16 @@ class TestSE3:
             inverse(torch.zeros(3, 3))
         with pytest.raises(DcslamError, match="torch.Tensor"):
             se3_log([[1.0]])
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_one_angle_takes_one_branch_with_the_same_values(dtype):
+    """The coefficients of one angle (a solver's step) come from the branch it takes alone: the values of the
+    batched form, which computes both and selects, bit for bit, on both sides of the Taylor switch."""
+    from dcslam.geometry.se3 import _SMALL, _coefficients
+
+    theta2 = torch.tensor([0.0, 1e-12, _SMALL / 2, _SMALL, 2 * _SMALL, 1e-6, 0.3, 2.0, 9.0], dtype=dtype)
+    batched = _coefficients(theta2)
+    for k, value in enumerate(theta2):
+        for one, many in zip(_coefficients(value), batched):
+            assert one.shape == () and torch.equal(one, many[k]), (float(value), float(one), float(many[k]))

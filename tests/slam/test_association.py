@@ -59,3 +59,26 @@ def test_empty_target_gives_no_pairs(sparse_pair, association):
     empty = view_from_frame(prepare_frame(torch.zeros(1, 1, H, W), f0.K), T[0])
     src, _, _ = association.prepare(empty)(f0.vertex[f0.valid])
     assert src.numel() == 0
+
+
+def test_projective_pairs_are_those_of_project(sparse_pair):
+    """The association projects with the pose and K taken once per target: each source point gets the target of the
+    pixel project() rounds it to (inside the image, in front of the camera), the same pairs bit for bit, points
+    behind the camera and outside the image unpaired."""
+    from dcslam.geometry.camera import project
+    from dcslam.geometry.se3 import inverse, transform_points
+
+    (f0, f1), T = sparse_pair
+    target = view_from_frame(f0, T[0])
+    g = torch.Generator().manual_seed(3)
+    points = transform_points(T[1], f1.vertex[f1.valid])
+    points = torch.cat([points, points[:50] + torch.randn(50, 3, generator=g) * 5])          # some outside
+    src, q, n = ProjectiveAssociation().prepare(target)(points)
+    uv, z = project(transform_points(inverse(target.T_world_cam), points), target.K)
+    px = torch.round(uv)
+    inside = (z > 0) & (px[:, 0] >= 0) & (px[:, 0] <= W - 1) & (px[:, 1] >= 0) & (px[:, 1] <= H - 1)
+    index = target.index.reshape(-1)
+    lin = torch.where(inside, px[:, 1] * W + px[:, 0], 0).long()
+    expected = torch.nonzero(inside & (index[lin] >= 0)).squeeze(1)
+    assert torch.equal(src, expected) and 0 < src.numel() < points.shape[0]
+    assert torch.equal(q, target.points[index[lin[src]]]) and torch.equal(n, target.normals[index[lin[src]]])

@@ -76,6 +76,14 @@ def test_render_is_one_zbuffer_pass_and_a_minimum_filter():
             assert view.index.tolist() == _render_by_definition(p, K.to(dtype), 8, 12, splat)
             hit = view.index.clamp_min(0)
             assert torch.equal(view.vertex, torch.where(view.valid[..., None], p[hit], torch.zeros((), dtype=dtype)))
+    for splat in (0, 1, 2):                      # points in one corner, and at the edges: a window of the image
+        for corner in ([1.5, 1.2], [-2.2, -1.5], [3.0, -1.0]):
+            p = (torch.rand(25, 3, generator=g, dtype=torch.float64) * torch.tensor([1.2, 0.8, 1.0])
+                 + torch.tensor([*corner, 4.0])).float()
+            p[:, 2] = torch.round(p[:, 2] * 4) / 4
+            view = render(_cloud(p.tolist()), torch.eye(4), K, 8, 12, splat=splat)
+            assert view.index.tolist() == _render_by_definition(p, K, 8, 12, splat)
+            assert 0 < int(view.valid.sum()) < 8 * 12
     empty = render(PointMap.empty(), torch.eye(4), K, 8, 12, splat=1)
     assert not bool(empty.valid.any()) and empty.vertex.shape == (8, 12, 3)
 
