@@ -247,12 +247,12 @@ class SLAM:
         return report
 
     def _road(self, frame: Frame) -> RoadPlane | None:
-        """The frame's road plane, fitted once (kept in :attr:`Frame.cache`); None when the health rules do not
-        ask for it (``max_road_drift_m`` 0) or the frame saw no road."""
+        """The frame's road plane, fitted once to its valid pixels' points (kept in :attr:`Frame.cache`); None when
+        the health rules do not ask for it (``max_road_drift_m`` 0) or the frame saw no road."""
         if self.health.max_road_drift_m <= 0:
             return None
         if "road" not in frame.cache:
-            frame.cache["road"] = frame_road(frame.vertex)
+            frame.cache["road"] = frame_road(valid_points(frame)[1])  # the valid pixels' points: no full image
         return frame.cache["road"]
 
     def run(self, depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None = None,

@@ -1,13 +1,13 @@
 """The road as a depth-only witness of a SLAM run's vertical drift.
 
-Each frame's road plane is fitted to the points of the depth the run uses (the frame's vertex map, whatever the
-input: measured, completed or exact) that lie more than ``BELOW_M`` below the camera, ``NEAR_M``-``FAR_M`` ahead and
-within ``SIDE_M`` across: RANSAC with a fixed seed, ``TRIES`` hypotheses on at most ``MAX_POINTS`` of them, then least
-squares on the inliers (:func:`frame_road`). Per step, the previous frame's plane carried into the frame by the
-estimated relative pose should be the frame's own; the smallest motion taking one onto the other is the step's
-pitch, roll and height error as the road sees it. Composing the estimated steps with those corrections gives a
-road-corrected trajectory, and the vertical distance between it and the estimate estimates the run's vertical
-error (:func:`road_drift`; on generated drives within 0.015-0.028 m of the truth, median: docs/slam.md).
+Each frame's road plane is fitted to the points of the depth the run uses (its valid pixels back-projected, whatever
+the input: measured, completed or exact) that lie more than ``BELOW_M`` below the camera, ``NEAR_M``-``FAR_M`` ahead
+and within ``SIDE_M`` across: RANSAC with a fixed seed, ``TRIES`` hypotheses on at most ``MAX_POINTS`` of them, then
+least squares on the inliers (:func:`frame_road`). Per step, the previous frame's plane carried into the frame by the
+estimated relative pose should be the frame's own; the smallest motion taking one onto the other is the step's pitch,
+roll and height error as the road sees it. Composing the estimated steps with those corrections gives a
+road-corrected trajectory, and the vertical distance between it and the estimate estimates the run's vertical error
+(:func:`road_drift`; on generated drives within 0.015-0.028 m of the truth, median: docs/slam.md).
 
 The thresholds are metric, for a street seen from a car's roof: a frame with fewer than ``MIN_POINTS`` such
 returns or inliers (a room, a crest, a view blocked by a truck) has no road, is skipped and counted; its steps are
