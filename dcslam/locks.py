@@ -104,9 +104,15 @@ def _take_flock(lock: Path, what: str, path: Path, note: Callable[[str], None]) 
     """The open, locked lock file's descriptor; None where the filesystem has no ``flock``."""
     import fcntl
 
-    while True:
+    for attempt in range(1000):
         try:
             fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        except FileNotFoundError as exc:  # the folder, made by a sibling output's holder, removed as it left
+            if attempt >= 3:
+                raise _lock_error(exc, lock) from None
+            with contextlib.suppress(OSError):
+                lock.parent.mkdir(parents=True, exist_ok=True)
+            continue
         except OSError as exc:
             raise _lock_error(exc, lock) from None
         try:
@@ -141,6 +147,7 @@ def _take_flock(lock: Path, what: str, path: Path, note: Callable[[str], None]) 
             os.close(fd)
             raise _lock_error(exc, lock) from None
         return fd
+    raise DcslamError(f"{what} {path}: could not take its lock file {lock}; another process keeps taking it")
 
 
 def _take_exclusive(lock: Path, what: str, path: Path, note: Callable[[str], None]) -> int:

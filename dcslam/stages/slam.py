@@ -139,7 +139,11 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
     from dcslam.locks import output_lock
 
     check_layer_folder(layer.folder)  # a layer made from an input that changed since is refused
-    with output_lock(out_dir, "SLAM output"):  # before anything is checked or written: one writer at a time
+    # one writer per drive's outputs, taken for every drive before anything is checked or written: the SLAM stages
+    # of one layer's drives run side by side (reproduce --jobs, a Slurm array), each writing only its own drive
+    with contextlib.ExitStack() as locks:
+        for path in sorted(paths):
+            locks.enter_context(output_lock(out_dir / path.stem, "SLAM output"))
         return _run_drives(config, layer, paths, out_dir, force)
 
 

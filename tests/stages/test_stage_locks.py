@@ -50,12 +50,24 @@ def test_train_force_never_deletes_a_run_another_process_is_writing(ws, hold, cl
     assert (run_dir / "last.pt").read_bytes() == b"the other process's checkpoint"
 
 
-def test_slam_refuses_an_output_folder_another_process_is_writing(ws, hold, cli):
+def test_slam_refuses_a_drive_another_process_is_writing(ws, hold, cli):
     out = ws.slam / "dense"
-    pid = hold(out, "SLAM output")
+    pid = hold(out / "drive_d", "SLAM output")
     result = cli("slam", "-w", ws.root, "--odometry", "gt", "--frames", 2, "--force")
-    assert result.exit_code == 1 and f"SLAM output {out} is being written by PID {pid}" in result.output
-    assert not out.exists()
+    assert result.exit_code == 1 and f"SLAM output {out / 'drive_d'} is being written by PID {pid}" in result.output
+    assert [p.name for p in out.iterdir()] == [".drive_d.lock"]  # the holder's lock file, nothing written
+
+
+def test_slam_writes_one_drive_of_a_layer_while_another_process_writes_another(ws, hold, cli):
+    """The SLAM stages of one layer's drives run side by side (reproduce --jobs 2, a Slurm array): each holds only
+    its own drive's outputs."""
+    out = ws.slam / "dense"
+    hold(out / "drive_c", "SLAM output")
+    result = cli("slam", "-w", ws.root, "--odometry", "gt", "--frames", 2, "--drive", "drive_d")
+    assert result.exit_code == 0, result.output
+    assert (out / "drive_d.done").exists() and not (out / "drive_c.json").exists()
+    refused = cli("slam", "-w", ws.root, "--odometry", "gt", "--frames", 2, "--drive", "drive_c", "--force")
+    assert refused.exit_code == 1 and f"SLAM output {out / 'drive_c'} is being written by PID" in refused.output
 
 
 def test_predict_refuses_a_layer_another_process_is_writing(ws, hold):
