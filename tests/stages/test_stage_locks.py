@@ -96,3 +96,16 @@ def test_the_lock_is_released_when_the_stage_ends(ws):
     run(ws, SlamStageConfig(odometry="gt", frames=2, evidence="none"))
     assert not lock_path(ws.slam / "dense").exists()
     assert {p.name for p in ws.slam.iterdir()} == {"dense"}
+
+
+def test_the_slam_stages_of_one_layer_run_side_by_side_in_worker_processes(ws):
+    """reproduce --jobs 2 hands each (layer, drive) SLAM stage to a worker: two drives of one layer, at once, both
+    written (a lock on the whole layer folder refused the second)."""
+    from dcslam.stages import slam
+    from dcslam.stages.pipeline import Pipeline, Stage
+
+    out = ws.slam / "dense"
+    stages = [Stage(f"slam-dense-{drive}", slam.run, slam.SlamStageConfig(drive=[drive], odometry="gt"),
+                    outputs=lambda d=drive: [out / f"{d}.done"], kind="slam") for drive in ("drive_c", "drive_d")]
+    Pipeline(ws).run_all(stages, jobs=2)
+    assert (out / "drive_c.done").exists() and (out / "drive_d.done").exists()
