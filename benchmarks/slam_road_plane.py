@@ -27,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dcslam.slam.road import align_planes
+
 BELOW_M, NEAR_M, FAR_M, SIDE_M, INLIER_M = 0.8, 3.0, 30.0, 10.0, 0.08
 
 
@@ -60,21 +62,6 @@ def fit_plane(p: np.ndarray, rng: np.random.Generator, tries: int = 200) -> tupl
     n = np.linalg.svd(q - centre, full_matrices=False)[2][2]
     n = n * (-1 if n[1] > 0 else 1)
     return n, float(-n @ centre), best
-
-
-def align_planes(n_from: np.ndarray, d_from: float, n_to: np.ndarray, d_to: float) -> np.ndarray:
-    """The smallest rigid motion (4, 4) taking plane (n_from, d_from) onto (n_to, d_to): the rotation about
-    n_from x n_to, then the shift along n_to."""
-    axis = np.cross(n_from, n_to)
-    s, c = np.linalg.norm(axis), float(n_from @ n_to)
-    R = np.eye(3)
-    if s > 1e-12:
-        k = axis / s
-        Kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-        R = np.eye(3) + s * Kx + (1 - c) * Kx @ Kx
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, (d_from - d_to) * n_to
-    return T
 
 
 def road_evidence(depth: np.ndarray, K: np.ndarray, T: np.ndarray) -> dict:
