@@ -32,15 +32,20 @@ $(STAMP): pyproject.toml
 # slurm-wlm and munge with apt-get when missing, as root; skipped with the reason elsewhere, failed under CI=true)
 # TEST_JOBS: pytest-xdist workers, one per core by default; each test file runs whole on one worker, so module-wide
 # fixtures (a smoke reproduction, the Slurm runs) are built once. TEST_JOBS=0 runs everything in this process.
-PYTEST_ARGS ?=
-TEST_JOBS   ?= auto
+# TEST_THREADS: threads per worker for torch and the BLAS libraries (OMP_NUM_THREADS and kin, inherited by the
+# commands the tests start): one, as dcslam's own worker pools, since the workers already fill the cores and the
+# tests' small tensors run slower, not faster, on several threads (docs/getting-started.md).
+PYTEST_ARGS  ?=
+TEST_JOBS    ?= auto
+TEST_THREADS ?= 1
 test: setup
 	$(PY) -m ruff check dcslam tests benchmarks examples
-	$(PY) -m pytest -q $(if $(filter 0,$(TEST_JOBS)),,-n $(TEST_JOBS) --dist loadfile) $(PYTEST_ARGS) tests
+	OMP_NUM_THREADS=$(TEST_THREADS) OPENBLAS_NUM_THREADS=$(TEST_THREADS) MKL_NUM_THREADS=$(TEST_THREADS) \
+	$(PY) -m pytest -q $(if $(filter 0,$(TEST_JOBS)),,-n $(TEST_JOBS) --dist loadfile --no-loadscope-reorder) $(PYTEST_ARGS) tests
 
 # only the tests on Slurm (dcslam reproduce --executor slurm), a few minutes
 test-cluster: setup
-	$(PY) -m pytest -q -m cluster tests/cluster
+	OMP_NUM_THREADS=$(TEST_THREADS) $(PY) -m pytest -q -m cluster tests/cluster
 
 # The main job: generate KITTI-format drives (or read KITTI_ROOT=...), train the four recipes, predict, filter,
 # run SLAM on every depth source, score, and print Table 5.2. PROFILE=thesis runs the thesis's scale (for a GPU).

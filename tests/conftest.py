@@ -56,3 +56,15 @@ def dtype(request):
     import torch
 
     return getattr(torch, request.param)
+
+
+def pytest_collection_modifyitems(config, items):
+    """The files of the long runs first (the Slurm runs, then the slow end-to-end ones), each file's tests in their
+    order: `make test` hands whole files to its workers in this order (``--no-loadscope-reorder``), so the longest
+    start at once instead of ending the run on one worker while the other waits."""
+    rank = {}
+    for item in items:
+        path = str(item.path)
+        here = 0 if item.get_closest_marker("cluster") else 1 if item.get_closest_marker("slow") else 2
+        rank[path] = min(rank.get(path, 2), here)
+    items.sort(key=lambda item: rank[str(item.path)])  # stable: the order within a rank is the collection's

@@ -136,7 +136,6 @@ def test_chamfer_only_training_beats_the_noisy_input_on_another_room(rooms, tmp_
     train, test = drives_of(rooms)
     config = DenoiseConfig(sigma_m=0.05, scale=1.0, steps=60, batch_size=4, patch=0, lr=1e-3, features=16,
                            layers=5, device="cpu", train_drives=train, test_drives=test, examples=2)
-    torch.set_num_threads(2)
     result = run_denoising(tmp_path / "out", config)
     noisy, denoised = result.scores["noisy"], result.scores["denoised"]
     assert result.scores["frames"] == 12
