@@ -5,9 +5,11 @@ the truth being whether it ends (final translation error) more than ``--truth`` 
 
 Prints, per input and beam count, runs / ending > truth / flagged of those / flagged of the others, for the stored
 verdicts (``stored``: the health in each JSON as written) and for the candidate rules (``--floors``, ``--sigmas``,
-``--min-pairs``); ``--json`` also writes the per-run rows.
+``--min-pairs``); ``--json`` also writes the per-run rows, ``--flags`` prints every false flag and miss of the stored
+verdicts with its reasons, ``--drives 1000-1003`` keeps those drives only (a half of the test set).
 
     python benchmarks/slam_evidence.py /tmp/repro-ws-b --floors 0.2,0.3,0.4 --sigmas 3 --min-pairs 250,150
+    python benchmarks/slam_evidence.py /tmp/calib-ws --flags --drives 1000-1003
 """
 from __future__ import annotations
 
@@ -132,11 +134,15 @@ def verdicts(runs: dict, rules: HealthRules | None, evidence: EvidenceRules | No
                 health = merge(health, judge(run["T"], companion["T"], c_health, kind, evidence))
                 verdict = health["evidence"]["verdict"]
         source, beams = layer_input(layer)
+        stored = health.get("evidence") or {}
         rows.append({"input": source, "beams": beams, "layer": layer, "drive": drive,
                      "final_m": float(record["translation_error_m"]["final"]),
                      "max_m": float(record["translation_error_m"]["max"]), "flagged": bool(health["suspect"]),
-                     "evidence": verdict, "gap_m": health.get("evidence", {}).get("gap_m"),
-                     "reasons": list(health["reasons"])})
+                     "evidence": verdict or stored.get("verdict"), "gap_m": stored.get("gap_m"),
+                     "reasons": list(health["reasons"]), "overruled": list(health.get("overruled", [])),
+                     "road_m": (health.get("road") or {}).get("drift_m"),
+                     "bound_m": (health.get("drift") or {}).get("bound_m"),
+                     "weakest_share": (health.get("drift") or {}).get("weakest_share")})
     return rows
 
 
@@ -165,6 +171,30 @@ def print_table(title: str, lines: list[tuple], truth: float) -> None:
         print(f"| {source} | {beams} | {n} | {bad} | {hit} | {false} of {n - bad} |")
 
 
+def drive_numbers(text: str) -> set[str]:
+    """``1000-1003`` or ``1000,1002`` -> the drive numbers as strings."""
+    out = set()
+    for part in text.split(","):
+        lo, _, hi = part.partition("-")
+        out |= {str(n) for n in range(int(lo), int(hi or lo) + 1)}
+    return out
+
+
+def print_flags(rows: list[dict], truth: float) -> None:
+    """Every false flag (a run within ``truth`` flagged) and every miss (a run beyond it not flagged), with the
+    reasons of its summary, the evidence verdict and its gap, the road figure and the drift bound."""
+    print(f"\nfalse flags (ending within {truth:g} m, flagged) and misses (ending beyond, not flagged)")
+    for r in rows:
+        bad = r["final_m"] > truth
+        if bad == r["flagged"]:
+            continue
+        what = "MISS" if bad else "FALSE"
+        print(f"{what:5s} {r['layer']:24s} {r['drive'][-9:-5]} final {r['final_m']:.3f} m, evidence "
+              f"{r['evidence']} (gap {r['gap_m'] if r['gap_m'] is not None else '-'}), road {r['road_m']}, bound "
+              f"{r['bound_m']} (weakest share {r['weakest_share']}): {' | '.join(r['reasons']) or '-'}"
+              + (f" [overruled: {' | '.join(r['overruled'])}]" if r["overruled"] else ""))
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("workspace", type=Path)
@@ -176,13 +206,23 @@ def main(argv=None) -> int:
                         help="candidate drift_sigmas values (standard deviations of the drift bound)")
     parser.add_argument("--json", type=Path, help="write the per-run rows of every candidate here")
     parser.add_argument("--runs", action="store_true", help="print every run of the last candidate")
+    parser.add_argument("--flags", action="store_true",
+                        help="print every false flag and miss of the stored verdicts, with its reasons")
+    parser.add_argument("--drives", help="only these drives, by number: 1000-1003 or 1000,1002")
     args = parser.parse_args(argv)
     runs = load_runs(args.workspace / "slam")
+    if args.drives:
+        keep = drive_numbers(args.drives)
+        runs = {k: v for k, v in runs.items() if re.search(r"(\d{4})_sync$", k[1]) and
+                re.search(r"(\d{4})_sync$", k[1]).group(1) in keep}
     if not runs:
         print(f"no SLAM outputs under {args.workspace / 'slam'}", file=sys.stderr)
         return 1
     results = {"stored": verdicts(runs, None, None)}
-    print_table("stored verdicts (no evidence)", table(results["stored"], args.truth), args.truth)
+    print_table("stored verdicts (the health as written, with its evidence)", table(results["stored"], args.truth),
+                args.truth)
+    if args.flags:
+        print_flags(results["stored"], args.truth)
     for pairs in (int(p) for p in args.min_pairs.split(",")):
         for drift in (float(d) for d in args.drift_sigmas.split(",")):
             for sigmas in (float(s) for s in args.sigmas.split(",")):
