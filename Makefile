@@ -38,14 +38,14 @@ $(STAMP): pyproject.toml
 PYTEST_ARGS  ?=
 TEST_JOBS    ?= auto
 TEST_THREADS ?= 1
+TEST_ENV      = OMP_NUM_THREADS=$(TEST_THREADS) OPENBLAS_NUM_THREADS=$(TEST_THREADS) MKL_NUM_THREADS=$(TEST_THREADS)
 test: setup
 	$(PY) -m ruff check dcslam tests benchmarks examples
-	OMP_NUM_THREADS=$(TEST_THREADS) OPENBLAS_NUM_THREADS=$(TEST_THREADS) MKL_NUM_THREADS=$(TEST_THREADS) \
-	$(PY) -m pytest -q $(if $(filter 0,$(TEST_JOBS)),,-n $(TEST_JOBS) --dist loadfile --no-loadscope-reorder) $(PYTEST_ARGS) tests
+	$(TEST_ENV) $(PY) -m pytest -q $(if $(filter 0,$(TEST_JOBS)),,-n $(TEST_JOBS) --dist loadfile --no-loadscope-reorder) $(PYTEST_ARGS) tests
 
 # only the tests on Slurm (dcslam reproduce --executor slurm), a few minutes
 test-cluster: setup
-	OMP_NUM_THREADS=$(TEST_THREADS) $(PY) -m pytest -q -m cluster tests/cluster
+	$(TEST_ENV) $(PY) -m pytest -q -m cluster tests/cluster
 
 # The main job: generate KITTI-format drives (or read KITTI_ROOT=...), train the four recipes, predict, filter,
 # run SLAM on every depth source, score, and print Table 5.2. PROFILE=thesis runs the thesis's scale (for a GPU).

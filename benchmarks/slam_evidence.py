@@ -213,8 +213,7 @@ def main(argv=None) -> int:
     runs = load_runs(args.workspace / "slam")
     if args.drives:
         keep = drive_numbers(args.drives)
-        runs = {k: v for k, v in runs.items() if re.search(r"(\d{4})_sync$", k[1]) and
-                re.search(r"(\d{4})_sync$", k[1]).group(1) in keep}
+        runs = {k: v for k, v in runs.items() if k[1].removesuffix("_sync")[-4:] in keep}
     if not runs:
         print(f"no SLAM outputs under {args.workspace / 'slam'}", file=sys.stderr)
         return 1
