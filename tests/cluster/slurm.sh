@@ -62,7 +62,7 @@ start_munge() {
 write_conf() {
   local host cpus mem_mb
   host=$(hostname -s)
-  cpus=$(nproc)
+  cpus=$(env -u OMP_NUM_THREADS -u OMP_THREAD_LIMIT nproc)  # nproc alone obeys OMP_NUM_THREADS (make test sets 1)
   mem_mb=$(( $(awk '/MemTotal/ {print $2}' /proc/meminfo) / 1024 - 1024 ))
   mkdir -p /etc/slurm "$STATE/ctld" "$STATE/slurmd"
   cat > "$CONF" <<CONF
@@ -113,7 +113,7 @@ start() {
   /usr/sbin/slurmctld -c -i || fail "slurmctld did not start (see $CTLD_LOG)"
   /usr/sbin/slurmd -c || fail "slurmd did not start (see $SLURMD_LOG)"
   for _ in $(seq 120); do
-    if node_up; then echo "slurm.sh: cluster up ($(hostname -s), $(nproc) CPUs)" >&2; return 0; fi
+    if node_up; then echo "slurm.sh: cluster up ($(hostname -s), $(sinfo -h -N -o '%c') CPUs)" >&2; return 0; fi
     sleep 0.5
   done
   fail "the node did not come up within 60 s: $(sinfo -h -N -o '%T %E' 2>&1 | head -n1); see $CTLD_LOG and $SLURMD_LOG"

@@ -104,6 +104,13 @@ def test_slurm_gives_the_tables_of_the_local_run(runs):
     assert all(stamp["complete"] for stamp in stamps(runs["slurm"]).values())
 
 
+def test_the_node_offers_every_cpu_of_this_machine(runs):
+    """slurm.sh sizes the node by the CPUs this process may use, not by OMP_NUM_THREADS (which `make test` sets to
+    1 and GNU nproc obeys): a one-CPU node would run the jobs one at a time."""
+    cpus = subprocess.run(["sinfo", "-h", "-N", "-o", "%c"], capture_output=True, text=True, check=True).stdout
+    assert int(cpus.split()[0]) == len(os.sched_getaffinity(0))
+
+
 def test_every_independent_stage_ran_as_a_slurm_job(runs):
     jobs = dict(re.findall(r"^\[slurm\] (\S+): job (\S+)$", runs["log"], flags=re.M))  # stage → job id
     expected = {name for name in stamps(runs["local"]) if name.startswith(JOB_STAGES)}
