@@ -32,6 +32,9 @@ $(STAMP): pyproject.toml
 # slurm-wlm and munge with apt-get when missing, as root; skipped with the reason elsewhere, failed under CI=true)
 # TEST_JOBS: pytest-xdist workers, one per core by default; each test file runs whole on one worker, so module-wide
 # fixtures (a smoke reproduction, the Slurm runs) are built once. TEST_JOBS=0 runs everything in this process.
+# compileall: dcslam's byte code written once, so that the hundreds of Python processes the tests start (commands,
+# worker pools, Slurm jobs) read it instead of compiling the sources each (where PYTHONDONTWRITEBYTECODE is set, as on
+# the CI machines, Python never writes it itself: ~0.3 CPU-s per process).
 # TEST_THREADS: threads per worker for torch and the BLAS libraries (OMP_NUM_THREADS and kin, inherited by the
 # commands the tests start): one, as dcslam's own worker pools, since the workers already fill the cores and the
 # tests' small tensors run slower, not faster, on several threads (docs/getting-started.md).
@@ -41,6 +44,7 @@ TEST_THREADS ?= 1
 TEST_ENV      = OMP_NUM_THREADS=$(TEST_THREADS) OPENBLAS_NUM_THREADS=$(TEST_THREADS) MKL_NUM_THREADS=$(TEST_THREADS)
 test: setup
 	$(PY) -m ruff check dcslam tests benchmarks examples
+	$(PY) -m compileall -q -j 0 dcslam tests benchmarks examples >/dev/null
 	$(TEST_ENV) $(PY) -m pytest -q $(if $(filter 0,$(TEST_JOBS)),,-n $(TEST_JOBS) --dist loadfile --no-loadscope-reorder) $(PYTEST_ARGS) tests
 
 # only the tests on Slurm (dcslam reproduce --executor slurm), a few minutes
