@@ -13,6 +13,8 @@ REPRO_ARGS  = --profile $(PROFILE) --workspace $(WORKSPACE) --jobs $(JOBS) $(if 
 
 .PHONY: setup test test-cluster bench clean reproduce-table-5-2 reproduce-table-5-1 reproduce-beams reproduce-surface demo-icl results pages
 
+# torch by pip (its CPU build lies on this machine's disk, where pip looks and uv does not); the rest by uv, which
+# resolves the same versions and installs them in parallel (the test extra: 24 s with an empty cache, 66 s by pip)
 setup: $(STAMP)
 
 $(STAMP): pyproject.toml
@@ -23,8 +25,8 @@ $(STAMP): pyproject.toml
 	fi
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q torch==2.13.0
-	$(PY) -m pip install -q -e '.[test]'
+	$(PY) -m pip install -q torch==2.13.0 uv
+	$(PY) -m uv pip install -q --python $(PY) --compile-bytecode -e '.[test]'
 	touch $(STAMP)
 
 # every test, the slow end-to-end ones and the cluster ones included (CI runs this), a worker per core; PYTEST_ARGS='-m "not slow"'
