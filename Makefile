@@ -11,18 +11,24 @@ KITTI_ROOT ?=
 JOBS       ?= $(shell nproc 2>/dev/null || echo 1)
 REPRO_ARGS  = --profile $(PROFILE) --workspace $(WORKSPACE) --jobs $(JOBS) $(if $(KITTI_ROOT),--kitti $(KITTI_ROOT))
 
-.PHONY: setup test test-cluster bench clean reproduce-table-5-2 reproduce-table-5-1 reproduce-beams reproduce-surface demo-icl results pages
+.PHONY: setup python-env system-libs test test-cluster bench clean reproduce-table-5-2 reproduce-table-5-1 reproduce-beams reproduce-surface demo-icl results pages
 
-# torch by pip (its CPU build lies on this machine's disk, where pip looks and uv does not); the rest by uv, which
-# resolves the same versions and installs them in parallel (the test extra: 24 s with an empty cache, 66 s by pip)
-setup: $(STAMP)
+# setup: Open3D's system library (libusb-1.0-0, by apt-get when missing and root), then the Python environment
+# (python-env). torch by pip (its CPU build lies on this machine's disk, where pip looks and uv does not); the rest by
+# uv, which resolves the same versions and installs them in parallel (the test extra: 24 s with an empty cache, 66 s
+# by pip)
+setup: system-libs $(STAMP)
 
-$(STAMP): pyproject.toml
+python-env: $(STAMP)
+
+system-libs:
 	@if ! ldconfig -p 2>/dev/null | grep -q libusb-1.0; then \
 	  echo "installing libusb-1.0-0 (needed by Open3D)"; \
 	  (apt-get update -qq && apt-get install -y -qq libusb-1.0-0) >/dev/null || \
 	  echo "warning: could not install libusb-1.0-0; run 'apt-get install -y libusb-1.0-0' as root"; \
 	fi
+
+$(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q torch==2.13.0 uv

@@ -4,10 +4,13 @@
 #   tests/cluster/slurm.sh start   install slurm-wlm and munge when missing (Debian, as root), write a one-node
 #                                  slurm.conf (this host, all its CPUs, no accounting) and start munged, slurmctld and
 #                                  slurmd; waits until the node accepts jobs. A cluster already up is left as it is.
+#   tests/cluster/slurm.sh install install slurm-wlm and munge when missing, and nothing else (CI runs it beside
+#                                  `make setup`, so that the cluster tests do not wait for apt-get).
 #   tests/cluster/slurm.sh stop    stop the daemons it started (by the pid files they wrote).
 #   tests/cluster/slurm.sh log     path of slurmctld's log (what the tests read: there is no accounting database).
 #
-# Exit status 0 when the cluster is up (start) or down (stop); otherwise 1 with the reason as the last line on stderr.
+# Exit status 0 when the cluster is up (start), installed (install) or down (stop); otherwise 1 with the reason as the
+# last line on stderr.
 set -euo pipefail
 
 STATE=${DCSLAM_SLURM_STATE:-/var/lib/dcslam-slurm}
@@ -134,7 +137,8 @@ stop() {
 
 case "${1:-}" in
   start) start ;;
+  install) install_packages ;;
   stop) stop ;;
   log) echo "$CTLD_LOG" ;;
-  *) echo "usage: $0 start|stop|log" >&2; exit 2 ;;
+  *) echo "usage: $0 start|install|stop|log" >&2; exit 2 ;;
 esac
