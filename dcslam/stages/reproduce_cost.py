@@ -32,10 +32,15 @@ UNITS = {"synth": "generated frames", "prepare-kitti": "drive frames",
          "train-mse": "training steps (frames x epochs)", "train-chamfer": "training steps (frames x epochs)",
          "train-pose": "training steps (frames x epochs)",
          "predict": "predicted frames", "predict-classical": "predicted frames", "filter": "filtered frames",
-         "slam": "SLAM frames", "slam-long": "SLAM frames", "score": "SLAM runs scored"}
+         "slam-sparse": "SLAM frames", "slam-dense": "SLAM frames", "slam-completed": "SLAM frames",
+         "slam-long": "SLAM frames", "score": "SLAM runs scored"}
 # IP-Basic's predictions are kind predict-classical; every other classical completer's are a kind of their own,
 # predict-<completer> (their costs differ tenfold: planefit against scanline)
 CLASSICAL_KIND = ("ip-basic", "ip-basic-fast")
+# SLAM on a LiDAR-like layer, on annotated depth (a fifth of the pixels) and on full images (completions, filtered
+# completions, exact depth, each with its companion run) costs about 1 : 1.7 : 4 per frame (docs/benchmarks.md): a
+# SLAM stage's kind is its input's (:func:`slam_kind`)
+SLAM_KINDS = ("slam-sparse", "slam-dense", "slam-completed")
 # frames 5 … N−6 of a generated drive of N raw frames have depth, and only those are in its drive file
 UNDEPTHED_FRAMES = 10
 
@@ -67,10 +72,19 @@ def stage_kind(name: str, config: dict) -> str:
     if name.startswith("slam-long-"):
         return "slam-long"
     if name.startswith("slam-"):
-        return "slam"
+        return slam_kind(str(config.get("depth", "")))
     if name.startswith("score-"):
         return "score"
     raise DcslamError(f"stage {name}: not a stage of dcslam reproduce")
+
+
+def slam_kind(depth: str) -> str:
+    """The kind of a SLAM stage on the layer ``depth`` (a stage's ``depth`` option): ``slam-sparse`` for the
+    LiDAR's own depth (``sparse``, ``sparse@N``), ``slam-dense`` for the annotated ``dense`` depth, ``slam-completed``
+    for every other layer (predictions, filtered predictions, ``exact``)."""
+    if depth == "sparse" or depth.startswith("sparse@"):
+        return "slam-sparse"
+    return "slam-dense" if depth == "dense" else "slam-completed"
 
 
 def stage_work(name: str, config: dict, drives: DriveFrames, slam_runs: int) -> tuple[str, float]:
@@ -88,7 +102,7 @@ def stage_work(name: str, config: dict, drives: DriveFrames, slam_runs: int) -> 
         return kind, float(config["epochs"] * used)  # a step's cost at the profile's scale is its unit cost
     if kind.startswith("predict") or kind == "filter":
         return kind, float(drives.total(test))
-    if kind in ("slam", "slam-long"):
+    if kind in (*SLAM_KINDS, "slam-long"):
         frames = [drives.frames.get(Path(d).stem, 0) for d in config["drive"] or test]
         return kind, float(sum(min(n, config["frames"]) if config["frames"] else n for n in frames))
     return kind, float(slam_runs)

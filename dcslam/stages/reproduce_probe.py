@@ -3,12 +3,12 @@ this machine by a short probe.
 
 The probe runs a sample of Table 5.2's stages at a profile's settings (its image scale, learning rate, SLAM settings,
 filters): synth, prepare-kitti, one training of each loss (mse, chamfer, pose), a prediction by a trained run and by
-IP-Basic and by each other classical completer (:data:`PROBE_COMPLETERS`), a filter, SLAM of a sparse and a predicted
-layer and over a whole drive, and the tables; twice, on 3 generated drives of :data:`PROBE_SIZES` frames with depth
-(training and SLAM on as many frames; the larger sample runs SLAM on two more layers, so that the tables score more
-runs), each in a temporary workspace, with one torch thread; the trainings are measured on a second run, as the first
-training of a process also sets torch up. Each stage's stamp records its CPU seconds; the two samples of each kind
-give its fixed part per stage (``stage_s``) and its part per unit (``unit_s``) by a line through the two
+IP-Basic and by each other classical completer (:data:`PROBE_COMPLETERS`), a filter, SLAM of sparse, annotated dense
+and predicted depth and over a whole drive, and the tables; twice, on 3 generated drives of :data:`PROBE_SIZES` frames
+with depth (training and SLAM on as many frames; the larger sample runs SLAM on one more completion, so that the tables
+score more runs), each in a temporary workspace, with one torch thread; the trainings are measured on a second run, as
+the first training of a process also sets torch up. Each stage's stamp records its CPU seconds; the two samples of
+each kind give its fixed part per stage (``stage_s``) and its part per unit (``unit_s``) by a line through the two
 (:func:`fit`), written for the profile into ``<workspace>/.reproduce/calibration.json`` (``reproduce_costs.json``'s
 layout), which the estimate then uses.
 """
@@ -30,7 +30,9 @@ from dcslam.workspace import Workspace
 PROBE_SIZES = (2, 4)  # frames with depth per generated drive (and frames trained on, SLAM frames) of the 2 samples
 PROBE_STAGES = ("synth", "prepare-kitti", "train-mse-dense", "train-chamfer-8", "train-pose", "predict-mse-dense",
                 "predict-ip-basic-fast", "score-tables")
-PROBE_SLAM = (("sparse", "mse-dense"), ("sparse", "mse-dense", "dense", "ip-basic-fast"))  # layers, per sample
+# SLAM layers of each sample: every SLAM kind in both (sparse, annotated dense, a completion), one more completion in
+# the larger, so that scoring (its unit: the runs scored) has a slope to fit
+PROBE_SLAM = (("sparse", "dense", "mse-dense"), ("sparse", "dense", "mse-dense", "ip-basic-fast"))
 # classical completers other than IP-Basic (which the experiment predicts with): each predicts the test drive too
 PROBE_COMPLETERS = ("ip-basic-multiscale", "scanline", "planefit")
 # imported before the samples run: otherwise the first stage of a kind in the first sample pays them (1-2 s of CPU),

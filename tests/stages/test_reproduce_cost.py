@@ -6,8 +6,9 @@ import pytest
 from dcslam.errors import DcslamError
 from dcslam.stages.experiments.table_5_2 import PROFILES
 from dcslam.stages.reproduce import ReproduceConfig
-from dcslam.stages.reproduce_cost import (CALIBRATION, DriveFrames, UnitCosts, estimate, measure, plan_text,
-                                          planned_drives, read_costs, shipped_costs, stage_work, unit_costs)
+from dcslam.stages.reproduce_cost import (CALIBRATION, SLAM_KINDS, DriveFrames, UnitCosts, estimate, measure,
+                                          plan_text, planned_drives, read_costs, shipped_costs, stage_work,
+                                          unit_costs)
 from dcslam.stages.reproduce_plan import planned_splits, planned_stages
 from dcslam.workspace import Workspace
 
@@ -27,8 +28,15 @@ def test_work_of_each_stage_kind():
     # every other classical completer a kind of its own (planefit costs ten times scanline)
     assert stage_work("predict-planefit-sparse16", {"run": None, "model": "planefit"}, DRIVES, 0) == \
         ("predict-planefit", 44.0)
-    assert stage_work("slam-sparse-t1", {"drive": ["t1"], "frames": 30}, DRIVES, 0) == ("slam", 30.0)
-    assert stage_work("slam-sparse-t2", {"drive": ["t2"], "frames": 30}, DRIVES, 0) == ("slam", 12.0)
+    assert stage_work("slam-sparse-t1", {"depth": "sparse", "drive": ["t1"], "frames": 30}, DRIVES, 0) == \
+        ("slam-sparse", 30.0)
+    assert stage_work("slam-sparse@8-t2", {"depth": "sparse@8", "drive": ["t2"], "frames": 30}, DRIVES, 0) == \
+        ("slam-sparse", 12.0)
+    # a SLAM stage's kind is its input's: LiDAR-like, annotated, or a full image (a frame costs about 4x a sparse one)
+    assert stage_work("slam-dense-t1", {"depth": "dense", "drive": ["t1"], "frames": 30}, DRIVES, 0)[0] == "slam-dense"
+    for depth in ("predicted/planefit-sparse16", "exact", "predicted/mse-dense+edges"):
+        assert stage_work("slam-x-t1", {"depth": depth, "drive": ["t1"], "frames": 30}, DRIVES, 0)[0] == \
+            "slam-completed"
     assert stage_work("slam-long-sparse-t1", {"drive": ["t1"], "frames": 0}, DRIVES, 0) == ("slam-long", 32.0)
     assert stage_work("score-tables", {}, DRIVES, 7) == ("score", 7.0)
     with pytest.raises(DcslamError, match="not a stage"):
@@ -41,15 +49,17 @@ def test_unit_costs_are_measured_from_the_stamps_of_finished_stages(tmp_path):
     root = write_workspace(tmp_path / "ws")  # drive files a, b (train), c (val), d (test); 6 frames each
     state = root / ".reproduce"
     state.mkdir()
-    slam = {"drive": ["drive_d"], "frames": 4}
+    slam = {"depth": "sparse", "drive": ["drive_d"], "frames": 4}
     (state / "slam-sparse-drive_d.json").write_text(json.dumps({"config": slam, "complete": True, "seconds": 2.0}))
-    (state / "slam-dense-drive_d.json").write_text(json.dumps({"config": slam, "complete": True, "seconds": 9.0,
-                                                               "cpu_seconds": 6.0}))  # CPU seconds where recorded
+    (state / "slam-sparse@8-drive_d.json").write_text(json.dumps({"config": slam | {"depth": "sparse@8"},
+                                                                  "complete": True, "seconds": 9.0,
+                                                                  "cpu_seconds": 6.0}))  # CPU seconds where recorded
     (state / "slam-x-drive_d.json").write_text(json.dumps({"config": slam, "complete": False}))  # interrupted
     (state / "broken.json").write_text("{")
-    assert measure(root) == {"slam": (8.0, 8.0, 2)}  # 2 runs of 4 frames in 8 s: 1 s per SLAM frame
+    assert measure(root) == {"slam-sparse": (8.0, 8.0, 2)}  # 2 runs of 4 frames in 8 s: 1 s per SLAM frame
     costs = unit_costs(root)
-    assert costs.per_unit["slam"] == 1.0 and costs.per_stage["slam"] == 0.0 and str(state) in costs.source
+    assert costs.per_unit["slam-sparse"] == 1.0 and costs.per_stage["slam-sparse"] == 0.0
+    assert str(state) in costs.source and "slam-completed" in costs.source  # the kinds it lacks named, then shipped
     assert costs.per_unit["synth"] == shipped_costs().per_unit["synth"]  # the kinds it lacks: the shipped ones
     assert unit_costs(tmp_path / "empty", profile="smoke").source == shipped_costs("smoke").source
     with pytest.raises(DcslamError, match="--costs-from .* no finished stage"):
@@ -59,9 +69,10 @@ def test_unit_costs_are_measured_from_the_stamps_of_finished_stages(tmp_path):
     drives = planned_drives(plan, PROFILES["smoke"], None, planned_splits(plan, PROFILES["smoke"]))
     assert set(drives.frames.values()) == {12 - 10}  # the frames of a generated drive that have depth
     rows = estimate(stages, drives, costs).rows
-    assert rows["slam"][:2] == (14, 28.0) and rows["slam"][2] == 28.0  # 14 SLAM runs of 2 frames at 1 s each
-    fixed = UnitCosts({"slam": 1.0}, "test", {"slam": 0.5})
-    assert estimate(stages, drives, fixed).rows["slam"][2] == 14 * 0.5 + 28.0  # each stage's fixed part, then units
+    assert rows["slam-sparse"][:2] == (1, 2.0) and rows["slam-sparse"][2] == 2.0  # one sparse run of 2 frames, 1 s
+    assert rows["slam-dense"][:2] == (1, 2.0) and rows["slam-completed"][:2] == (12, 24.0)  # the other 13 runs
+    fixed = UnitCosts({"slam-completed": 1.0}, "test", {"slam-completed": 0.5})
+    assert estimate(stages, drives, fixed).rows["slam-completed"][2] == 12 * 0.5 + 24.0  # fixed part, then units
 
 
 def test_plan_counts_stages_per_seed_and_writes_nothing(tmp_path):
@@ -105,7 +116,7 @@ def test_costs_file_round_trip_and_malformed_files(tmp_path):
         with pytest.raises(DcslamError, match="bad.json: cannot read the unit costs"):
             read_costs(tmp_path / "bad.json", "smoke")
     shipped = shipped_costs("smoke")  # the packaged figures: measured by the probe, a fixed and a unit part per kind
-    assert {"synth", "train-chamfer", "slam", "score"} <= set(shipped.per_unit) and "probe" in shipped.source
+    assert {"synth", "train-chamfer", "score", *SLAM_KINDS} <= set(shipped.per_unit) and "probe" in shipped.source
     assert "not thesis's" in shipped_costs("thesis").source  # measured at another profile's settings, and says so
     (tmp_path / "none.json").write_text('{"profiles": {}}')
     with pytest.raises(DcslamError, match="none.json: cannot read the unit costs"):

@@ -6,7 +6,7 @@ import pytest
 
 from dcslam.stages.experiments.table_5_2 import PROFILES
 from dcslam.stages.reproduce_cost import CALIBRATION, read_costs
-from dcslam.stages.reproduce_probe import PROBE_SIZES, _wanted, fit, probe_profile
+from dcslam.stages.reproduce_probe import PROBE_SIZES, PROBE_SLAM, _wanted, fit, probe_profile
 
 
 def test_fit_is_the_line_through_the_two_samples_per_stage():
@@ -33,6 +33,7 @@ def test_probe_profile_shrinks_the_counts_and_keeps_the_settings():
     assert quick.train["max_frames"] == 4 and quick.train["epochs"] == 1 and quick.pose["max_frames"] == 4
     assert quick.pose["pose_grad_iterations"] == 2 and smoke.train["scale"] == 0.25
     assert smoke.slam["voxel_size"] == 0.2
+    assert all({"sparse", "dense"} < set(layers) for layers in PROBE_SLAM)  # every SLAM kind in both samples
     wanted = _wanted(quick, ("sparse", "mse-dense"))
     assert wanted("train-chamfer-8") and wanted("filter-mse-dense+edges") and wanted("score-tables")
     assert wanted("slam-sparse-2011_09_26_drive_1002_sync") and wanted("slam-long-sparse-2011_09_26_drive_1002_sync")
