@@ -38,8 +38,8 @@ UNITS = {"synth": "generated frames", "prepare-kitti": "drive frames",
 # predict-<completer> (their costs differ tenfold: planefit against scanline)
 CLASSICAL_KIND = ("ip-basic", "ip-basic-fast")
 # SLAM on a LiDAR-like layer, on annotated depth (a fifth of the pixels) and on full images (completions, filtered
-# completions, exact depth, each with its companion run) costs about 1 : 1.7 : 4 per frame (docs/benchmarks.md): a
-# SLAM stage's kind is its input's (:func:`slam_kind`)
+# completions, exact depth, each with its companion run) cost about 1 : 3.4 : 5.4 per frame at the quick settings
+# (the shipped probe figures): a SLAM stage's kind is its input's (:func:`slam_kind`)
 SLAM_KINDS = ("slam-sparse", "slam-dense", "slam-completed")
 # frames 5 … N−6 of a generated drive of N raw frames have depth, and only those are in its drive file
 UNDEPTHED_FRAMES = 10
