@@ -85,14 +85,22 @@ TRAINED = tuple(dict.fromkeys(i.completer for i in INPUTS if i.completer not in 
 SURFACE_COMPLETERS = ("scanline", "planefit")  # the classical completers that keep planes and scanline structure
 CLASSICAL_RUNS = (IP_BASIC_RUN, *SURFACE_COMPLETERS)
 """Completers of ``dcslam predict --model`` (no training) behind a row."""
+SCAFFOLD_RUN = "sparse-conv-planefit"
+"""The surface experiment's learned completer: SparseConvNet correcting planefit's scaffold in inverse depth
+(:mod:`dcslam.depth.models.scaffold`), trained against exact depth with the geometry losses."""
 _SURFACE_DEPTH = (BeamsInput("sparse", None), BeamsInput("IP-Basic", IP_BASIC_RUN),
-                  *(BeamsInput(c, c) for c in SURFACE_COMPLETERS))
-SURFACE_INPUTS = (*_SURFACE_DEPTH, *(BeamsInput(i.label + MEASURED_LABEL, i.completer, sources=MEASURED)
+                  *(BeamsInput(c, c) for c in SURFACE_COMPLETERS),
+                  BeamsInput("SparseConvNet on planefit", SCAFFOLD_RUN, needs_exact=True))
+SURFACE_INPUTS = (*_SURFACE_DEPTH, *(BeamsInput(i.label + MEASURED_LABEL, i.completer, sources=MEASURED,
+                                                needs_exact=i.needs_exact)
                                      for i in _SURFACE_DEPTH if i.completer is not None),
                   BeamsInput("exact" + MEASURED_LABEL, "", sources=MEASURED, needs_exact=True),
                   BeamsInput("exact", "", needs_exact=True))
-"""The rows of the surface experiment: the classical completers, none trained, each in depth mode and with measured
-sources, between the sparse input and exact depth (:mod:`dcslam.stages.experiments.surface`)."""
+"""The rows of the surface experiment: the classical completers and the network on planefit's scaffold, each in depth
+mode and with measured sources, between the sparse input and exact depth (:mod:`dcslam.stages.experiments.surface`)."""
+SURFACE_TRAINED = (SCAFFOLD_RUN,)
+LEARNED = (*TRAINED, *SURFACE_TRAINED)
+"""Run names of every learned completer a table may hold, whose rows gather the runs of several training seeds."""
 INPUT_OF = {i.label: i for i in (*INPUTS, *SURFACE_INPUTS)}  # a label names one input in every catalogue
 
 
@@ -171,8 +179,8 @@ def beams_results(ws: Workspace, beams: list[int], drives: list[str], max_time_d
     inputs = [i for i in catalogue if (exact or not i.needs_exact) and (inputs is None or i.label in inputs)]
     keys = [(b, i) for b in sorted(beams, reverse=True) for i in inputs if i.per_beam]
     keys += [(None, i) for i in inputs if not i.per_beam]
-    runs = {c: seed_runs(ws, c) for c in TRAINED}
-    members = {key: runs[key[1].completer] if key[1].completer in TRAINED else [(None, None)] for key in keys}
+    runs = {c: seed_runs(ws, c) for c in LEARNED}
+    members = {key: runs[key[1].completer] if key[1].completer in LEARNED else [(None, None)] for key in keys}
     work = [(ws, item.label, layer_name(item, b, run), drives, max_time_diff, failure_threshold,
              slam_name(item, b, run))
             for b, item in keys for run, _ in members[(b, item)]]

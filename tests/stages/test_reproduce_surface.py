@@ -11,8 +11,9 @@ from dcslam.stages.experiments.surface import PROFILES, SurfaceProfile
 from tests.fixtures import depth as depth_fixtures
 
 ARGS = ["reproduce", "--table", "surface", "--profile", "smoke"]
-DEPTH_ROWS = ("sparse", "IP-Basic", "scanline", "planefit")
-MEASURED_ROWS = tuple(f"{label}, measured sources" for label in ("IP-Basic", "scanline", "planefit", "exact"))
+NET = "SparseConvNet on planefit"
+DEPTH_ROWS = ("sparse", "IP-Basic", "scanline", "planefit", NET)
+MEASURED_ROWS = tuple(f"{label}, measured sources" for label in ("IP-Basic", "scanline", "planefit", NET, "exact"))
 
 
 @pytest.fixture
@@ -30,7 +31,7 @@ def tiny_drives(monkeypatch):
     monkeypatch.setattr("dcslam.stages.prepare.run", prepare)
 
 
-@pytest.mark.slow  # three completers at two beam counts, 22 SLAM runs
+@pytest.mark.slow  # a tiny training, four completers at two beam counts, 26 SLAM runs
 def test_smoke_profile_writes_the_surface_table_and_rebuilds_it(cli, tmp_path, tiny_drives):
     result = cli(*ARGS, "--workspace", tmp_path)
     assert result.exit_code == 0, result.output
@@ -55,7 +56,14 @@ def test_smoke_profile_writes_the_surface_table_and_rebuilds_it(cli, tmp_path, t
     assert {"signed_rank_p", "median_diff", "gap_closed_median"} <= set(rows[0])
     for layer in ("scanline-sparse16", "planefit-sparse64+measured", "exact+measured-sparse16", "exact", "sparse@16"):
         assert (tmp_path / "slam" / layer / "drive_d.txt").exists(), layer
-    assert not (tmp_path / "runs").exists()  # nothing trained
+    # the network on planefit's scaffold: trained once (one seed), against exact depth, its layers predicted
+    import json
+
+    settings = json.loads((tmp_path / "runs" / "sparse-conv-planefit" / "config.json").read_text())["settings"]
+    assert settings["model_hparams"] == {"correct_fill": True, "fill": "planefit", "fill_output": "inverse-residual"}
+    assert settings["target"] == "exact" and settings["input_mix"] == ["sparse", "sparse@16"]
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == ["sparse-conv-planefit"]
+    assert (tmp_path / "slam" / "sparse-conv-planefit-sparse16+measured" / "drive_d.txt").exists()
     again = cli(*ARGS, "--workspace", tmp_path)
     assert again.exit_code == 0, again.output
     assert "[run]" not in again.stderr
@@ -64,20 +72,25 @@ def test_smoke_profile_writes_the_surface_table_and_rebuilds_it(cli, tmp_path, t
     assert (tmp_path / "rebuilt" / "table_surface.csv").read_text() == (results / "table_surface.csv").read_text()
 
 
-def test_the_plan_lists_the_classical_completers_and_both_icp_modes_and_trains_nothing(tmp_path):
+def test_the_plan_lists_the_completers_and_both_icp_modes_and_trains_the_network_per_seed(tmp_path):
     from dcslam.stages.reproduce_plan import planned_stages
     from dcslam.workspace import Workspace
 
     stages = {s.name: s for s in planned_stages(Workspace(tmp_path / "ws"), PROFILES["quick"], "surface")}
     names = list(stages)
     assert names[:2] == ["synth", "prepare-kitti"] and names[-1] == "score-surface"
-    assert not [n for n in names if n.startswith(("train-", "filter-"))]
+    assert [n for n in names if n.startswith(("train-", "filter-"))] == ["train-sparse-conv-planefit"]
+    net = stages["train-sparse-conv-planefit"].config
+    assert (net.model, net.correct_fill, net.fill, net.fill_output, net.target) == (
+        "sparse-conv", True, "planefit", "inverse-residual", "exact")
+    assert net.input_mix == ["sparse", "sparse@16", "sparse@8"] and net.normal_weight > 0
+    completers = ("ip-basic-fast", "scanline", "planefit", "sparse-conv-planefit")
     predictions = {n for n in names if n.startswith("predict-")}
-    assert predictions == {f"predict-{c}-sparse{b}" for c in ("ip-basic-fast", "scanline", "planefit")
-                           for b in (64, 16, 8)}
+    assert predictions == {f"predict-{c}-sparse{b}" for c in completers for b in (64, 16, 8)}
     assert stages["predict-planefit-sparse8"].config.model == "planefit"
+    assert stages["predict-sparse-conv-planefit-sparse8"].config.run == "sparse-conv-planefit"
     slam_layers = {n.rsplit("-", 1)[0].removeprefix("slam-") for n in names if n.startswith("slam-")}
-    completions = {f"{c}-sparse{b}" for c in ("ip-basic-fast", "scanline", "planefit") for b in (64, 16, 8)}
+    completions = {f"{c}-sparse{b}" for c in completers for b in (64, 16, 8)}
     assert slam_layers == ({"sparse", "sparse@16", "sparse@8", "exact"} | completions
                            | {f"{c}+measured" for c in completions}
                            | {f"exact+measured-sparse{b}" for b in (64, 16, 8)})
@@ -86,15 +99,22 @@ def test_the_plan_lists_the_classical_completers_and_both_icp_modes_and_trains_n
     measured = next(s for n, s in stages.items() if n.startswith("slam-scanline-sparse16+measured-"))
     assert (measured.config.sources, measured.config.measured) == ("measured", "sparse@16")
     assert stages["score-surface"].config.beams == [64, 16, 8]
+    # the study: the network with 3 training seeds, each its own run, predictions and SLAM runs
+    study = [s.name for s in planned_stages(Workspace(tmp_path / "ws"), PROFILES["study"], "surface", seeds=3)]
+    assert [n for n in study if n.startswith("train-")] == [
+        "train-sparse-conv-planefit", "train-sparse-conv-planefit-s1", "train-sparse-conv-planefit-s2"]
+    assert "predict-sparse-conv-planefit-s2-sparse16" in study
+    assert any(n.startswith("slam-sparse-conv-planefit-s1-sparse8+measured-") for n in study)
 
 
-def test_a_kitti_root_plans_no_exact_row(tmp_path):
+def test_a_kitti_root_plans_no_exact_row_and_trains_nothing(tmp_path):
     from dcslam.stages.reproduce_plan import planned_stages
     from dcslam.workspace import Workspace
 
     names = [s.name for s in planned_stages(Workspace(tmp_path / "ws"), PROFILES["quick"], "surface",
                                             kitti_root=tmp_path)]
     assert not [n for n in names if "exact" in n] and any(n.startswith("slam-planefit-sparse8-") for n in names)
+    assert not [n for n in names if "sparse-conv" in n]  # the network's target is exact depth
 
 
 def test_profiles_test_on_enough_drives_and_refuse_what_cannot_run():
@@ -109,8 +129,13 @@ def test_profiles_test_on_enough_drives_and_refuse_what_cannot_run():
     assert experiment("surface").profile("smoke") is PROFILES["smoke"]
     with pytest.raises(DcslamError, match="must include 64"):
         SurfaceProfile(name="bad", drives=3, frames=12, slam_frames=2, beams=(16, 8))
-    with pytest.raises(DcslamError, match="seeds must be 1"):
+    with pytest.raises(DcslamError, match="seeds must be 1 without a trained row"):
         SurfaceProfile(name="bad", drives=3, frames=12, slam_frames=2, seeds=3)
+    with pytest.raises(DcslamError, match="nconv, not a run of the surface table"):
+        SurfaceProfile(name="bad", drives=3, frames=12, slam_frames=2, train={"nconv": {}})
+    with pytest.raises(DcslamError, match="profile surface bad: train"):
+        SurfaceProfile(name="bad", drives=3, frames=12, slam_frames=2, train={"sparse-conv-planefit": {"epoks": 1}})
+    assert PROFILES["study"].seeds == 3 and PROFILES["quick"].train == PROFILES["study"].train
     with pytest.raises(DcslamError, match="add up"):
         SurfaceProfile(name="bad", drives=3, frames=12, slam_frames=2, split=(1, 1, 2))
     with pytest.raises(DcslamError, match="profile surface bad: slam"):

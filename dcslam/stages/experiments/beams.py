@@ -26,8 +26,8 @@ from pathlib import Path
 from dcslam.errors import DcslamError
 from dcslam.eval.trajectory import EVO_MAX_TIME_DIFF_S
 from dcslam.report.results import FAILURE_THRESHOLD
-from dcslam.report.table_beams import (CLASSICAL_RUNS, FULL_BEAMS, INPUTS, IP_BASIC_RUN, MEASURED, TRAINED,
-                                       layer_name, prediction_name, slam_name, sparse_kind)
+from dcslam.report.table_beams import (CLASSICAL_RUNS, FULL_BEAMS, INPUTS, IP_BASIC_RUN, LEARNED, MEASURED,
+                                       TRAINED, layer_name, prediction_name, slam_name, sparse_kind)
 from dcslam.stages import filter as filter_stage
 from dcslam.stages import predict, prepare, slam, train
 from dcslam.stages.config import option
@@ -246,18 +246,16 @@ def compose(pipe: Pipeline, profile: BeamsProfile, kitti_root: Path | None = Non
 def _train(pipe: Pipeline, profile: BeamsProfile, learn: list[Path], exact: bool, seed: int, jobs: int,
            seeds: int) -> None:
     """Train every learned completer ``seeds`` times, in rounds (those fine-tuned from another run after it)."""
-    ws = pipe.ws
     for runs in profile.stages_of_training(exact):
-        stages = []
-        for k in range(seeds):
-            for run in runs:
-                config = profile.train_config(run, seed, k)
-                stages.append(Stage(f"train-{config.name}", train.run, config,
-                                    outputs=lambda r=config.name: [ws.runs / r / "model.pt",
-                                                                   ws.runs / r / "metrics.jsonl"],
-                                    inputs=lambda c=config: learn + _init_model(ws, {"init": c.init}),
-                                    seed=seed + k, kind="train"))
-        pipe.run_all(stages, jobs)
+        pipe.run_all([train_stage(pipe.ws, profile.train_config(run, seed, k), learn, seed + k)
+                      for k in range(seeds) for run in runs], jobs)
+
+
+def train_stage(ws: Workspace, config: train.TrainStageConfig, learn: list[Path], seed: int) -> Stage:
+    """The stage that trains ``config`` (its run ``runs/<config.name>/``) on the drives ``learn`` with ``seed``."""
+    return Stage(f"train-{config.name}", train.run, config,
+                 outputs=lambda: [ws.runs / config.name / "model.pt", ws.runs / config.name / "metrics.jsonl"],
+                 inputs=lambda: learn + _init_model(ws, {"init": config.init}), seed=seed, kind="train")
 
 
 def predict_stages(ws: Workspace, beams, test: list[Path], completers: list[tuple[str, int | None]]) -> list[Stage]:
@@ -303,7 +301,7 @@ def make_slam_stages(ws: Workspace, profile, test: list[Path], exact: bool, seed
     for item in inputs:
         if item.needs_exact and not exact:
             continue
-        trained = item.completer in TRAINED
+        trained = item.completer in LEARNED
         for k in range(seeds if trained else 1):
             run = seed_run_name(item.completer, k) if trained else None
             for b in (profile.beams if item.per_beam else [None]):
