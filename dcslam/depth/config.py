@@ -101,6 +101,13 @@ class TrainSettings:
                                            "points from the --target surface, point-to-plane (0 = off).")
     edge_weight: float = option(0.0, help="Add this weight times the mean squared distance (m²) of the predicted "
                                           "points near --target depth edges from the nearer side (0 = off).")
+    confidence_weight: float = option(0.0, help="Add this weight times the binary cross-entropy between the "
+                                                "network's confidence and whether each pixel lies within "
+                                                "PointFusion's association gate of the --target depth (max(0.1 m, "
+                                                "2 percent of the depth)): a confidence that says which pixels it "
+                                                "placed. sparse-conv --correct-fill (its head's gate; its "
+                                                "predictions then leave empty the pixels of confidence below 0.5) "
+                                                "and nconv networks (0 = off).")
     lr_schedule: str = option("constant", choices=LR_SCHEDULES, help="constant, or cosine: from --lr down to 0 over "
                                                                      "all the run's steps.")
     pose_frames: int = option(4, help="Pose loss: frames per window (the first at its true pose, the others "
@@ -126,7 +133,8 @@ class TrainSettings:
         check_at_least_one(self, "map_frames", "epochs", "max_frames", "stride", "batch_size")
         if not 0 < self.lr < float("inf"):
             raise DcslamError(f"--lr must be a positive number, got {self.lr}")
-        for name in ("weight_decay", "l1_weight", *(f"{term}_weight" for term in GEOMETRY_TERMS)):
+        for name in ("weight_decay", "l1_weight", "confidence_weight",
+                     *(f"{term}_weight" for term in GEOMETRY_TERMS)):
             if not 0 <= getattr(self, name) < float("inf"):
                 raise DcslamError(f"{flag(name)} must be a non-negative number, got {getattr(self, name)}")
         check_view(self.scale, self.crop)

@@ -10,10 +10,16 @@ def run_model(model, batch):
     return model(batch.sparse, mask) if batch.rgb is None else model(batch.sparse, mask, batch.rgb)
 
 
+def gives_confidence(model) -> bool:
+    """Whether a network says how sure it is: it has ``forward_with_confidence`` (nconv) and, where it declares
+    ``gives_confidence``, says so (a sparse-conv only when trained with a confidence loss)."""
+    return hasattr(model, "forward_with_confidence") and bool(getattr(model, "gives_confidence", True))
+
+
 def run_model_with_confidence(model, batch, use_confidence: bool = True):
     """(prediction (B, 1, h, w), confidence (B, 1, h, w) in [0, 1] or None): the confidence of networks that give
-    one (``forward_with_confidence``, e.g. nconv) when ``use_confidence``, else None."""
-    if not use_confidence or not hasattr(model, "forward_with_confidence"):
+    one (:func:`gives_confidence`) when ``use_confidence``, else None."""
+    if not use_confidence or not gives_confidence(model):
         return run_model(model, batch), None
     mask = (batch.sparse > 0).to(batch.sparse.dtype)
     args = (batch.sparse, mask) if batch.rgb is None else (batch.sparse, mask, batch.rgb)

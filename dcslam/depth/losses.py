@@ -64,6 +64,44 @@ def masked_l1(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> t
     return _masked_mean(pred, target, mask, torch.abs)
 
 
+#: A predicted pixel counts as placed when it lies within PointFusion's association gate of the target depth
+#: (:class:`dcslam.slam.fusion.PointFusion` defaults: max(0.1 m, 2 % of the depth)): it would be fused with the
+#: true surface's point, not beside it.
+PLACED_ABSOLUTE_M, PLACED_RELATIVE = 0.1, 0.02
+
+
+def placed(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Where ``pred`` lies within the placement gate of ``target`` (:data:`PLACED_ABSOLUTE_M`,
+    :data:`PLACED_RELATIVE`), at the pixels where both have a value. Not differentiable.
+
+    Shape: pred, target (B, 1, H, W) metres → (B, 1, H, W) bool
+    """
+    _check_same(pred, target)
+    pred, target = pred.detach(), target.detach()
+    gate = torch.clamp(PLACED_RELATIVE * target, min=PLACED_ABSOLUTE_M)
+    return (pred > 0) & (target > 0) & ((pred - target).abs() <= gate)
+
+
+def confidence_loss(confidence: torch.Tensor, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Binary cross-entropy of a network's per-pixel confidence against whether it placed each pixel
+    (:func:`placed`), over the pixels with a target; 0 with zero gradient if none has. The gradient reaches the
+    confidence only: what counts as placed is a fixed function of the prediction, so this term never moves the
+    depth (a network cannot earn confidence by moving its pixels).
+
+    Shape: confidence (B, 1, H, W) in [0, 1], pred, target (B, 1, H, W) metres → scalar
+    """
+    _check_same(confidence, pred, target)
+    valid = target > 0
+    count = valid.sum()
+    if count == 0:
+        return (confidence * 0).sum()
+    truth = placed(pred, target).to(confidence.dtype)
+    eps = 1e-6  # log(0) guard: a confidence of exactly 0 or 1 costs at most -log(1e-6) ~ 13.8 per pixel
+    c = confidence.clamp(eps, 1 - eps)
+    per_pixel = -(truth * torch.log(c) + (1 - truth) * torch.log1p(-c))
+    return torch.where(valid, per_pixel, torch.zeros_like(per_pixel)).sum() / count
+
+
 class MaskedMSE:
     """The MSE training loss with the thesis's ``sparse`` or ``dense`` mask:
     ``MaskedMSE("dense")(pred, sparse, dense)``; with ``l1_weight`` > 0, plus that weight times the mean absolute

@@ -13,7 +13,7 @@ import torch
 from dcslam.depth.config import TrainConfig
 from dcslam.depth.data import DriveFrames, frame_windows
 from dcslam.depth.forward import run_model
-from dcslam.depth.losses import GeometryTerms, MaskedMSE, batch_depth_errors
+from dcslam.depth.losses import GeometryTerms, MaskedMSE, batch_depth_errors, confidence_loss
 from dcslam.depth.maps import MapChamfer
 from dcslam.depth.train_pose import pose_loss_of
 from dcslam.errors import DcslamError
@@ -33,18 +33,27 @@ class Objective:
         self.pose = pose_loss_of(config) if config.loss == "pose" else None
         self.geometry = GeometryTerms(config.normal_weight, config.plane_weight, config.edge_weight)
         self.weights = {"pose": config.pose_weight, "mse": config.mse_weight, "chamfer": config.chamfer_weight}
+        self.confidence_weight = config.confidence_weight
+        self.pose_weights = config.pose_weights
         self.parts: dict = {}
 
     def __call__(self, pred, batch, confidence=None):
-        """``confidence`` (B, 1, h, w) or None: per-pixel ICP weights of the pose loss."""
+        """``confidence`` (B, 1, h, w) or None: the network's, for the confidence loss (``confidence_weight``) and
+        as the pose loss's per-pixel ICP weights (``pose_weights`` confidence)."""
         geometry = self.geometry(pred, batch.dense, batch.K)
+        if self.confidence_weight > 0:
+            if confidence is None:
+                raise DcslamError("--confidence-weight needs a network that gives a confidence (sparse-conv "
+                                  "--correct-fill trained with it, nconv, nconv-guided)")
+            geometry = {**geometry, "confidence": confidence_loss(confidence, pred, batch.dense)}
         if self.loss in ("mse", "chamfer"):
             own = self.mse(pred, batch.sparse, batch.dense) if self.loss == "mse" else \
                 self.chamfer(pred, batch.dense, batch.K, batch.T_world_cam)
             if geometry:
                 self.parts = {k: float(v.detach()) for k, v in {self.loss: own, **geometry}.items()}
-            return own + self.geometry.weighted(geometry)
-        pose, details = self.pose(pred, batch.K, batch.T_world_cam, confidence)
+            return own + self._weighted(geometry)
+        weights = confidence if self.pose_weights == "confidence" else None
+        pose, details = self.pose(pred, batch.K, batch.T_world_cam, weights)
         terms = {"pose": pose}
         if self.weights["mse"] > 0:
             terms["mse"] = self.mse(pred, batch.sparse, batch.dense)
@@ -53,7 +62,13 @@ class Objective:
         self.parts = {**{k: float(v.detach()) for k, v in {**terms, **geometry}.items()},
                       "pose_translation_m": float(details["translation_m"].mean()),
                       "pose_rotation_rad": float(details["rotation_rad"].mean()), "pose_rejected": details["rejected"]}
-        return sum(self.weights[k] * v for k, v in terms.items()) + self.geometry.weighted(geometry)
+        return sum(self.weights[k] * v for k, v in terms.items()) + self._weighted(geometry)
+
+    def _weighted(self, terms: dict):
+        """The geometry terms weighted (:meth:`GeometryTerms.weighted`) plus the confidence term's share."""
+        rest = {k: v for k, v in terms.items() if k != "confidence"}
+        total = self.geometry.weighted(rest)
+        return total + self.confidence_weight * terms["confidence"] if "confidence" in terms else total
 
 
 def validate(model, drives: list[DriveFrames], map_frames: int, device, map_builder=None,

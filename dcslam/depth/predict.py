@@ -26,8 +26,11 @@ class NetworkCompleter:
 
     @property
     def has_confidence(self) -> bool:
-        """Whether the network says how sure it is (``forward_with_confidence``, e.g. ``nconv``)."""
-        return hasattr(self.model, "forward_with_confidence")
+        """Whether the network says how sure it is (:func:`dcslam.depth.forward.gives_confidence`: nconv, a
+        sparse-conv trained with a confidence loss)."""
+        from dcslam.depth.forward import gives_confidence
+
+        return gives_confidence(self.model)
 
     def __call__(self, sparse_m: np.ndarray) -> np.ndarray:
         """(H, W) float32 metres → (H, W) float32 metres (finite; 0 = none, else ≥ :data:`MIN_DEPTH_M`).
@@ -44,7 +47,8 @@ class NetworkCompleter:
 
     def complete(self, sparse_m: np.ndarray, rgb: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
         """Like :meth:`__call__`, with the network's confidence (H, W) float32 in [0, 1] (0 at holes), or None
-        for a network without one. ``rgb`` (H, W, 3) uint8 is required by guided networks."""
+        for a network without one; a network with an ``empty_below`` confidence leaves the pixels below it empty.
+        ``rgb`` (H, W, 3) uint8 is required by guided networks."""
         import cv2
         import torch
 
@@ -72,6 +76,9 @@ class NetworkCompleter:
                 pred, confidence = self.model(x, mask)[0, 0].float().cpu().numpy(), None
         pred = np.nan_to_num(pred, nan=0.0, posinf=0.0, neginf=0.0)
         pred[pred < MIN_DEPTH_M] = 0
+        empty_below = getattr(self.model, "empty_below", None)
+        if confidence is not None and empty_below is not None:  # what it says it cannot place stays empty
+            pred[~(confidence >= empty_below)] = 0
         if confidence is not None:
             confidence = np.clip(np.nan_to_num(confidence, nan=0.0), 0, 1)
             confidence[pred == 0] = 0

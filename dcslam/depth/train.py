@@ -36,7 +36,7 @@ import torch
 
 from dcslam.depth.config import TrainConfig
 from dcslam.depth.data import DriveFrames, frame_windows
-from dcslam.depth.forward import run_model, run_model_with_confidence
+from dcslam.depth.forward import gives_confidence, run_model, run_model_with_confidence
 from dcslam.depth.hooks import Hook, TrainState, default_hooks
 from dcslam.depth.models import build_model
 from dcslam.depth.objective import Objective
@@ -125,9 +125,11 @@ def _continue(state: TrainState, checkpoint: dict) -> None:
 
 
 def _uses_confidence(config: TrainConfig, model) -> bool:
-    """Whether the pose loss weights its ICP by the network's confidence (nconv networks with --pose-weights
-    confidence)."""
-    return config.loss == "pose" and config.pose_weights == "confidence" and hasattr(model, "forward_with_confidence")
+    """Whether the step's loss needs the network's confidence: the pose loss weighting its ICP by it (nconv
+    networks with --pose-weights confidence), or a confidence loss (--confidence-weight)."""
+    if not gives_confidence(model):
+        return False
+    return config.confidence_weight > 0 or (config.loss == "pose" and config.pose_weights == "confidence")
 
 
 def _my_chunks(config: TrainConfig, train_frames: list[DriveFrames], rank: int, world: int) -> list[tuple[int, range]]:

@@ -22,6 +22,7 @@ from dcslam.locks import output_lock
 from dcslam.workspace import Workspace, stage_config
 
 CORRECTABLE = ("sparse-conv", "nconv", "nconv-guided")  # the networks with a correct_fill option
+CONFIDENT = ("nconv", "nconv-guided")  # the networks whose confidence is their own (a sparse-conv's is its head's)
 LOGS = ("jsonl", "tensorboard")  # --log: metrics.jsonl alone, or TensorBoard's event files beside it
 
 
@@ -69,6 +70,11 @@ class TrainStageConfig(TrainSettings):
         check_choice(self, "fill", FILLS)
         check_choice(self, "log", LOGS)
         check_choice(self, "fill_output", FILL_OUTPUTS)
+        if self.confidence_weight > 0 and not (self.model in CONFIDENT or (self.model == "sparse-conv" and
+                                                                          self.correct_fill)):
+            raise DcslamError(f"--confidence-weight needs a network that gives a confidence: sparse-conv "
+                              f"--correct-fill or {', '.join(CONFIDENT)}, not {self.model}"
+                              + (" without --correct-fill" if self.model == "sparse-conv" else ""))
         if (self.fill, self.fill_output) != ("nearest", "depth") and not self.correct_fill:
             raise DcslamError(f"--fill {self.fill} --fill-output {self.fill_output} are options of --correct-fill; "
                               "add --correct-fill")
@@ -95,7 +101,9 @@ class TrainStageConfig(TrainSettings):
         return {**({"fill_holes": True} if self.fill_holes else {}),
                 **({"correct_fill": True} if self.correct_fill else {}),
                 **({"fill": self.fill} if self.fill != "nearest" else {}),
-                **({"fill_output": self.fill_output} if self.fill_output != "depth" else {})}
+                **({"fill_output": self.fill_output} if self.fill_output != "depth" else {}),
+                # a sparse-conv's confidence is its head's gate, trained only by a confidence loss
+                **({"confidence": True} if self.confidence_weight > 0 and self.model == "sparse-conv" else {})}
 
     def train_config(self, train_drives: list[Path], val_drives: list[Path],
                      init_model: Path | None = None) -> TrainConfig:

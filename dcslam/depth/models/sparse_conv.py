@@ -133,20 +133,34 @@ class SparseConvNet(nn.Module):
 
     def __init__(self, channels: int = 16, kernels: tuple[int, ...] = (11, 7, 5, 3, 3, 1), eps: float = 1e-8,
                  fill_holes: bool = False, correct_fill: bool = False, fill: str = "nearest",
-                 fill_output: str = "depth"):
+                 fill_output: str = "depth", confidence: bool = False):
         super().__init__()
+        if confidence and not correct_fill:
+            raise DcslamError("a sparse-conv confidence is its fill correction's gate: confidence needs correct_fill")
         kernels = tuple(int(k) for k in kernels)
         sizes = [1] + [channels] * (len(kernels) - 1) + [1]
         self.hparams = {"channels": int(channels), "kernels": list(kernels), "eps": float(eps)}
         if fill_holes:  # recorded only when set, so that model files of the paper's network stay as they were
             self.hparams["fill_holes"] = True
         self.hparams.update(correction_options(correct_fill, fill, fill_output))  # likewise
+        if confidence:  # likewise
+            self.hparams["confidence"] = True
+        #: whether :meth:`forward_with_confidence` says something (trained with a confidence loss); a prediction
+        #: leaves empty the pixels of confidence below :attr:`empty_below`
+        self.gives_confidence = bool(confidence)
+        self.empty_below = 0.5 if confidence else None
         self.fill_holes = bool(fill_holes)
         self.layers = nn.ModuleList(SparseConv(sizes[i], sizes[i + 1], k, eps=eps) for i, k in enumerate(kernels))
         # the network's depth (scale-free) and where it reached
         self.correction = FillCorrection(2, fill=fill, output=fill_output) if correct_fill else None
 
     def forward(self, sparse: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        return self.forward_with_confidence(sparse, mask)[0]
+
+    def forward_with_confidence(self, sparse: torch.Tensor, mask: torch.Tensor | None = None
+                                ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Depth and confidence (B, 1, H, W) each: the fill correction's gate through a sigmoid (untrained 0.98
+        everywhere; it means something only where :attr:`gives_confidence`); None without ``correct_fill``."""
         if mask is None:
             mask = (sparse > 0).to(sparse.dtype)
         _check_pair(sparse, mask, 1)
@@ -156,7 +170,8 @@ class SparseConvNet(nn.Module):
         if self.fill_holes:
             x, _ = fill_from_coarser(x, m)
             x = x * below_topmost(mask, self.layers[0].kernel_size)
-        if self.correction is not None:
-            scale = depth_scale(sparse, mask.to(sparse.dtype))
-            x = self.correction(sparse, mask, torch.cat([x / scale, m.to(x.dtype)], 1), scale)[0]
-        return x
+        if self.correction is None:
+            return x, None
+        scale = depth_scale(sparse, mask.to(sparse.dtype))
+        depth, gate = self.correction(sparse, mask, torch.cat([x / scale, m.to(x.dtype)], 1), scale)
+        return depth, torch.sigmoid(gate)
