@@ -85,20 +85,22 @@ TRAINED = tuple(dict.fromkeys(i.completer for i in INPUTS if i.completer not in 
 SURFACE_COMPLETERS = ("scanline", "planefit")  # the classical completers that keep planes and scanline structure
 CLASSICAL_RUNS = (IP_BASIC_RUN, *SURFACE_COMPLETERS)
 """Completers of ``dcslam predict --model`` (no training) behind a row."""
-SCAFFOLD_RUN = "sparse-conv-planefit"
-"""The surface experiment's learned completer: SparseConvNet correcting planefit's scaffold in inverse depth
-(:mod:`dcslam.depth.models.scaffold`), trained against exact depth with the geometry losses."""
+SCAFFOLD_RUN, CONFIDENT_RUN = "sparse-conv-planefit", "sparse-conv-planefit-sure"
+"""The surface experiment's learned completers: SparseConvNet correcting planefit's scaffold in inverse depth
+(:mod:`dcslam.depth.models.scaffold`), trained against exact depth with the geometry losses; and the same with a
+learned confidence (``confidence_weight``), whose predictions leave empty what it is not sure of."""
 _SURFACE_DEPTH = (BeamsInput("sparse", None), BeamsInput("IP-Basic", IP_BASIC_RUN),
                   *(BeamsInput(c, c) for c in SURFACE_COMPLETERS),
-                  BeamsInput("SparseConvNet on planefit", SCAFFOLD_RUN, needs_exact=True))
+                  BeamsInput("SparseConvNet on planefit", SCAFFOLD_RUN, needs_exact=True),
+                  BeamsInput("SparseConvNet on planefit, sure", CONFIDENT_RUN, needs_exact=True))
 SURFACE_INPUTS = (*_SURFACE_DEPTH, *(BeamsInput(i.label + MEASURED_LABEL, i.completer, sources=MEASURED,
                                                 needs_exact=i.needs_exact)
                                      for i in _SURFACE_DEPTH if i.completer is not None),
                   BeamsInput("exact" + MEASURED_LABEL, "", sources=MEASURED, needs_exact=True),
                   BeamsInput("exact", "", needs_exact=True))
-"""The rows of the surface experiment: the classical completers and the network on planefit's scaffold, each in depth
+"""The rows of the surface experiment: the classical completers and the networks on planefit's scaffold, each in depth
 mode and with measured sources, between the sparse input and exact depth (:mod:`dcslam.stages.experiments.surface`)."""
-SURFACE_TRAINED = (SCAFFOLD_RUN,)
+SURFACE_TRAINED = (SCAFFOLD_RUN, CONFIDENT_RUN)
 LEARNED = (*TRAINED, *SURFACE_TRAINED)
 """Run names of every learned completer a table may hold, whose rows gather the runs of several training seeds."""
 INPUT_OF = {i.label: i for i in (*INPUTS, *SURFACE_INPUTS)}  # a label names one input in every catalogue

@@ -11,9 +11,9 @@ from dcslam.stages.experiments.surface import PROFILES, SurfaceProfile
 from tests.fixtures import depth as depth_fixtures
 
 ARGS = ["reproduce", "--table", "surface", "--profile", "smoke"]
-NET = "SparseConvNet on planefit"
-DEPTH_ROWS = ("sparse", "IP-Basic", "scanline", "planefit", NET)
-MEASURED_ROWS = tuple(f"{label}, measured sources" for label in ("IP-Basic", "scanline", "planefit", NET, "exact"))
+NETS = ("SparseConvNet on planefit", "SparseConvNet on planefit, sure")
+DEPTH_ROWS = ("sparse", "IP-Basic", "scanline", "planefit", *NETS)
+MEASURED_ROWS = tuple(f"{label}, measured sources" for label in ("IP-Basic", "scanline", "planefit", *NETS, "exact"))
 
 
 @pytest.fixture
@@ -31,7 +31,7 @@ def tiny_drives(monkeypatch):
     monkeypatch.setattr("dcslam.stages.prepare.run", prepare)
 
 
-@pytest.mark.slow  # a tiny training, four completers at two beam counts, 26 SLAM runs
+@pytest.mark.slow  # two tiny trainings, five completers at two beam counts, 30 SLAM runs
 def test_smoke_profile_writes_the_surface_table_and_rebuilds_it(cli, tmp_path, tiny_drives):
     result = cli(*ARGS, "--workspace", tmp_path)
     assert result.exit_code == 0, result.output
@@ -56,13 +56,16 @@ def test_smoke_profile_writes_the_surface_table_and_rebuilds_it(cli, tmp_path, t
     assert {"signed_rank_p", "median_diff", "gap_closed_median"} <= set(rows[0])
     for layer in ("scanline-sparse16", "planefit-sparse64+measured", "exact+measured-sparse16", "exact", "sparse@16"):
         assert (tmp_path / "slam" / layer / "drive_d.txt").exists(), layer
-    # the network on planefit's scaffold: trained once (one seed), against exact depth, its layers predicted
+    # the networks on planefit's scaffold: trained once each (one seed), against exact depth, their layers predicted
     import json
 
     settings = json.loads((tmp_path / "runs" / "sparse-conv-planefit" / "config.json").read_text())["settings"]
     assert settings["model_hparams"] == {"correct_fill": True, "fill": "planefit", "fill_output": "inverse-residual"}
     assert settings["target"] == "exact" and settings["input_mix"] == ["sparse", "sparse@16"]
-    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == ["sparse-conv-planefit"]
+    assert sorted(p.name for p in (tmp_path / "runs").iterdir()) == ["sparse-conv-planefit",
+                                                                     "sparse-conv-planefit-sure"]
+    sure = json.loads((tmp_path / "runs" / "sparse-conv-planefit-sure" / "config.json").read_text())["settings"]
+    assert sure["model_hparams"]["confidence"] is True and sure["confidence_weight"] > 0
     assert (tmp_path / "slam" / "sparse-conv-planefit-sparse16+measured" / "drive_d.txt").exists()
     again = cli(*ARGS, "--workspace", tmp_path)
     assert again.exit_code == 0, again.output
@@ -79,12 +82,15 @@ def test_the_plan_lists_the_completers_and_both_icp_modes_and_trains_the_network
     stages = {s.name: s for s in planned_stages(Workspace(tmp_path / "ws"), PROFILES["quick"], "surface")}
     names = list(stages)
     assert names[:2] == ["synth", "prepare-kitti"] and names[-1] == "score-surface"
-    assert [n for n in names if n.startswith(("train-", "filter-"))] == ["train-sparse-conv-planefit"]
+    assert [n for n in names if n.startswith(("train-", "filter-"))] == ["train-sparse-conv-planefit",
+                                                                         "train-sparse-conv-planefit-sure"]
+    assert stages["train-sparse-conv-planefit-sure"].config.confidence_weight > 0
+    assert stages["train-sparse-conv-planefit"].config.confidence_weight == 0
     net = stages["train-sparse-conv-planefit"].config
     assert (net.model, net.correct_fill, net.fill, net.fill_output, net.target) == (
         "sparse-conv", True, "planefit", "inverse-residual", "exact")
     assert net.input_mix == ["sparse", "sparse@16", "sparse@8"] and net.normal_weight > 0
-    completers = ("ip-basic-fast", "scanline", "planefit", "sparse-conv-planefit")
+    completers = ("ip-basic-fast", "scanline", "planefit", "sparse-conv-planefit", "sparse-conv-planefit-sure")
     predictions = {n for n in names if n.startswith("predict-")}
     assert predictions == {f"predict-{c}-sparse{b}" for c in completers for b in (64, 16, 8)}
     assert stages["predict-planefit-sparse8"].config.model == "planefit"
@@ -102,7 +108,7 @@ def test_the_plan_lists_the_completers_and_both_icp_modes_and_trains_the_network
     # the study: the network with 3 training seeds, each its own run, predictions and SLAM runs
     study = [s.name for s in planned_stages(Workspace(tmp_path / "ws"), PROFILES["study"], "surface", seeds=3)]
     assert [n for n in study if n.startswith("train-")] == [
-        "train-sparse-conv-planefit", "train-sparse-conv-planefit-s1", "train-sparse-conv-planefit-s2"]
+        f"train-{run}{k}" for k in ("", "-s1", "-s2") for run in ("sparse-conv-planefit", "sparse-conv-planefit-sure")]
     assert "predict-sparse-conv-planefit-s2-sparse16" in study
     assert any(n.startswith("slam-sparse-conv-planefit-s1-sparse8+measured-") for n in study)
 

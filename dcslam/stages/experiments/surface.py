@@ -6,8 +6,8 @@ The stages, through the stage engine and the beams experiment's machinery
 (:mod:`dcslam.stages.experiments.beams`)::
 
     synth (unless a KITTI root is given) → prepare-kitti --beams 16,8 (plus depth/exact on generated drives)
-    → train SparseConvNet on planefit's scaffold (:data:`SCAFFOLD_RECIPE`; ``seeds`` times; only on drives with
-      exact depth, its target)
+    → train SparseConvNet on planefit's scaffold (:data:`SCAFFOLD_RECIPE`), and the same with a learned confidence
+      (:data:`SURE`) (``seeds`` times each; only on drives with exact depth, their target)
     → predict IP-Basic, scanline, planefit and each trained run at every beam count
     → slam over every (input, beam count, test drive): sparse, each completion, exact depth, and each completion
       and exact depth again with measured ICP sources (the B-beam pixels against the completed map)
@@ -23,7 +23,8 @@ from pathlib import Path
 
 from dcslam.errors import DcslamError
 from dcslam.report.seeds import seed_run_name
-from dcslam.report.table_beams import CLASSICAL_RUNS, FULL_BEAMS, SCAFFOLD_RUN, SURFACE_INPUTS, SURFACE_TRAINED
+from dcslam.report.table_beams import (CLASSICAL_RUNS, CONFIDENT_RUN, FULL_BEAMS, SCAFFOLD_RUN, SURFACE_INPUTS,
+                                       SURFACE_TRAINED)
 from dcslam.stages import prepare, slam, train
 from dcslam.stages.experiments.beams import (BeamsTableConfig, have_exact, make_slam_stages, predict_stages,
                                              run_table, train_stage, workspace_beams)
@@ -81,29 +82,36 @@ class SurfaceProfile:
 SCAFFOLD_RECIPE = {"model": "sparse-conv", "correct_fill": True, "fill": "planefit", "fill_output": "inverse-residual",
                    "target": "exact", "normal_weight": 100.0, "plane_weight": 7.0, "edge_weight": 10.0,
                    "l1_weight": 30.0, "lr": 1e-3, "lr_schedule": "cosine"}
+# the same with a learned confidence: its predictions leave empty what the head's gate is not sure it placed (within
+# PointFusion's association gate of the exact depth); weighted to the order of the other terms at the start
+SURE = {"confidence_weight": 10.0}
 _MIX = {"input_mix": ["sparse", "sparse@16", "sparse@8"]}
 _QUICK = {"epochs": 2, "max_frames": 31, "scale": 0.5}  # as the beams and Table 5.2 quick profiles
+
+
+def _networks(options: Mapping) -> dict:
+    """The trained rows' options: the network on planefit's scaffold, and the same with a learned confidence."""
+    return {SCAFFOLD_RUN: {**SCAFFOLD_RECIPE, **options}, CONFIDENT_RUN: {**SCAFFOLD_RECIPE, **SURE, **options}}
 PROFILES = {
     "smoke": SurfaceProfile(
         name="smoke", drives=3, frames=12, beams=(64, 16), slam_frames=2, slam={"iterations": 3, "voxel_size": 0.2},
-        train={SCAFFOLD_RUN: {**SCAFFOLD_RECIPE, "input_mix": ["sparse", "sparse@16"], "epochs": 1, "max_frames": 2,
-                              "scale": 0.25}},
+        train=_networks({"input_mix": ["sparse", "sparse@16"], "epochs": 1, "max_frames": 2, "scale": 0.25}),
         description="a check that every stage runs (3 drives of 12 frames, 64 and 16 beams, tiny training, SLAM "
                     "over 2 frames): numbers mean nothing"),
     "quick": SurfaceProfile(
         name="quick", drives=8, frames=42, split=(3, 1, 4), slam_frames=30,
-        train={SCAFFOLD_RUN: {**SCAFFOLD_RECIPE, **_MIX, **_QUICK}},
+        train=_networks({**_MIX, **_QUICK}),
         description="8 generated drives of 42 frames (3 train / 1 val / 4 test, the drives of the beams and Table "
                     "5.2 quick profiles), 64/16/8 beams, SparseConvNet on planefit's scaffold trained 2 epochs at "
-                    "half resolution, SLAM on the first 30 frames of each test drive, with the depth's own and with "
-                    "the measured ICP sources"),
+                    "half resolution (with and without a learned confidence), SLAM on the first 30 frames of each test "
+                    "drive, with the depth's own and with the measured ICP sources"),
     "study": SurfaceProfile(
         name="study", drives=14, frames=42, split=(5, 1, 8), slam_frames=30, seeds=3,
-        train={SCAFFOLD_RUN: {**SCAFFOLD_RECIPE, **_MIX, **_QUICK}},
+        train=_networks({**_MIX, **_QUICK}),
         description="14 generated drives of 42 frames (5 train / 1 val / 8 test, the drives of the beams and Table "
-                    "5.2 study profiles), 64/16/8 beams, SparseConvNet on planefit's scaffold with 3 training seeds "
-                    "(the quick recipe), SLAM on the first 30 frames of each test drive; intervals and paired tests "
-                    "over seeds and drives"),
+                    "5.2 study profiles), 64/16/8 beams, SparseConvNet on planefit's scaffold (with and without a "
+                    "learned confidence) with 3 training seeds (the quick recipe), SLAM on the first 30 frames of "
+                    "each test drive; intervals and paired tests over seeds and drives"),
 }
 
 
