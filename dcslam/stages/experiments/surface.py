@@ -92,6 +92,8 @@ _QUICK = {"epochs": 2, "max_frames": 31, "scale": 0.5}  # as the beams and Table
 def _networks(options: Mapping) -> dict:
     """The trained rows' options: the network on planefit's scaffold, and the same with a learned confidence."""
     return {SCAFFOLD_RUN: {**SCAFFOLD_RECIPE, **options}, CONFIDENT_RUN: {**SCAFFOLD_RECIPE, **SURE, **options}}
+
+
 PROFILES = {
     "smoke": SurfaceProfile(
         name="smoke", drives=3, frames=12, beams=(64, 16), slam_frames=2, slam={"iterations": 3, "voxel_size": 0.2},
