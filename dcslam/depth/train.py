@@ -196,8 +196,8 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     checkpoint = read_checkpoint(run_dir / "last.pt", model, optimizer) if resume else None
     if _uses_confidence(config, model) and world > 1:
-        raise DcslamError("the pose loss with confidence weights runs in one process; pass --pose-weights none or "
-                          "--nproc 1")
+        raise DcslamError("a loss through the network's confidence (the pose loss with confidence weights, "
+                          "--confidence-weight) runs in one process; pass --nproc 1 (or --pose-weights none)")
     state = TrainState(run_dir, config, device, model, optimizer, Objective(config, map_builder), train_frames,
                        val_frames, _my_chunks(config, train_frames, rank, world), rank)
     if checkpoint is not None:

@@ -121,3 +121,16 @@ def test_a_tiny_run_trains_the_confidence_and_predicts_with_it(cli, tmp_path):
     assert layer.confidence is not None and np.isfinite(layer.confidence).all()
     assert ((layer.depth == 0) == (layer.confidence == 0)).all()  # empty exactly where it is not sure
     assert (layer.confidence[layer.depth > 0] >= 0.5).all()
+
+
+def test_a_confidence_loss_is_refused_across_processes(tmp_path):
+    """Its step runs the network outside DistributedDataParallel (as the pose loss's confidence weights do), so it
+    would not share gradients: more than one process is refused before anything is trained."""
+    from dcslam.depth.config import TrainConfig
+    from dcslam.depth.train import train_loop
+
+    config = TrainConfig(model="sparse-conv", confidence_weight=1.0,
+                         model_hparams={"correct_fill": True, "confidence": True})
+    with pytest.raises(DcslamError, match="runs in one process; pass --nproc 1"):
+        train_loop(tmp_path, config, torch.device("cpu"), [], [], world=2)
+    assert not list(tmp_path.iterdir())
