@@ -120,7 +120,7 @@ GIVEN = [("--loss", "pose", "loss", "pose"), ("--mask", "sparse", "mask", "spars
          ("--input-mix", "sparse@8", "input_mix", ["sparse@8"]), ("--target", "exact", "target", "exact"),
          ("--l1-weight", "2", "l1_weight", 2.0), ("--lr-schedule", "cosine", "lr_schedule", "cosine"),
          ("--normal-weight", "0.5", "normal_weight", 0.5), ("--plane-weight", "3", "plane_weight", 3.0),
-         ("--edge-weight", "1.5", "edge_weight", 1.5),
+         ("--edge-weight", "1.5", "edge_weight", 1.5), ("--confidence-weight", "0.75", "confidence_weight", 0.75),
          ("--pose-frames", "5", "pose_frames", 5), ("--pose-weight", "2", "pose_weight", 2.0),
          ("--mse-weight", "0.5", "mse_weight", 0.5), ("--chamfer-weight", "0.25", "chamfer_weight", 0.25),
          ("--pose-translation-weight", "3", "pose_translation_weight", 3.0),
