@@ -1,9 +1,10 @@
 """What ``dcslam reproduce`` will run and what it will cost, printed before it starts (``--dry-run``: only that).
 
 The cost of a stage of a kind is ``stage_s + units × unit_s`` CPU seconds: ``units`` its work in the units of its kind
-(generated frames, drive frames, training steps (frames × epochs), predicted or filtered frames, SLAM frames, SLAM
-runs scored; :func:`stage_work`), counted at the profile's settings (image scale, model, loss, map frames, completer,
-SLAM settings), so unit costs hold for the profile they were measured at. Unit costs are measured, never assumed:
+(generated frames, drive frames, training steps (frames × epochs), predicted or filtered frames, SLAM frames, the
+SLAM frames of the runs scored; :func:`stage_work`), counted at the profile's settings (image scale, model, loss, map
+frames, completer, SLAM settings), so unit costs hold for the profile they were measured at.
+Unit costs are measured, never assumed:
 
 - ``--costs-from DIR``: the stamps of a finished reproduction (each records the CPU seconds of its stage):
   seconds per unit of each kind, no per-stage part;
@@ -33,10 +34,14 @@ UNITS = {"synth": "generated frames", "prepare-kitti": "drive frames",
          "train-pose": "training steps (frames x epochs)",
          "predict": "predicted frames", "predict-classical": "predicted frames", "filter": "filtered frames",
          "slam-sparse": "SLAM frames", "slam-dense": "SLAM frames", "slam-completed": "SLAM frames",
-         "slam-long": "SLAM frames", "score": "SLAM runs scored"}
+         "slam-long": "SLAM frames", "score": "SLAM frames scored"}
 # IP-Basic's predictions are kind predict-classical; every other classical completer's are a kind of their own,
 # predict-<completer> (their costs differ tenfold: planefit against scanline)
 CLASSICAL_KIND = ("ip-basic", "ip-basic-fast")
+# a network trained on a classical completer's fill (``--correct-fill --fill F``) computes that fill for every frame
+# it trains on or predicts: its trainings are kind train-<loss>+<F>, its predictions predict+<F> (the study's
+# scaffold networks cost 3.4x and 2.4x a plain network's units)
+FILL_SUFFIX = "+"
 # SLAM on a LiDAR-like layer, on annotated depth (a fifth of the pixels) and on full images (completions, filtered
 # completions, exact depth, each with its companion run) cost about 1 : 3.4 : 5.4 per frame at the quick settings
 # (the shipped probe figures): a SLAM stage's kind is its input's (:func:`slam_kind`)
@@ -56,17 +61,22 @@ class DriveFrames:
         return sum(self.frames.get(n, 0) for n in (self.frames if names is None else names))
 
 
-def stage_kind(name: str, config: dict) -> str:
-    """The kind of stage ``name`` (its stamp's name) with ``config`` (its options as plain values)."""
+def stage_kind(name: str, config: dict, fills: dict[str, str] | None = None) -> str:
+    """The kind of stage ``name`` (its stamp's name) with ``config`` (its options as plain values); ``fills``: the
+    fill each trained run of the plan corrects (:func:`run_fills`), which its predictions compute too."""
     if name == "synth":
         return "synth"
     if name == "prepare-kitti":
         return "prepare-kitti"
     if name.startswith("train-"):
-        return f"train-{config.get('loss', 'mse')}"
+        fill = _fill(config)
+        return f"train-{config.get('loss', 'mse')}" + (f"{FILL_SUFFIX}{fill}" if fill else "")
     if name.startswith("predict-"):
         model = config.get("model")
-        return "predict" if not model else "predict-classical" if model in CLASSICAL_KIND else f"predict-{model}"
+        if not model:
+            fill = (fills or {}).get(str(config.get("run")))
+            return "predict" + (f"{FILL_SUFFIX}{fill}" if fill else "")
+        return "predict-classical" if model in CLASSICAL_KIND else f"predict-{model}"
     if name.startswith("filter-"):
         return "filter"
     if name.startswith("slam-long-"):
@@ -78,6 +88,18 @@ def stage_kind(name: str, config: dict) -> str:
     raise DcslamError(f"stage {name}: not a stage of dcslam reproduce")
 
 
+def _fill(config: dict) -> str | None:
+    """The classical fill a training ``config`` corrects (None: the network's own depth)."""
+    return str(config["fill"]) if config.get("correct_fill") and config.get("fill") else None
+
+
+def run_fills(named_configs) -> dict[str, str]:
+    """``{run: fill}`` of the trainings among ``named_configs`` (``(stage name, config)`` pairs) that correct a
+    classical fill: the predictions by those runs compute it for every frame."""
+    return {str(config.get("name", name.removeprefix("train-"))): _fill(config)
+            for name, config in named_configs if name.startswith("train-") and _fill(config)}
+
+
 def slam_kind(depth: str) -> str:
     """The kind of a SLAM stage on the layer ``depth`` (a stage's ``depth`` option): ``slam-sparse`` for the
     LiDAR's own depth (``sparse``, ``sparse@N``), ``slam-dense`` for the annotated ``dense`` depth, ``slam-completed``
@@ -87,10 +109,11 @@ def slam_kind(depth: str) -> str:
     return "slam-dense" if depth == "dense" else "slam-completed"
 
 
-def stage_work(name: str, config: dict, drives: DriveFrames, slam_runs: int) -> tuple[str, float]:
-    """``(kind, units)`` of stage ``name`` with ``config`` over ``drives`` (``slam_runs``: the SLAM runs a scoring
-    stage scores)."""
-    kind = stage_kind(name, config)
+def stage_work(name: str, config: dict, drives: DriveFrames, slam_frames: float,
+               fills: dict[str, str] | None = None) -> tuple[str, float]:
+    """``(kind, units)`` of stage ``name`` with ``config`` over ``drives`` (``slam_frames``: the frames of the SLAM
+    runs a scoring stage scores, whose trajectories, depths and surfaces it reads; ``fills``: :func:`run_fills`)."""
+    kind = stage_kind(name, config, fills)
     test = drives.splits.get("test", [])
     if kind == "synth":
         return kind, float(config["drives"] * config["frames"])
@@ -105,7 +128,13 @@ def stage_work(name: str, config: dict, drives: DriveFrames, slam_runs: int) -> 
     if kind in (*SLAM_KINDS, "slam-long"):
         frames = [drives.frames.get(Path(d).stem, 0) for d in config["drive"] or test]
         return kind, float(sum(min(n, config["frames"]) if config["frames"] else n for n in frames))
-    return kind, float(slam_runs)
+    return kind, float(slam_frames)
+
+
+def _slam_frames(named_configs, drives: DriveFrames) -> float:
+    """The SLAM frames of the SLAM stages among ``named_configs``: what a scoring stage of the plan scores."""
+    return sum(stage_work(name, config, drives, 0.0)[1] for name, config in named_configs
+               if name.startswith("slam-"))
 
 
 def _stamps(root: Path) -> list[tuple[str, dict]]:
@@ -140,11 +169,12 @@ def measure(root: Path) -> dict[str, tuple[float, float, int]]:
         with DriveFile(drive) as d:
             frames[drive.stem] = len(d)
     drives = DriveFrames(frames, splits)
-    slam_runs = sum(name.startswith("slam-") for name, _ in records)
+    known = [(name, record["config"]) for name, record in records if _known(name, record["config"], drives)]
+    slam_frames, fills = _slam_frames(known, drives), run_fills(known)
     totals: dict[str, tuple[float, float, int]] = {}
     for name, record in records:
         try:
-            kind, units = stage_work(name, record["config"], drives, slam_runs)
+            kind, units = stage_work(name, record["config"], drives, slam_frames, fills)
         except (DcslamError, KeyError, TypeError):
             continue  # a stage this estimate does not know, or a stamp of another version's options
         cpu = record.get("cpu_seconds")
@@ -152,6 +182,15 @@ def measure(root: Path) -> dict[str, tuple[float, float, int]]:
         total, work, stages = totals.get(kind, (0.0, 0.0, 0))
         totals[kind] = (total + seconds, work + units, stages + 1)
     return totals
+
+
+def _known(name: str, config: dict, drives: DriveFrames) -> bool:
+    """Whether a stamp's stage is one this estimate knows, with the options it reads."""
+    try:
+        stage_work(name, config, drives, 0.0)
+    except (DcslamError, KeyError, TypeError):
+        return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -246,14 +285,18 @@ class Estimate:
         return sum(s for _, _, s in self.rows.values() if s is not None)
 
 
-def estimate(stages: list, drives: DriveFrames, costs: UnitCosts) -> Estimate:
-    """The :class:`Estimate` of ``stages`` (:class:`dcslam.stages.pipeline.Stage`) over ``drives``."""
+def estimate(stages: list, drives: DriveFrames, costs: UnitCosts, planned: list | None = None) -> Estimate:
+    """The :class:`Estimate` of ``stages`` (:class:`dcslam.stages.pipeline.Stage`) over ``drives``; ``planned``: the
+    whole plan they are part of (default: ``stages``): a scoring stage scores all its SLAM runs, and its trainings
+    say which runs correct a fill."""
     from dcslam.stages.config import to_dict
 
-    slam_runs = sum(s.name.startswith("slam-") for s in stages)
+    named = [(s.name, to_dict(s.config)) for s in stages]
+    whole = named if planned is None else [(s.name, to_dict(s.config)) for s in planned]
+    slam_frames, fills = _slam_frames(whole, drives), run_fills(whole)  # a scoring stage scores every run
     rows: dict[str, list] = {}
-    for stage in stages:
-        kind, units = stage_work(stage.name, to_dict(stage.config), drives, slam_runs)
+    for name, config in named:
+        kind, units = stage_work(name, config, drives, slam_frames, fills)
         row = rows.setdefault(kind, [0, 0.0])
         row[0] += 1
         row[1] += units
@@ -281,7 +324,8 @@ def planned_drives(ws, profile, kitti_root: Path | None, splits: dict[str, list[
 
 def unit_of(kind: str) -> str:
     """What a unit of ``kind`` is, as the estimate prints it."""
-    return UNITS.get(kind) or ("predicted frames" if kind.startswith("predict-") else "?")
+    base = kind.split(FILL_SUFFIX, 1)[0]
+    return UNITS.get(base) or ("predicted frames" if base.startswith("predict") else "?")
 
 
 def _hours(seconds: float | None) -> str:
@@ -301,7 +345,7 @@ def plan_text(ws, config) -> str:
     todo = [s for s in stages if not checker.up_to_date(s)]
     drives = planned_drives(ws, profile, config.kitti, splits)
     costs = unit_costs(ws.root, config.costs_from, profile.name)
-    result = estimate(todo, drives, costs)
+    result = estimate(todo, drives, costs, planned=stages)
     trained = sorted({s.seed for s in stages if s.seed is not None})
     lines = [f"dcslam reproduce --table {config.table} --profile {profile.name}: {len(splits.get('test', []))} test "
              f"drive(s), {seeds} training seed(s) per trained run (seeds {', '.join(map(str, trained)) or '—'}); "

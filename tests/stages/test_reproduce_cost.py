@@ -1,5 +1,6 @@
 """What dcslam reproduce prints before it runs: its stages and their cost from measured stage timings."""
 import json
+from pathlib import Path
 
 import pytest
 
@@ -7,8 +8,8 @@ from dcslam.errors import DcslamError
 from dcslam.stages.experiments.table_5_2 import PROFILES
 from dcslam.stages.reproduce import ReproduceConfig
 from dcslam.stages.reproduce_cost import (CALIBRATION, SLAM_KINDS, DriveFrames, UnitCosts, estimate, measure,
-                                          plan_text, planned_drives, read_costs, shipped_costs, stage_work,
-                                          unit_costs)
+                                          plan_text, planned_drives, read_costs, run_fills, shipped_costs,
+                                          stage_work, unit_costs, unit_of)
 from dcslam.stages.reproduce_plan import planned_splits, planned_stages
 from dcslam.workspace import Workspace
 
@@ -38,9 +39,42 @@ def test_work_of_each_stage_kind():
         assert stage_work("slam-x-t1", {"depth": depth, "drive": ["t1"], "frames": 30}, DRIVES, 0)[0] == \
             "slam-completed"
     assert stage_work("slam-long-sparse-t1", {"drive": ["t1"], "frames": 0}, DRIVES, 0) == ("slam-long", 32.0)
-    assert stage_work("score-tables", {}, DRIVES, 7) == ("score", 7.0)
+    assert stage_work("score-tables", {}, DRIVES, 70) == ("score", 70.0)  # the SLAM frames of the runs it scores
     with pytest.raises(DcslamError, match="not a stage"):
         stage_work("bake-bread", {}, DRIVES, 0)
+
+
+def test_a_network_on_a_classical_fill_is_a_kind_of_its_own_and_so_are_its_predictions():
+    """A network that corrects a fill computes it for every frame it trains on and predicts (the study's scaffold
+    networks cost 3.4x and 2.4x a plain network's units): its kinds name the fill."""
+    scaffold = {"loss": "mse", "epochs": 1, "max_frames": 25, "stride": 1, "correct_fill": True, "fill": "planefit",
+                "name": "net"}
+    assert stage_work("train-net", scaffold, DRIVES, 0) == ("train-mse+planefit", 70.0)
+    assert stage_work("train-net", scaffold | {"correct_fill": False}, DRIVES, 0)[0] == "train-mse"
+    plain = {**scaffold, "correct_fill": False, "name": "plain"}
+    fills = run_fills([("train-net", scaffold), ("train-plain", plain), ("slam-x-t1", {"depth": "exact"})])
+    assert fills == {"net": "planefit"}
+    assert stage_work("predict-net-sparse16", {"run": "net", "model": None}, DRIVES, 0, fills) == \
+        ("predict+planefit", 44.0)
+    assert stage_work("predict-plain", {"run": "plain", "model": None}, DRIVES, 0, fills)[0] == "predict"
+    assert stage_work("predict-net-sparse16", {"run": "net", "model": None}, DRIVES, 0)[0] == "predict"  # unknown run
+    assert unit_of("predict+planefit") == "predicted frames" and unit_of("train-mse+planefit").startswith("training")
+
+
+def test_scoring_is_priced_by_the_slam_frames_of_the_whole_plan():
+    """A scoring stage reads every run's trajectory, depths and surfaces: its units are the SLAM frames of every SLAM
+    stage of the plan, also when those are up to date and only the scoring is to run."""
+    plan = Workspace(Path("/nonexistent-plan"))
+    stages = planned_stages(plan, PROFILES["smoke"])
+    drives = planned_drives(plan, PROFILES["smoke"], None, planned_splits(plan, PROFILES["smoke"]))
+    costs = UnitCosts({"score": 1.0}, "test")
+    slam_frames = sum(units for kind, (_, units, _) in estimate(stages, drives, costs).rows.items()
+                      if kind.startswith("slam-"))
+    assert slam_frames == 14 * 2 + 3 * 2  # 14 runs of 2 frames, 3 over the whole (2-frame) test drive
+    assert estimate(stages, drives, costs).rows["score"][1] == slam_frames
+    score = [s for s in stages if s.name.startswith("score-")]
+    assert estimate(score, drives, costs, planned=stages).rows["score"] == (1, slam_frames, slam_frames)
+    assert estimate(score, drives, costs).rows["score"][1] == 0  # without the plan: nothing known to score
 
 
 def test_unit_costs_are_measured_from_the_stamps_of_finished_stages(tmp_path):

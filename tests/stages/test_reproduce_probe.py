@@ -6,7 +6,7 @@ import pytest
 
 from dcslam.stages.experiments.table_5_2 import PROFILES
 from dcslam.stages.reproduce_cost import CALIBRATION, read_costs
-from dcslam.stages.reproduce_probe import PROBE_SIZES, PROBE_SLAM, _wanted, fit, probe_profile
+from dcslam.stages.reproduce_probe import PROBE_SIZES, PROBE_SLAM, SCAFFOLD_PROBE, _wanted, fit, probe_profile
 
 
 def test_fit_is_the_line_through_the_two_samples_per_stage():
@@ -40,6 +40,7 @@ def test_probe_profile_shrinks_the_counts_and_keeps_the_settings():
     assert not wanted("slam-mse-sparse-2011_09_26_drive_1002_sync") and not wanted("train-chamfer-1")
     assert not wanted("slam-mse-dense+edges-2011_09_26_drive_1002_sync") and not wanted("predict-pose")
     assert wanted("predict-planefit") and wanted("predict-scanline") and wanted("predict-ip-basic-fast")
+    assert wanted(f"train-{SCAFFOLD_PROBE}") and wanted(f"predict-{SCAFFOLD_PROBE}")  # the network on a fill
 
 
 def test_calibrate_writes_the_fit_the_dry_run_then_estimates_with(cli, tmp_path, monkeypatch):
