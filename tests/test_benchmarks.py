@@ -1,0 +1,78 @@
+"""The scripts under benchmarks/ call dcslam, and no other test runs them: every name they import from dcslam (at the
+top or inside a function, where a removed name only fails when the script runs) and from each other must exist."""
+from __future__ import annotations
+
+import ast
+import importlib
+from pathlib import Path
+
+import pytest
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+SCRIPTS = sorted(BENCHMARKS.glob("*.py"))
+
+
+def imported_names(tree: ast.AST) -> list[tuple[str, str | None, int]]:
+    """``(module, name or None, line)`` of every ``import`` and ``from … import`` in ``tree``, at any depth."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            found += [(node.module, alias.name, node.lineno) for alias in node.names]
+        elif isinstance(node, ast.Import):
+            found += [(alias.name, None, node.lineno) for alias in node.names]
+    return found
+
+
+def missing(module: str, name: str | None) -> str | None:
+    """What of ``from module import name`` (``import module`` when ``name`` is None) does not exist, or None."""
+    try:
+        loaded = importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        return f"module {exc.name}"
+    if name is None or name == "*" or hasattr(loaded, name):
+        return None
+    try:
+        importlib.import_module(f"{module}.{name}")  # a submodule
+    except ModuleNotFoundError:
+        return f"{module}.{name}"
+    return None
+
+
+def sibling_missing(module: str, name: str) -> str | None:
+    """What of ``from <benchmark script> import name`` does not exist (the scripts import each other by file name)."""
+    tree = ast.parse((BENCHMARKS / f"{module}.py").read_text())
+    defined = {node.name for node in tree.body if isinstance(node, (ast.FunctionDef, ast.ClassDef))}
+    for node in tree.body:
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(
+            node, ast.AnnAssign) else []
+        defined |= {t.id for t in targets if isinstance(t, ast.Name)}
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            defined |= {(alias.asname or alias.name).split(".")[0] for alias in node.names}
+    return None if name in defined else f"{module}.{name}"
+
+
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.stem)
+def test_every_dcslam_name_a_benchmark_imports_exists(script):
+    siblings = {p.stem for p in SCRIPTS}
+    problems = []
+    for module, name, line in imported_names(ast.parse(script.read_text())):
+        if module.split(".")[0] == "dcslam":
+            gone = missing(module, name)
+        elif module in siblings and name is not None:
+            gone = sibling_missing(module, name)
+        else:
+            continue
+        if gone:
+            problems.append(f"{script.name}:{line}: {gone} does not exist")
+    assert not problems, "\n".join(problems)
+
+
+def test_the_check_finds_a_removed_name(tmp_path):
+    """The check fails where it should: a name dcslam does not have, a module it does not have, a sibling's name."""
+    assert missing("dcslam.slam.health", "summarise") is None and missing("dcslam.slam", "health") is None
+    assert missing("dcslam.slam.health", "no_such_function") == "dcslam.slam.health.no_such_function"
+    assert missing("dcslam.no_such_module", None) == "module dcslam.no_such_module"
+    assert sibling_missing("slam_drives", "score") is None
+    assert sibling_missing("slam_drives", "no_such_function") == "slam_drives.no_such_function"
+    tree = ast.parse("def f():\n    from dcslam.slam.drive import run_drive\n")
+    assert imported_names(tree) == [("dcslam.slam.drive", "run_drive", 2)]  # inside a function too
