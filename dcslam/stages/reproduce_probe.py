@@ -5,14 +5,15 @@ The probe runs a sample of Table 5.2's stages at a profile's settings (its image
 filters): synth, prepare-kitti, one training of each loss (mse, chamfer, pose) and one of the surface experiment's
 network on planefit's scaffold (:data:`SCAFFOLD_PROBE`: it computes the fill of every frame it trains on and
 predicts), a prediction by each trained run and by IP-Basic and by each other classical completer
-(:data:`PROBE_COMPLETERS`), a filter, SLAM of sparse, annotated dense
-and predicted depth and over a whole drive, and the tables; twice, on 3 generated drives of :data:`PROBE_SIZES` frames
-with depth (training and SLAM on as many frames; the larger sample runs SLAM on one more completion, so that the tables
-score more runs), each in a temporary workspace, with one torch thread; the trainings are measured on a second run, as
-the first training of a process also sets torch up. Each stage's stamp records its CPU seconds; the two samples of
-each kind give its fixed part per stage (``stage_s``) and its part per unit (``unit_s``) by a line through the two
-(:func:`fit`), written for the profile into ``<workspace>/.reproduce/calibration.json`` (``reproduce_costs.json``'s
-layout), which the estimate then uses.
+(:data:`PROBE_COMPLETERS`), a filter, SLAM of sparse, annotated dense and predicted depth and over a whole drive,
+and the tables; twice, on 3 generated drives of :data:`PROBE_SIZES` frames with depth (training and SLAM on as many
+frames; the larger sample runs SLAM on one more completion, so that the tables score more runs), each in a temporary
+workspace, with one torch thread. The larger sample runs first and generates the drives; the smaller prepares the
+first frames of the same drives (synth, about half of a sample's CPU, runs once). The trainings are measured on a
+second run, as the first training of a process also sets torch up. Each stage's stamp records its CPU seconds; the
+two samples of each kind give its fixed part per stage (``stage_s``) and its part per unit (``unit_s``) by a line
+through the two (:func:`fit`; synth: per generated frame), written for the profile into
+``<workspace>/.reproduce/calibration.json`` (``reproduce_costs.json``'s layout), which the estimate then uses.
 """
 from __future__ import annotations
 
@@ -47,16 +48,20 @@ WARM_IMPORTS = ("torch", "matplotlib.pyplot", "dcslam.depth.train", "dcslam.dept
 
 
 class _Sample(Pipeline):
-    """A pipeline that runs, in this process, only the stages ``wanted`` (a predicate on stage names) accepts."""
+    """A pipeline that runs, in this process, only the stages ``wanted`` (a predicate on stage names) accepts;
+    ``max_frames``: its prepare-kitti keeps at most that many frames with depth per drive (None: all)."""
 
-    def __init__(self, workspace: Workspace, wanted: Callable[[str], bool], log: Callable[[str], None]):
+    def __init__(self, workspace: Workspace, wanted: Callable[[str], bool], log: Callable[[str], None],
+                 max_frames: int | None = None):
         super().__init__(workspace, log, force=True)
-        self.wanted = wanted
+        self.wanted, self.max_frames = wanted, max_frames
         self.ran: list = []
 
     def run(self, stage):
         if not self.wanted(stage.name):
             return None
+        if stage.name == "prepare-kitti" and self.max_frames is not None:
+            stage = replace(stage, config=replace(stage.config, max_frames=self.max_frames))
         self.ran.append(stage)
         return super().run(stage)
 
@@ -81,9 +86,11 @@ def _wanted(profile, layers: tuple[str, ...]) -> Callable[[str], bool]:
 
 
 def sample(profile, frames: int, layers: tuple[str, ...], root: Path,
-           log: Callable[[str], None] = lambda line: None) -> dict[str, tuple[float, float, int]]:
+           log: Callable[[str], None] = lambda line: None,
+           kitti: Path | None = None) -> dict[str, tuple[float, float, int]]:
     """Run one probe sample of ``profile`` (:func:`probe_profile` of ``frames``; SLAM of ``layers``) in the empty
-    folder ``root``; ``{kind: (CPU seconds, units, stages)}`` its stamps measured (:func:`measure`)."""
+    folder ``root``; ``{kind: (CPU seconds, units, stages)}`` its stamps measured (:func:`measure`). ``kitti``: the
+    generated drives of a larger sample, of which it prepares the first ``frames`` frames with depth (no synth)."""
     from dcslam.stages import predict
     from dcslam.stages.experiments.table_5_2 import compose
     from dcslam.stages.slam import torch_threads
@@ -91,8 +98,8 @@ def sample(profile, frames: int, layers: tuple[str, ...], root: Path,
     small = probe_profile(profile, frames)
     ws = Workspace(root)
     with torch_threads(1):
-        pipe = _Sample(ws, _wanted(small, layers), log)
-        compose(pipe, small)
+        pipe = _Sample(ws, _wanted(small, layers), log, None if kitti is None else frames)
+        compose(pipe, small, kitti_root=kitti)
         for name in PROBE_COMPLETERS:
             made = ws.predictions / name
             pipe.run(Stage(f"predict-{name}", predict.run, predict.PredictConfig(model=name),
@@ -125,8 +132,14 @@ def _scaffold(pipe: _Sample, small) -> None:
 
 def fit(small: dict[str, tuple[float, float, int]], large: dict[str, tuple[float, float, int]]) -> dict[str, dict]:
     """Each kind's ``{"stage_s", "unit_s", "samples"}`` from its two samples ``(CPU seconds, units, stages)``: the
-    line through the two per-stage points; a negative part (noise) is 0 and the other fits both samples' sums."""
+    line through the two per-stage points; a negative part (noise) is 0 and the other fits both samples' sums. A kind
+    only the large sample has (synth: the small one reuses its drives) is priced per unit, without a fixed part."""
     fitted = {}
+    for kind in sorted(large.keys() - small.keys()):
+        seconds, units, stages = large[kind]
+        if units > 0:
+            fitted[kind] = {"stage_s": 0.0, "unit_s": round(seconds / units, 4),
+                            "samples": [[round(seconds, 3), units, stages]]}
     for kind in sorted(small.keys() & large.keys()):
         (s1, u1, n1), (s2, u2, n2) = small[kind], large[kind]
         x1, y1, x2, y2 = u1 / n1, s1 / n1, u2 / n2, s2 / n2
@@ -166,12 +179,14 @@ def calibrate(ws: Workspace, profile, log: Callable[[str], None] = lambda line: 
     for name in WARM_IMPORTS:
         importlib.import_module(name)
     began, start = machine(), time.perf_counter()
-    samples = []
-    for frames, layers in zip(PROBE_SIZES, PROBE_SLAM):
-        with tempfile.TemporaryDirectory(prefix="dcslam-probe-") as folder:
-            log(f"[calibrate] probe sample of {frames} frames with depth per drive")
-            samples.append(sample(profile, frames, layers, Path(folder) / "ws", log))
-    kinds = fit(*samples)
+    # the larger sample first: the smaller one prepares the first frames of its generated drives
+    with tempfile.TemporaryDirectory(prefix="dcslam-probe-") as folder:
+        log(f"[calibrate] probe sample of {PROBE_SIZES[1]} frames with depth per drive")
+        large = sample(profile, PROBE_SIZES[1], PROBE_SLAM[1], Path(folder) / "large", log)
+        log(f"[calibrate] probe sample of {PROBE_SIZES[0]} frames with depth per drive (the same drives)")
+        small = sample(profile, PROBE_SIZES[0], PROBE_SLAM[0], Path(folder) / "small", log,
+                       kitti=Path(folder) / "large" / "kitti")
+    kinds = fit(small, large)
     if not kinds:
         raise DcslamError(f"profile {profile.name}: the probe measured no stage; rerun `dcslam reproduce --calibrate`")
     path = ws.root / ".reproduce" / CALIBRATION

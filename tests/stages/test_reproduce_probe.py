@@ -11,9 +11,11 @@ from dcslam.stages.reproduce_probe import PROBE_SIZES, PROBE_SLAM, SCAFFOLD_PROB
 
 def test_fit_is_the_line_through_the_two_samples_per_stage():
     small = {"synth": (4.0, 4.0, 1), "slam": (3.0, 4.0, 2), "score": (2.0, 3.0, 1), "only-small": (1.0, 1.0, 1)}
-    large = {"synth": (6.0, 8.0, 1), "slam": (8.0, 16.0, 4), "score": (2.2, 3.0, 1)}
+    large = {"synth": (6.0, 8.0, 1), "slam": (8.0, 16.0, 4), "score": (2.2, 3.0, 1), "only-large": (3.0, 12.0, 1)}
     fitted = fit(small, large)
-    assert set(fitted) == {"synth", "slam", "score"}  # a kind needs both samples
+    assert set(fitted) == {"synth", "slam", "score", "only-large"}  # not a kind the small sample alone measured
+    # a kind of the large sample alone (synth: the small one reuses its drives) is priced per unit
+    assert fitted["only-large"] == {"stage_s": 0.0, "unit_s": 0.25, "samples": [[3.0, 12.0, 1]]}
     assert (fitted["synth"]["stage_s"], fitted["synth"]["unit_s"]) == (2.0, 0.5)  # 2 s + 0.5 s per unit
     assert (fitted["slam"]["stage_s"], fitted["slam"]["unit_s"]) == (1.0, 0.25)  # per stage: (2, 1.5) and (4, 2)
     assert fitted["score"] == {"stage_s": 2.1, "unit_s": 0.0, "samples": [[2.0, 3.0, 1], [2.2, 3.0, 1]]}
