@@ -295,16 +295,22 @@ def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(cli, tmp
 
 
 def test_two_seeds_at_smoke_scale_write_the_seed_and_interval_columns(cli, tmp_path, monkeypatch):
-    """--seeds 2 on one thesis recipe (the other recipes left out to keep it short: their rows say so): each seed's
-    run is trained, predicted, filtered and run through SLAM; Table 5.2 gives the recipe one row over both seeds
-    with its interval and seed-to-seed spread, the per-drive CSV a seed column, Table 5.1 a row per seed."""
+    """--seeds 2 on one thesis recipe (the other recipes left out to keep it short: their rows say so), on three
+    tiny KITTI-format drives split as generated ones (the seeds, not the drives, are under test): each seed's run is
+    trained, predicted, filtered and run through SLAM; Table 5.2 gives the recipe one row over both seeds with its
+    interval and seed-to-seed spread, the per-drive CSV a seed column, Table 5.1 a row per seed."""
     import csv
 
     from dcslam.stages.experiments import table_5_2 as module
+    from tests.fixtures.kitti import write_tiny_drive
 
     monkeypatch.setattr(module, "RECIPES", {"mse-sparse": module.RECIPES["mse-sparse"]})
     monkeypatch.setattr(module, "POSE_RECIPES", {})
-    result = cli("reproduce", "--profile", "smoke", "--seeds", "2", "--workspace", tmp_path)
+    kitti = tmp_path.parent / f"{tmp_path.name}-kitti"
+    for i in range(3):
+        write_tiny_drive(kitti, name=f"2011_09_26_drive_{1000 + i:04d}_sync", n_frames=16, size=(64, 96), seed=i)
+    (kitti / "SYNTHETIC").write_text("tiny drives split as generated ones\n")
+    result = cli("reproduce", "--profile", "smoke", "--seeds", "2", "--kitti", kitti, "--workspace", tmp_path)
     assert result.exit_code == 0, result.output
     assert "2 training seed(s) per trained run (seeds 0, 1)" in result.stderr and "CPU-hours" in result.stderr
     for run, seed in (("mse-sparse", 0), ("mse-sparse-s1", 1)):
@@ -326,9 +332,9 @@ def test_two_seeds_at_smoke_scale_write_the_seed_and_interval_columns(cli, tmp_p
     assert sorted((r["layer"], r["seed"]) for r in per_drive if r["method"] == "MSE sparse mask") == [
         ("mse-sparse", "0"), ("mse-sparse-s1", "1")]
     assert "mean ± std of 2 seeds" in (results / "table_5_1.md").read_text()
-    stages = planned_stages(Workspace(tmp_path), PROFILES["smoke"], seeds=2)
+    stages = planned_stages(Workspace(tmp_path), PROFILES["smoke"], kitti_root=kitti, seeds=2)
     assert {p.stem for p in (tmp_path / ".reproduce").glob("*.json")} - {"splits"} == {s.name for s in stages}
     assert {(s.name, s.seed) for s in stages if s.name.startswith("train-")} == {
         ("train-mse-sparse", 0), ("train-mse-sparse-s1", 1)}
     assert {s.seed for s in stages if "sparse-s1" in s.name} == {1} and \
-        {s.seed for s in stages if s.name.startswith(("synth", "slam-dense", "predict-ip-basic"))} == {None}
+        {s.seed for s in stages if s.name.startswith(("prepare", "slam-dense", "predict-ip-basic"))} == {None}
