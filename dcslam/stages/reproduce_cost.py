@@ -39,11 +39,11 @@ UNITS = {"synth": "generated frames", "prepare-kitti": "drive frames",
 # predict-<completer> (their costs differ tenfold: planefit against scanline)
 CLASSICAL_KIND = ("ip-basic", "ip-basic-fast")
 # a network trained on a classical completer's fill (``--correct-fill --fill F``) computes that fill for every frame
-# it trains on or predicts: its trainings are kind train-<loss>+<F>, its predictions predict+<F> (the study's
-# scaffold networks cost 3.4x and 2.4x a plain network's units)
+# it trains on or predicts: its trainings are kind train-<loss>+<F>, its predictions predict+<F> (priced as plain
+# networks, the surface study's took 3.4x and 2.4x their estimate)
 FILL_SUFFIX = "+"
 # SLAM on a LiDAR-like layer, on annotated depth (a fifth of the pixels) and on full images (completions, filtered
-# completions, exact depth, each with its companion run) cost about 1 : 3.4 : 5.4 per frame at the quick settings
+# completions, exact depth, each with its companion run) cost about 1 : 3 : 5 per frame at the quick settings
 # (the shipped probe figures): a SLAM stage's kind is its input's (:func:`slam_kind`)
 SLAM_KINDS = ("slam-sparse", "slam-dense", "slam-completed")
 # frames 5 … N−6 of a generated drive of N raw frames have depth, and only those are in its drive file
