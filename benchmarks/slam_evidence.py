@@ -6,10 +6,13 @@ the truth being whether it ends (final translation error) more than ``--truth`` 
 Prints, per input and beam count, runs / ending > truth / flagged of those / flagged of the others, for the stored
 verdicts (``stored``: the health in each JSON as written) and for the candidate rules (``--floors``, ``--sigmas``,
 ``--min-pairs``); ``--json`` also writes the per-run rows, ``--flags`` prints every false flag and miss of the stored
-verdicts with its reasons, ``--drives 1000-1003`` keeps those drives only (a half of the test set).
+verdicts with its reasons, ``--drives 1000-1003`` keeps those drives only (a half of the test set), ``--group`` prints
+the stored verdicts once more with the inputs grouped by kind (sparse, dense, exact, classical completers, networks;
+each with measured sources apart).
 
     python benchmarks/slam_evidence.py /tmp/repro-ws-b --floors 0.2,0.3,0.4 --sigmas 3 --min-pairs 250,150
     python benchmarks/slam_evidence.py /tmp/calib-ws --flags --drives 1000-1003
+    python benchmarks/slam_evidence.py /tmp/study-ws --group
 """
 from __future__ import annotations
 
@@ -146,6 +149,22 @@ def verdicts(runs: dict, rules: HealthRules | None, evidence: EvidenceRules | No
     return rows
 
 
+def input_group(source: str) -> str:
+    """The kind of an input (:func:`layer_input`'s first part): sparse, dense, exact, classical (a completer that needs
+    no training, ``dcslam.depth.models.CLASSICAL``) or networks (any other layer), with ", measured sources" for a run
+    that aligned the LiDAR's pixels against the completed map."""
+    from dcslam.depth.models import CLASSICAL
+
+    base, measured = source.removesuffix("+measured"), source.endswith("+measured")
+    kind = base if base in ("sparse", "dense", "exact") else "classical" if base in CLASSICAL else "networks"
+    return kind + (", measured sources" if measured else "")
+
+
+def grouped(rows: list[dict]) -> list[dict]:
+    """``rows`` with each input replaced by its :func:`input_group` (exact and dense counted at 64 beams)."""
+    return [{**r, "input": input_group(r["input"]), "beams": "64" if r["beams"] == "-" else r["beams"]} for r in rows]
+
+
 def table(rows: list[dict], truth: float) -> list[tuple]:
     """(input, beams, runs, > truth, flagged of those, flagged of the others) per input and beam count, and a total."""
     groups = defaultdict(list)
@@ -209,6 +228,8 @@ def main(argv=None) -> int:
     parser.add_argument("--flags", action="store_true",
                         help="print every false flag and miss of the stored verdicts, with its reasons")
     parser.add_argument("--drives", help="only these drives, by number: 1000-1003 or 1000,1002")
+    parser.add_argument("--group", action="store_true",
+                        help="also print the stored verdicts with the inputs grouped by kind")
     args = parser.parse_args(argv)
     runs = load_runs(args.workspace / "slam")
     if args.drives:
@@ -220,6 +241,9 @@ def main(argv=None) -> int:
     results = {"stored": verdicts(runs, None, None)}
     print_table("stored verdicts (the health as written, with its evidence)", table(results["stored"], args.truth),
                 args.truth)
+    if args.group:
+        print_table("stored verdicts, inputs grouped by kind", table(grouped(results["stored"]), args.truth),
+                    args.truth)
     if args.flags:
         print_flags(results["stored"], args.truth)
     for pairs in (int(p) for p in args.min_pairs.split(",")):
