@@ -169,14 +169,13 @@ def measure(root: Path) -> dict[str, tuple[float, float, int]]:
         with DriveFile(drive) as d:
             frames[drive.stem] = len(d)
     drives = DriveFrames(frames, splits)
-    known = [(name, record["config"]) for name, record in records if _known(name, record["config"], drives)]
-    slam_frames, fills = _slam_frames(known, drives), run_fills(known)
+    # a stage this estimate does not know, or a stamp of another version's options, is left out
+    known = [(name, record) for name, record in records if _known(name, record["config"], drives)]
+    configs = [(name, record["config"]) for name, record in known]
+    slam_frames, fills = _slam_frames(configs, drives), run_fills(configs)
     totals: dict[str, tuple[float, float, int]] = {}
-    for name, record in records:
-        try:
-            kind, units = stage_work(name, record["config"], drives, slam_frames, fills)
-        except (DcslamError, KeyError, TypeError):
-            continue  # a stage this estimate does not know, or a stamp of another version's options
+    for name, record in known:
+        kind, units = stage_work(name, record["config"], drives, slam_frames, fills)
         cpu = record.get("cpu_seconds")
         seconds = float(cpu if isinstance(cpu, (int, float)) else record["seconds"])
         total, work, stages = totals.get(kind, (0.0, 0.0, 0))
