@@ -6,6 +6,7 @@ Run: ``python benchmarks/bench_data.py [--quick] [--drives N] [--frames N]``.
    accumulation, PNG / .bin / OXTS files), seconds per raw frame, and the time of each part on one frame.
 2. prepare-kitti on the generated drives: frames per second into HDF5 drive files, and the largest pose error of
    the poses it read back from OXTS against the generator's truth.
+3. reading one drive file's frames back: CPU per frame of h5py's ``dataset[i]`` beside dcslam's chunk reader.
 Figures depend on the machine and on what else runs on it: read them next to the machine line.
 """
 from __future__ import annotations
@@ -86,6 +87,35 @@ def main() -> None:
             R = np.transpose(T_read[:, :3, :3], (0, 2, 1)) @ T_true[:, :3, :3]
             worst_r = max(worst_r, float(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1) / 2, -1, 1)).max()))
         print(f"               poses read back vs truth: {worst_t * 1000:.4f} mm, {worst_r:.2e} rad at most")
+        read_frames(result.drives[0].path)
+
+
+def read_frames(path: Path, repeats: int = 3) -> None:
+    """CPU per frame of reading a drive file's frames once each, as SLAM reads them: h5py's ``dataset[i]`` beside
+    dcslam's chunk reader (:class:`dcslam.io.chunks.FrameReader`, ISA-L's inflate), the same arrays; the best of
+    ``repeats`` passes, each on a file opened anew (h5py keeps the last chunks it inflated)."""
+    import h5py
+
+    from dcslam.io.chunks import FrameReader
+
+    for name in ("rgb", "depth/sparse", "depth/dense"):
+        ms, fast = [], False
+        for dcslam_reads in (False, True):
+            best = np.inf
+            for _ in range(repeats):
+                with h5py.File(path, "r") as f:
+                    dataset = f[name]
+                    read = FrameReader(dataset) if dcslam_reads else dataset.__getitem__
+                    fast = fast or (dcslam_reads and read.fast)
+                    n, cpu = dataset.shape[0], time.process_time()
+                    for i in range(n):
+                        read(i)
+                    best = min(best, (time.process_time() - cpu) / n * 1e3)
+            ms.append(best)
+        with h5py.File(path, "r") as f:
+            assert all(np.array_equal(FrameReader(f[name])(i), f[name][i]) for i in range(f[name].shape[0]))
+        print(f"read {name:12s} h5py {ms[0]:5.2f} ms/frame, dcslam {ms[1]:5.2f} ({ms[0] / ms[1]:.1f} x; "
+              f"{'chunk' if fast else 'h5py'} path; {n} frames)")
 
 
 if __name__ == "__main__":

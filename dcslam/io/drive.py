@@ -46,6 +46,7 @@ import numpy as np
 
 from dcslam.errors import DcslamError
 from dcslam.io.atomic import WriteSink, atomic_output
+from dcslam.io.chunks import FrameReader
 
 DRIVE_SCHEMA = "dcslam.drive/1"
 LAYER_SCHEMA = "dcslam.layer/1"
@@ -304,6 +305,7 @@ class DriveFile:
         self.timestamps = self._h5["timestamps"][()]
         self.frame_ids = self._h5["frame_ids"][()]
         self.attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in self._h5.attrs.items()}
+        self._readers: dict[str, FrameReader] = {}
 
     def _validate(self) -> None:
         h5 = self._h5
@@ -388,7 +390,13 @@ class DriveFile:
 
     def rgb(self, i: int) -> np.ndarray:
         """(H, W, 3) uint8."""
-        return self._h5["rgb"][i]
+        return self._frame("rgb", i)
+
+    def _frame(self, name: str, i: int) -> np.ndarray:
+        """Frame ``i`` of dataset ``name``, as ``self._h5[name][i]`` (:class:`~dcslam.io.chunks.FrameReader`)."""
+        if name not in self._readers:
+            self._readers[name] = FrameReader(self._h5[name])
+        return self._readers[name](i)
 
     def depth(self, kind: str, i: int) -> np.ndarray:
         """(H, W) float32 metres of ``kind`` (``sparse``, ``dense``, ``sparse@<beams>`` or ``exact``)."""
@@ -397,7 +405,7 @@ class DriveFile:
             how = ("it is written for generated drives only (`dcslam synth`, then `dcslam prepare-kitti`)"
                    if kind == EXACT else f"rerun `dcslam prepare-kitti --beams {_beams_of(kind)} --force`")
             raise DcslamError(f"{self.path} holds no {kind} depth (it has {', '.join(self.kinds)}); {how}")
-        return check_depth(self._h5[name][i], f"{self.path}: {name}", i)
+        return check_depth(self._frame(name, i), f"{self.path}: {name}", i)
 
     def frame(self, i: int) -> DriveFrame:
         return DriveFrame(rgb=self.rgb(i), sparse=self.depth("sparse", i), dense=self.depth("dense", i),

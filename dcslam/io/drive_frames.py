@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
+from dcslam.io.chunks import FrameReader
 from dcslam.io.drive import LAYER_SCHEMA, DriveFile, check_depth, is_depth_kind
 
 
@@ -90,9 +91,10 @@ def layer_frames(drive: DriveFile, path: Path | str):
         raise DcslamError(f"{path} is not a readable HDF5 layer file ({exc})") from None
     try:
         check_layer(h5, path, drive)
-        confidence = h5["confidence"] if "confidence" in h5 else None
-        yield (lambda i: check_depth(h5["depth"][i], str(path), i)), (
-            None if confidence is None else (lambda i: _confidence(confidence[i], path, i)))
+        depth = FrameReader(h5["depth"])
+        confidence = FrameReader(h5["confidence"]) if "confidence" in h5 else None
+        yield (lambda i: check_depth(depth(i), str(path), i)), (
+            None if confidence is None else (lambda i: _confidence(confidence(i), path, i)))
     finally:
         h5.close()
 
