@@ -3,8 +3,8 @@
 dcslam's drive and layer files keep each frame in a chunk of its own, deflated (level 1) and byte-shuffled. HDF5
 inflates with the zlib it was built with; :class:`FrameReader` takes the chunk's bytes as stored and inflates them
 with ISA-L (``isal``, where it is installed), then undoes the shuffle in NumPy: the same array, bit for bit, in
-0.4 of the CPU (a 1242 x 375 colour image: 10.3 -> 3.5 ms; a sparse depth frame 5.5 -> 1.9 ms). Reading is a
-sixth of a sparse SLAM frame's CPU otherwise. Any other layout (other filters, chunks, byte order, a chunk whose
+less than half the CPU (1242 x 375: a colour image 8.1 -> 3.7 ms, a sparse depth frame 3.8 -> 1.7 ms; reading was a
+sixth of a sparse SLAM frame's CPU). Any other layout (other filters, chunks, byte order, a chunk whose
 filters were skipped) and any chunk that does not inflate goes through h5py: its values, and its errors, are
 h5py's. A chunk that inflates to other than one frame's bytes is refused in one line (HDF5 itself fills the missing
 bytes with whatever its buffer held).
