@@ -92,30 +92,36 @@ def main() -> None:
 
 def read_frames(path: Path, repeats: int = 3) -> None:
     """CPU per frame of reading a drive file's frames once each, as SLAM reads them: h5py's ``dataset[i]`` beside
-    dcslam's chunk reader (:class:`dcslam.io.chunks.FrameReader`, ISA-L's inflate), the same arrays; the best of
-    ``repeats`` passes, each on a file opened anew (h5py keeps the last chunks it inflated)."""
+    dcslam's chunk reader (:class:`dcslam.io.chunks.FrameReader`, ISA-L's inflate), the same arrays."""
     import h5py
 
     from dcslam.io.chunks import FrameReader
 
     for name in ("rgb", "depth/sparse", "depth/dense"):
-        ms, fast = [], False
-        for dcslam_reads in (False, True):
-            best = np.inf
-            for _ in range(repeats):
-                with h5py.File(path, "r") as f:
-                    dataset = f[name]
-                    read = FrameReader(dataset) if dcslam_reads else dataset.__getitem__
-                    fast = fast or (dcslam_reads and read.fast)
-                    n, cpu = dataset.shape[0], time.process_time()
-                    for i in range(n):
-                        read(i)
-                    best = min(best, (time.process_time() - cpu) / n * 1e3)
-            ms.append(best)
+        (h5py_ms, n, _), (ours_ms, _, fast) = (_read_ms(path, name, ours, repeats) for ours in (False, True))
         with h5py.File(path, "r") as f:
-            assert all(np.array_equal(FrameReader(f[name])(i), f[name][i]) for i in range(f[name].shape[0]))
-        print(f"read {name:12s} h5py {ms[0]:5.2f} ms/frame, dcslam {ms[1]:5.2f} ({ms[0] / ms[1]:.1f} x; "
+            assert all(np.array_equal(FrameReader(f[name])(i), f[name][i]) for i in range(n))
+        print(f"read {name:12s} h5py {h5py_ms:5.2f} ms/frame, dcslam {ours_ms:5.2f} ({h5py_ms / ours_ms:.1f} x; "
               f"{'chunk' if fast else 'h5py'} path; {n} frames)")
+
+
+def _read_ms(path: Path, name: str, ours: bool, repeats: int) -> tuple[float, int, bool]:
+    """(best CPU ms per frame over ``repeats`` passes, frames, whether the chunk path read them) of reading dataset
+    ``name`` by dcslam's reader (``ours``) or h5py's; each pass on the file opened anew (h5py keeps the last chunks
+    it inflated)."""
+    import h5py
+
+    from dcslam.io.chunks import FrameReader
+
+    best = np.inf
+    for _ in range(repeats):
+        with h5py.File(path, "r") as f:
+            read = FrameReader(f[name]) if ours else f[name].__getitem__
+            n, cpu = f[name].shape[0], time.process_time()
+            for i in range(n):
+                read(i)
+            best = min(best, (time.process_time() - cpu) / n * 1e3)
+    return best, n, ours and read.fast
 
 
 if __name__ == "__main__":
