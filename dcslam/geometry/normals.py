@@ -85,6 +85,11 @@ def _grid_normals(vertex: torch.Tensor, valid: torch.Tensor,
     :func:`choose`: four times faster than blending with 0/1 masks); the normalisation and the turn to the camera
     multiply by 0/1 masks (``x * 1`` is ``x`` exactly). Shape: vertex (B, 3, H, W), valid (B, 1, H, W) ->
     (normals (B, 3, H, W), valid (B, 1, H, W))."""
+    from dcslam.native import grid_normals
+
+    native = grid_normals(vertex, valid, max_relative_gap)   # the same values in one pass, where it applies
+    if native is not None:
+        return native
     B, _, H, W = vertex.shape
     dtype = vertex.dtype
     P = choose(valid, vertex, torch.zeros((), dtype=dtype, device=vertex.device))

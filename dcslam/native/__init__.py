@@ -1,0 +1,175 @@
+"""Native kernels: a few of dcslam's hot loops in C, built on first use with the system's C compiler.
+
+Contract: a kernel gives the values of the torch code it stands for, bit for bit, on this machine (the tests under
+``tests/native/`` compare them), so whether it is used changes the speed only. Where no C compiler is found, the
+build fails, or ``DCSLAM_NATIVE=0`` is set, :func:`library` returns None and the callers run their torch code.
+
+Why C and not a compiled extension: nothing to build at install (an editable install keeps working), no torch headers
+(the build takes a fraction of a second), and a machine without a compiler still runs dcslam.
+
+The library is built once per machine and source into ``DCSLAM_NATIVE_DIR`` (default ``$XDG_CACHE_HOME/dcslam`` or
+``~/.cache/dcslam``, else the system's temporary folder when that is not writable), written under a temporary name
+and renamed, so that processes building it at once never load a half-written file.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+from pathlib import Path
+
+#: The environment variable that turns the native kernels off (``0``).
+NATIVE_ENV = "DCSLAM_NATIVE"
+#: The environment variable naming the folder of the built library.
+NATIVE_DIR_ENV = "DCSLAM_NATIVE_DIR"
+
+SOURCE = Path(__file__).with_name("kernels.c")
+#: -ffp-contract=off: no product is fused into a sum unless the source says so (torch's own kernels are the rule)
+FLAGS = ("-O3", "-std=c11", "-ffp-contract=off", "-fno-math-errno", "-fPIC", "-shared")
+VERSION = 1
+
+_lock = threading.Lock()
+_loaded: dict[str, object] = {}
+
+
+def enabled() -> bool:
+    """Whether the native kernels may be used (``DCSLAM_NATIVE`` is not ``0``)."""
+    return os.environ.get(NATIVE_ENV, "1") != "0"
+
+
+def _compiler() -> str | None:
+    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
+        if name and shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+def _folders() -> list[Path]:
+    if os.environ.get(NATIVE_DIR_ENV):
+        return [Path(os.environ[NATIVE_DIR_ENV])]
+    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "dcslam"
+    return [cache, Path(tempfile.gettempdir()) / f"dcslam-native-{os.getuid() if hasattr(os, 'getuid') else 0}"]
+
+
+def _build(compiler: str, again: bool = False) -> Path | None:
+    """The built library's path (built now when missing, or when ``again``: a cached file that would not load), or
+    None when it cannot be built or written."""
+    source = SOURCE.read_bytes()
+    key = hashlib.sha256(source + " ".join(FLAGS).encode() + compiler.encode() + platform.machine().encode() +
+                         sys.platform.encode()).hexdigest()[:16]
+    for folder in _folders():
+        target = folder / f"dcslam-native-{key}.so"
+        if target.is_file() and not again:
+            return target
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            fd, partial = tempfile.mkstemp(prefix=target.name + ".", suffix=".part", dir=folder)
+            os.close(fd)
+        except OSError:
+            continue
+        try:
+            done = subprocess.run([compiler, *FLAGS, "-o", partial, str(SOURCE), "-lm"], capture_output=True,
+                                  timeout=120)
+            if done.returncode != 0:
+                return None
+            os.replace(partial, target)
+            return target
+        except (OSError, subprocess.SubprocessError):
+            continue
+        finally:
+            if os.path.exists(partial):
+                os.unlink(partial)
+    return None
+
+
+def library():
+    """The loaded native library (a :class:`ctypes.CDLL` with its functions' types set), or None: turned off, no
+    compiler, or the build failed. Built and loaded once per process."""
+    if not enabled():
+        return None
+    with _lock:
+        if "lib" not in _loaded:
+            _loaded["lib"] = _load()
+        return _loaded["lib"]
+
+
+def _load():
+    compiler = _compiler()
+    lib = None
+    for again in (False, True):      # a cached file that does not load (damaged, another machine's) is rebuilt once
+        path = _build(compiler, again) if compiler else None
+        if path is None:
+            return None
+        try:
+            lib = ctypes.CDLL(str(path))
+            lib.dcslam_native_version.restype = ctypes.c_int
+            if lib.dcslam_native_version() == VERSION:
+                break
+        except (OSError, AttributeError):
+            pass
+        lib = None
+    if lib is None:
+        return None
+    p, i64 = ctypes.c_void_p, ctypes.c_int64
+    lib.dcslam_grid_normals_f32.argtypes = [p, p, i64, i64, ctypes.c_float, p, p, p, ctypes.c_int]
+    lib.dcslam_grid_normals_f64.argtypes = [p, p, i64, i64, ctypes.c_double, p, p, p, ctypes.c_int]
+    lib.dcslam_grid_finish_f32.argtypes = lib.dcslam_grid_finish_f64.argtypes = [p, p, p, p, i64, p]
+    for name in ("grid_normals_f32", "grid_normals_f64", "grid_finish_f32", "grid_finish_f64"):
+        getattr(lib, "dcslam_" + name).restype = None
+    return lib
+
+
+def cross_fused(dtype) -> bool:
+    """Whether torch.cross on this machine rounds ``a1 b2 - a2 b1`` once (a fused multiply-add, as torch's kernels
+    built for AVX2 do) rather than each product apart; cached per dtype. ``(1 + 2^-12)^2 - (1 + 2^-11)`` is 2^-24
+    fused and 0 apart (in float64, ``(1 + 2^-27)^2 - (1 + 2^-26)``: 2^-54 and 0)."""
+    key = ("cross", str(dtype))
+    if key not in _loaded:
+        import torch
+
+        e = 12 if dtype == torch.float32 else 27
+        x, y = 1 + 2.0 ** -e, 1 + 2.0 ** -(e - 1)
+        a = torch.tensor([0.0, x, y], dtype=dtype)
+        b = torch.tensor([1.0, 0.0, x], dtype=dtype)
+        _loaded[key] = float(torch.cross(a, b, dim=0)[0]) != 0.0
+    return bool(_loaded[key])
+
+
+def grid_normals(vertex, valid, max_relative_gap: float):
+    """The native :func:`dcslam.geometry.normals._grid_normals`, or None when it does not apply here (no library;
+    a tensor not on the CPU, not float32/float64, or needing a gradient): the caller then runs the torch code.
+    Shape: vertex (B, 3, H, W), valid (B, 1, H, W) bool -> (normals (B, 3, H, W), valid (B, 1, H, W) bool)."""
+    import torch
+
+    if (vertex.dtype not in (torch.float32, torch.float64) or vertex.device.type != "cpu"
+            or (torch.is_grad_enabled() and vertex.requires_grad)):
+        return None
+    lib = library()
+    if lib is None:
+        return None
+    B, _, H, W = vertex.shape
+    vertex = vertex.detach().contiguous()
+    valid = valid.contiguous()
+    normal = torch.empty_like(vertex)
+    square = torch.empty(B, 1, H, W, dtype=vertex.dtype)
+    ok = torch.empty(B, 1, H, W, dtype=torch.bool)
+    f32 = vertex.dtype == torch.float32
+    cross = lib.dcslam_grid_normals_f32 if f32 else lib.dcslam_grid_normals_f64
+    finish = lib.dcslam_grid_finish_f32 if f32 else lib.dcslam_grid_finish_f64
+    # the gap as torch multiplies it: a Python float times a 0-d tensor of the vertex's dtype
+    gap = float(torch.tensor(max_relative_gap, dtype=vertex.dtype))
+    fused = int(cross_fused(vertex.dtype))
+    for b in range(B):
+        cross(vertex[b].data_ptr(), valid[b].data_ptr(), H, W, gap, normal[b].data_ptr(), square[b].data_ptr(),
+              ok[b].data_ptr(), fused)
+    root = torch.sqrt(square)   # torch's root, as the torch code takes it (MKL's: not always IEEE's)
+    for b in range(B):
+        finish(vertex[b].data_ptr(), valid[b].data_ptr(), ok[b].data_ptr(), root[b].data_ptr(), H * W,
+               normal[b].data_ptr())
+    return normal, ok

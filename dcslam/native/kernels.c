@@ -1,0 +1,131 @@
+/* dcslam's native kernels: loops that torch runs as many passes over an image, run here as one.
+ *
+ * Contract: each kernel gives the values of the torch code it stands for, bit for bit, on the machine it runs on
+ * (tests/native/ compares the two). So the arithmetic below is that code's, in its order, with no contraction of
+ * products into sums (built with -ffp-contract=off) except where torch's own kernel contracts: torch.cross computes
+ * fma(a1, b2, -(a2 * b1)) where it was built for FMA, and the loader (dcslam/native/__init__.py) picks the variant
+ * that torch on this machine uses.
+ *
+ * Built by the loader with the system's C compiler on first use, cached by the hash of this file and the flags.
+ */
+#include <math.h>
+#include <stdint.h>
+
+/* The normals of the pixel grid, dcslam.geometry.normals._grid_normals (search 1), in two passes around torch's own
+ * square root (torch.sqrt is MKL's, which rounds a fraction of a per cent of its results otherwise than IEEE's sqrt):
+ * GRID_NORMALS: each pixel's cross product of its tangents (normal, not yet unit) and the square to take the root of
+ * (its squared norm where the pixel has a normal, 1 elsewhere); GRID_FINISH: the cross product divided by that root,
+ * zeroed where the pixel has none, and turned to face the camera.
+ * vertex: (3, H, W) planes; valid: (H, W) bytes 0/1; normal: (3, H, W); square, root: (H, W); ok: (H, W) out. */
+#define GRID_NORMALS(NAME, T, SQRT, ABS, FMA_EXPR)                                                                \
+    static void NAME(const T *vertex, const uint8_t *valid, int64_t H, int64_t W, T gap, T *normal,             \
+                     T *square, uint8_t *ok_out) {                                                                          \
+        const int64_t HW = H * W;                                                                                \
+        const T *X = vertex, *Y = vertex + HW, *Z = vertex + 2 * HW;                                             \
+        for (int64_t i = 0; i < H; i++) {                                                                        \
+            for (int64_t j = 0; j < W; j++) {                                                                    \
+                const int64_t k = i * W + j;                                                                     \
+                const int v = valid[k] != 0;                                                                     \
+                /* P: the vertex where valid, +0 elsewhere (as choose(valid, vertex, 0)) */                      \
+                const T p0 = v ? X[k] : (T)0, p1 = v ? Y[k] : (T)0, p2 = v ? Z[k] : (T)0;                        \
+                const T limit = gap * p2;                                                                        \
+                T s[4][3];                                                                                       \
+                int sok[4];                                                                                      \
+                /* right, left, down, up: the neighbour where it is valid and not across a depth edge, else P */ \
+                const int64_t di[4] = {0, 0, 1, -1}, dj[4] = {1, -1, 0, 0};                                     \
+                for (int d = 0; d < 4; d++) {                                                                    \
+                    const int64_t a = i + di[d], b = j + dj[d];                                                  \
+                    int use = 0;                                                                                 \
+                    T q0 = 0, q1 = 0, q2 = 0;                                                                    \
+                    if (a >= 0 && a < H && b >= 0 && b < W && valid[a * W + b]) {                                \
+                        const int64_t m = a * W + b;                                                             \
+                        q0 = X[m]; q1 = Y[m]; q2 = Z[m];                                                         \
+                        use = ABS(q2 - p2) <= limit;                                                             \
+                    }                                                                                            \
+                    sok[d] = use;                                                                                \
+                    s[d][0] = use ? q0 : p0; s[d][1] = use ? q1 : p1; s[d][2] = use ? q2 : p2;                   \
+                }                                                                                                \
+                const T tx0 = s[0][0] - s[1][0], tx1 = s[0][1] - s[1][1], tx2 = s[0][2] - s[1][2];               \
+                const T ty0 = s[2][0] - s[3][0], ty1 = s[2][1] - s[3][1], ty2 = s[2][2] - s[3][2];               \
+                T n0, n1, n2;                                                                                    \
+                FMA_EXPR                                                                                         \
+                const T norm2 = n0 * n0 + n1 * n1 + n2 * n2;                                                     \
+                const int good = v && (sok[0] || sok[1]) && (sok[2] || sok[3]) && norm2 > (T)1e-20;              \
+                const T m = good ? (T)1 : (T)0;                                                                  \
+                normal[k] = n0; normal[HW + k] = n1; normal[2 * HW + k] = n2;                                    \
+                square[k] = norm2 * m + ((T)1 - m);                                                              \
+                ok_out[k] = (uint8_t)good;                                                                       \
+            }                                                                                                    \
+        }                                                                                                        \
+    }
+
+#define GRID_FINISH(NAME, T)                                                                                      \
+    static void NAME(const T *vertex, const uint8_t *valid, const uint8_t *ok, const T *root, int64_t HW,        \
+                     T *normal) {                                                                                 \
+        const T *X = vertex, *Y = vertex + HW, *Z = vertex + 2 * HW;                                             \
+        for (int64_t k = 0; k < HW; k++) {                                                                       \
+            const int v = valid[k] != 0;                                                                         \
+            const T p0 = v ? X[k] : (T)0, p1 = v ? Y[k] : (T)0, p2 = v ? Z[k] : (T)0;                            \
+            const T m = ok[k] ? (T)1 : (T)0;                                                                     \
+            const T n0 = normal[k] / root[k] * m, n1 = normal[HW + k] / root[k] * m,                             \
+                    n2 = normal[2 * HW + k] / root[k] * m;                                                       \
+            const T facing = (n0 * p0 + n1 * p1 + n2 * p2) > (T)0 ? (T)1 : (T)0;                                 \
+            const T sign = (T)1 - (T)2 * facing;                                                                 \
+            normal[k] = n0 * sign; normal[HW + k] = n1 * sign; normal[2 * HW + k] = n2 * sign;                   \
+        }                                                                                                        \
+    }
+
+GRID_FINISH(grid_finish_f32, float)
+GRID_FINISH(grid_finish_f64, double)
+
+#define CROSS_FUSED(FMA)                                                                                          \
+    n0 = FMA(tx1, ty2, -(tx2 * ty1)); n1 = FMA(tx2, ty0, -(tx0 * ty2)); n2 = FMA(tx0, ty1, -(tx1 * ty0));
+#define CROSS_PLAIN                                                                                               \
+    n0 = tx1 * ty2 - tx2 * ty1; n1 = tx2 * ty0 - tx0 * ty2; n2 = tx0 * ty1 - tx1 * ty0;
+
+/* fmaf / fma are correctly rounded wherever they run; with the target "fma" the compiler emits the instruction */
+__attribute__((target("fma"))) GRID_NORMALS(grid_normals_f32_fma_hw, float, sqrtf, fabsf, CROSS_FUSED(fmaf))
+__attribute__((target("fma"))) GRID_NORMALS(grid_normals_f64_fma_hw, double, sqrt, fabs, CROSS_FUSED(fma))
+GRID_NORMALS(grid_normals_f32_fma_sw, float, sqrtf, fabsf, CROSS_FUSED(fmaf))
+GRID_NORMALS(grid_normals_f64_fma_sw, double, sqrt, fabs, CROSS_FUSED(fma))
+GRID_NORMALS(grid_normals_f32_plain, float, sqrtf, fabsf, CROSS_PLAIN)
+GRID_NORMALS(grid_normals_f64_plain, double, sqrt, fabs, CROSS_PLAIN)
+
+static int has_fma(void) {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("fma");
+}
+
+/* Exported: the float32 and float64 kernels; fused: 1 as torch.cross with FMA, 0 without. */
+void dcslam_grid_normals_f32(const float *vertex, const uint8_t *valid, int64_t H, int64_t W, float gap,
+                             float *normal, float *square, uint8_t *ok, int fused) {
+    if (!fused)
+        grid_normals_f32_plain(vertex, valid, H, W, gap, normal, square, ok);
+    else if (has_fma())
+        grid_normals_f32_fma_hw(vertex, valid, H, W, gap, normal, square, ok);
+    else
+        grid_normals_f32_fma_sw(vertex, valid, H, W, gap, normal, square, ok);
+}
+
+void dcslam_grid_normals_f64(const double *vertex, const uint8_t *valid, int64_t H, int64_t W, double gap,
+                             double *normal, double *square, uint8_t *ok, int fused) {
+    if (!fused)
+        grid_normals_f64_plain(vertex, valid, H, W, gap, normal, square, ok);
+    else if (has_fma())
+        grid_normals_f64_fma_hw(vertex, valid, H, W, gap, normal, square, ok);
+    else
+        grid_normals_f64_fma_sw(vertex, valid, H, W, gap, normal, square, ok);
+}
+
+void dcslam_grid_finish_f32(const float *vertex, const uint8_t *valid, const uint8_t *ok, const float *root,
+                            int64_t HW, float *normal) {
+    grid_finish_f32(vertex, valid, ok, root, HW, normal);
+}
+
+void dcslam_grid_finish_f64(const double *vertex, const uint8_t *valid, const uint8_t *ok, const double *root,
+                            int64_t HW, double *normal) {
+    grid_finish_f64(vertex, valid, ok, root, HW, normal);
+}
+
+/* The version of this file's interface: the loader refuses a library of another. */
+int dcslam_native_version(void) { return 1; }

@@ -1,0 +1,139 @@
+"""dcslam.native: the C kernels give the torch code's values bit for bit, and dcslam runs without them (no compiler,
+a failed build, an unwritable cache, DCSLAM_NATIVE=0)."""
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+import torch
+
+import dcslam.native as native
+from dcslam.geometry.camera import backproject
+from dcslam.geometry.normals import _grid_normals
+
+K = torch.tensor([[60.0, 0, 40.5], [0, 60.0, 15.5], [0, 0, 1]], dtype=torch.float64)
+needs_compiler = pytest.mark.skipif(native._compiler() is None, reason="no C compiler on this machine")
+
+
+def _bits(x: torch.Tensor) -> torch.Tensor:
+    return x.view(torch.int32 if x.dtype == torch.float32 else torch.int64)
+
+
+def _torch_path(monkeypatch, fn, *args):
+    monkeypatch.setenv(native.NATIVE_ENV, "0")
+    try:
+        return fn(*args)
+    finally:
+        monkeypatch.setenv(native.NATIVE_ENV, "1")
+
+
+def _street_depth(g: torch.Generator, H: int = 32, W: int = 81, holes: float = 0.2) -> torch.Tensor:
+    """A ground plane, a wall with a depth edge, noise, holes, and ties in depth (rounded values): (1, 1, H, W)."""
+    v, u = torch.meshgrid(torch.arange(H, dtype=torch.float64), torch.arange(W, dtype=torch.float64), indexing="ij")
+    ground = 1.6 * 60.0 / (v - 15.5).clamp_min(0.5)
+    depth = torch.where(u > W // 2, torch.full_like(ground, 7.0), ground.clamp_max(30.0))
+    depth = depth + 0.02 * torch.randn(depth.shape, generator=g, dtype=torch.float64)
+    depth[:, :5] = torch.round(depth[:, :5])
+    depth[torch.rand(depth.shape, generator=g) < holes] = 0
+    return depth[None, None]
+
+
+@needs_compiler
+def test_the_library_builds_and_loads_here():
+    assert native.library() is not None
+
+
+@needs_compiler
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("gap", [0.1, 0.05])
+def test_grid_normals_are_the_torch_codes_bit_for_bit(monkeypatch, dtype, gap):
+    """Holes, depth edges, image borders, isolated pixels, ties in the gap test and a batch of two."""
+    g = torch.Generator().manual_seed(7)
+    depth = torch.cat([_street_depth(g), _street_depth(g, holes=0.6)]).to(dtype)
+    vertex = backproject(depth, K.to(dtype))
+    valid = depth > 0
+    ours, ours_ok = _grid_normals(vertex, valid, gap)
+    theirs, theirs_ok = _torch_path(monkeypatch, _grid_normals, vertex, valid, gap)
+    assert native.grid_normals(vertex, valid, gap) is not None          # the native path ran above
+    assert torch.equal(ours_ok, theirs_ok) and 0 < int(ours_ok.sum()) < int(valid.sum())
+    assert torch.equal(_bits(ours), _bits(theirs))
+
+
+@needs_compiler
+def test_grid_normals_of_a_full_size_frame(monkeypatch):
+    """A full KITTI-size frame (375 x 1242): torch's square root is MKL's, which rounds some results otherwise than
+    IEEE's; the kernel takes torch's, so the normals stay the same bits."""
+    g = torch.Generator().manual_seed(3)
+    depth = torch.nn.functional.interpolate(_street_depth(g, 47, 156, holes=0.0), size=(375, 1242)).float()
+    vertex = backproject(depth, torch.tensor([[721.5, 0, 609.6], [0, 721.5, 172.9], [0, 0, 1]]))
+    valid = depth > 0
+    ours, ours_ok = _grid_normals(vertex, valid, 0.1)
+    theirs, theirs_ok = _torch_path(monkeypatch, _grid_normals, vertex, valid, 0.1)
+    assert torch.equal(ours_ok, theirs_ok) and torch.equal(_bits(ours), _bits(theirs))
+
+
+def test_grid_normals_leave_autograd_and_other_dtypes_to_torch():
+    vertex = backproject(_street_depth(torch.Generator().manual_seed(1)), K).requires_grad_()
+    valid = vertex.detach()[:, 2:3] > 0
+    assert native.grid_normals(vertex, valid, 0.1) is None
+    normals, _ = _grid_normals(vertex, valid, 0.1)
+    assert normals.requires_grad
+    assert native.grid_normals(vertex.detach().half(), valid, 0.1) is None
+
+
+def test_cross_probe_says_what_torch_cross_does():
+    """The probe's verdict reproduces torch.cross on random vectors (fused: one rounding of a1 b2 - a2 b1)."""
+    g = torch.Generator().manual_seed(0)
+    a, b = torch.randn(3, 4096, generator=g), torch.randn(3, 4096, generator=g)
+    wide = a.double(), b.double()
+    if native.cross_fused(torch.float32):
+        # a float32 product is exact in float64; one rounding of the difference of an exact and a rounded product
+        expected = (wide[0][1] * wide[1][2] - (a[2] * b[1]).double()).float()
+    else:
+        expected = a[1] * b[2] - a[2] * b[1]
+    assert torch.equal(torch.cross(a, b, dim=0)[0], expected)
+
+
+RUN = """
+import sys, torch
+import dcslam.native as native
+print("none" if native.library() is None else "loaded")
+"""
+
+
+def _in_a_process(env_changes: dict) -> str:
+    env = {**os.environ, **env_changes}
+    done = subprocess.run([sys.executable, "-c", RUN], env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.strip()
+
+
+def test_turned_off_by_the_environment():
+    assert _in_a_process({native.NATIVE_ENV: "0"}) == "none"
+
+
+def test_no_compiler_or_a_failing_one_leaves_the_torch_code(tmp_path):
+    assert _in_a_process({"CC": "false", "PATH": str(tmp_path), native.NATIVE_DIR_ENV: str(tmp_path)}) == "none"
+    fails = shutil.which("false")
+    assert _in_a_process({"CC": fails, native.NATIVE_DIR_ENV: str(tmp_path / "cache")}) == "none"
+    assert not list((tmp_path / "cache").glob("*"))        # no half-written library left behind
+
+
+def test_an_unwritable_cache_leaves_the_torch_code(tmp_path):
+    """A cache folder that cannot be made (a file stands in its way: refused even to root)."""
+    (tmp_path / "blocker").write_text("")
+    assert _in_a_process({native.NATIVE_DIR_ENV: str(tmp_path / "blocker" / "cache")}) == "none"
+
+
+@needs_compiler
+def test_built_once_then_reused_and_a_damaged_file_rebuilt(tmp_path):
+    assert _in_a_process({native.NATIVE_DIR_ENV: str(tmp_path)}) == "loaded"
+    built = list(tmp_path.glob("dcslam-native-*.so"))
+    assert len(built) == 1 and not list(tmp_path.glob("*.part"))
+    stamp = built[0].stat().st_mtime_ns
+    assert _in_a_process({native.NATIVE_DIR_ENV: str(tmp_path)}) == "loaded"
+    assert built[0].stat().st_mtime_ns == stamp                   # reused, not rebuilt
+    built[0].write_bytes(b"not a library")
+    assert _in_a_process({native.NATIVE_DIR_ENV: str(tmp_path)}) == "loaded"
+    assert built[0].read_bytes()[:4] == b"\x7fELF"
