@@ -122,6 +122,10 @@ def _load():
     lib.dcslam_grid_finish_f32.argtypes = lib.dcslam_grid_finish_f64.argtypes = [p, p, p, p, i64, p]
     for name in ("grid_normals_f32", "grid_normals_f64", "grid_finish_f32", "grid_finish_f64"):
         getattr(lib, "dcslam_" + name).restype = None
+    for name in ("zbuffer_window_f32", "zbuffer_window_f64"):
+        getattr(lib, "dcslam_" + name).argtypes = [p, p, p, i64, i64, i64, i64]
+        getattr(lib, "dcslam_" + name).restype = i64
+    lib.dcslam_take_pairs.argtypes, lib.dcslam_take_pairs.restype = [p, p, i64], None
     return lib
 
 
@@ -173,3 +177,26 @@ def grid_normals(vertex, valid, max_relative_gap: float):
         finish(vertex[b].data_ptr(), valid[b].data_ptr(), ok[b].data_ptr(), root[b].data_ptr(), H * W,
                normal[b].data_ptr())
     return normal, ok
+
+
+def zbuffer_window(ids, px, z, height: int, width: int, splat: int):
+    """The native :func:`dcslam.slam.pointmap._zbuffer_window`, or None where it does not apply (no library; not
+    on the CPU; depths not float32/float64): the caller runs the torch code. Shape: ids (N,) int64, px (N, 2) int64,
+    z (N,) -> (pixels (C,) flat indices into the window in raster order, points (C,) int64)."""
+    import torch
+
+    if z.dtype not in (torch.float32, torch.float64) or z.device.type != "cpu" or px.dtype != torch.int64:
+        return None
+    lib = library()
+    if lib is None:
+        return None
+    ids, px, z = ids.contiguous(), px.contiguous(), z.detach().contiguous()
+    kernel = lib.dcslam_zbuffer_window_f32 if z.dtype == torch.float32 else lib.dcslam_zbuffer_window_f64
+    count = kernel(ids.data_ptr(), px.data_ptr(), z.data_ptr(), z.shape[0], height, width, splat)
+    if count == -2:          # a footprint wider than the kernel's offsets hold
+        return None
+    if count < 0:
+        raise MemoryError("dcslam.native: no memory for the z-buffer")
+    pix, hit = torch.empty(count, dtype=torch.int64), torch.empty(count, dtype=torch.int64)
+    lib.dcslam_take_pairs(pix.data_ptr(), hit.data_ptr(), count)
+    return pix, hit

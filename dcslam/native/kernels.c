@@ -10,6 +10,7 @@
  */
 #include <math.h>
 #include <stdint.h>
+#include <stdlib.h>
 
 /* The normals of the pixel grid, dcslam.geometry.normals._grid_normals (search 1), in two passes around torch's own
  * square root (torch.sqrt is MKL's, which rounds a fraction of a per cent of its results otherwise than IEEE's sqrt):
@@ -125,6 +126,96 @@ void dcslam_grid_finish_f32(const float *vertex, const uint8_t *valid, const uin
 void dcslam_grid_finish_f64(const double *vertex, const uint8_t *valid, const uint8_t *ok, const double *root,
                             int64_t HW, double *normal) {
     grid_finish_f64(vertex, valid, ok, root, HW, normal);
+}
+
+/* Scratch memory kept by each thread between calls and grown as needed: a full image's buffers are megabytes, and
+ * fresh ones cost a page fault per 4 kB every call (more than the work itself). */
+static __thread unsigned char *scratch = NULL;
+static __thread size_t scratch_bytes = 0;
+static __thread int64_t *kept = NULL;   /* the last z-buffer's (pixel, point) pairs, until dcslam_take_pairs */
+static __thread int64_t kept_count = 0;
+
+static void *grow(size_t bytes) {
+    if (bytes > scratch_bytes) {
+        free(scratch);
+        scratch = malloc(bytes);
+        scratch_bytes = scratch ? bytes : 0;
+    }
+    return scratch;
+}
+
+/* The z-buffer of a map's points in a window of the image and its (2 splat + 1)^2 minimum filter:
+ * dcslam.slam.pointmap._zbuffer_window. ids (N,), px (N, 2) (u, v) in the window (from -splat), z (N,); the window
+ * is height x width pixels. Keeps the covered pixels (flat indices into the window, raster order) and the point
+ * each shows for dcslam_take_pairs; returns their count, or -1 when memory ran out.
+ * Ties as the torch code breaks them: of equal depths at one centre pixel the highest id; of equally near centres
+ * covering a pixel the one at the largest offset (ky, kx) in that order (the torch code's separable filter keeps the
+ * largest kx in each row, then the largest ky: the same centre). Done by spreading each centre over its square, so
+ * the cost follows the points, not the window (a sparse map covers a few per cent of it). */
+#define ZBUFFER(NAME, T)                                                                                          \
+    static int64_t NAME(const int64_t *ids, const int64_t *px, const T *z, int64_t N, int64_t height,           \
+                        int64_t width, int64_t splat) {                                                          \
+        const int64_t Hp = height + 2 * splat, Wp = width + 2 * splat, side = 2 * splat + 1;                     \
+        const size_t n_pad = (size_t)(Hp * Wp), n_out = (size_t)(height * width);                                \
+        unsigned char *base = grow(n_pad * (sizeof(T) + sizeof(int64_t))                                         \
+                                   + n_out * (sizeof(T) + 3 * sizeof(int64_t) + sizeof(int32_t)) + 64);          \
+        if (!base) return -1;                                                                                    \
+        int64_t *owner = (int64_t *)base, *out = owner + n_pad, *shown = out + 2 * n_out;                       \
+        T *zbuf = (T *)(shown + n_out), *best = zbuf + n_pad;                                                    \
+        int32_t *rank = (int32_t *)(best + n_out);                                                               \
+        for (size_t k = 0; k < n_pad; k++) { zbuf[k] = (T)INFINITY; owner[k] = -1; }                             \
+        for (size_t k = 0; k < n_out; k++) best[k] = (T)INFINITY;                                                \
+        for (int64_t i = 0; i < N; i++) {                                                                        \
+            const int64_t c = (px[2 * i + 1] + splat) * Wp + (px[2 * i] + splat);                               \
+            if (z[i] < zbuf[c]) zbuf[c] = z[i];                                                                  \
+        }                                                                                                        \
+        for (int64_t i = 0; i < N; i++) {                                                                        \
+            const int64_t c = (px[2 * i + 1] + splat) * Wp + (px[2 * i] + splat);                               \
+            if (z[i] <= zbuf[c] && ids[i] > owner[c]) owner[c] = ids[i];                                         \
+        }                                                                                                        \
+        /* each centre once: the point that owns it (its id is unique among the points) */                       \
+        for (int64_t i = 0; i < N; i++) {                                                                        \
+            const int64_t cr = px[2 * i + 1] + splat, cc = px[2 * i] + splat, c = cr * Wp + cc;                  \
+            if (owner[c] != ids[i] || !(z[i] <= zbuf[c])) continue;                                              \
+            const T zc = zbuf[c];                                                                                \
+            /* centre (R, C) in the padded image covers pixel (R - 2 splat + ky, C - 2 splat + kx) */            \
+            for (int64_t ky = 0; ky < side; ky++) {                                                              \
+                const int64_t v = cr - 2 * splat + ky;                                                           \
+                if (v < 0 || v >= height) continue;                                                              \
+                for (int64_t kx = 0; kx < side; kx++) {                                                          \
+                    const int64_t u = cc - 2 * splat + kx;                                                       \
+                    if (u < 0 || u >= width) continue;                                                           \
+                    const int64_t k = v * width + u;                                                             \
+                    const int32_t r = (int32_t)(ky * side + kx);                                                 \
+                    if (zc < best[k] || (zc == best[k] && r > rank[k])) {                                        \
+                        best[k] = zc; rank[k] = r; shown[k] = owner[c];                                          \
+                    }                                                                                            \
+                }                                                                                                \
+            }                                                                                                    \
+        }                                                                                                        \
+        int64_t count = 0;                                                                                       \
+        for (size_t k = 0; k < n_out; k++)                                                                       \
+            if (isfinite(best[k])) { out[2 * count] = (int64_t)k; out[2 * count + 1] = shown[k]; count++; }      \
+        kept = out; kept_count = count;                                                                          \
+        return count;                                                                                            \
+    }
+
+ZBUFFER(zbuffer_f32, float)
+ZBUFFER(zbuffer_f64, double)
+
+int64_t dcslam_zbuffer_window_f32(const int64_t *ids, const int64_t *px, const float *z, int64_t N, int64_t height,
+                                  int64_t width, int64_t splat) {
+    return splat < 1024 ? zbuffer_f32(ids, px, z, N, height, width, splat) : -2;
+}
+
+int64_t dcslam_zbuffer_window_f64(const int64_t *ids, const int64_t *px, const double *z, int64_t N, int64_t height,
+                                  int64_t width, int64_t splat) {
+    return splat < 1024 ? zbuffer_f64(ids, px, z, N, height, width, splat) : -2;
+}
+
+/* The last z-buffer's pixels and points of this thread, count of each (as that call returned). */
+void dcslam_take_pairs(int64_t *pix, int64_t *hit, int64_t count) {
+    for (int64_t i = 0; i < count && i < kept_count; i++) { pix[i] = kept[2 * i]; hit[i] = kept[2 * i + 1]; }
 }
 
 /* The version of this file's interface: the loader refuses a library of another. */

@@ -184,6 +184,11 @@ def _zbuffer_window(ids: torch.Tensor, px: torch.Tensor, z: torch.Tensor, height
     """:func:`_zbuffer` in a window of (height, width) pixels holding every pixel the points' squares reach.
     Shape: ids (N,) the points' indices, px (N, 2) int64 their pixels (u, v) in the window, z (N,) their depths ->
     (pixels (C,) flat indices into the window, in raster order; points (C,) int64)."""
+    from dcslam.native import zbuffer_window
+
+    native = zbuffer_window(ids, px, z, height, width, splat)    # the same pixels and points in one pass
+    if native is not None:
+        return native
     device, dtype = z.device, z.dtype
     # the z-buffer at the points' own pixels, in an image padded by splat: (Hp, Wp)
     Hp, Wp = height + 2 * splat, width + 2 * splat

@@ -137,3 +137,23 @@ def test_built_once_then_reused_and_a_damaged_file_rebuilt(tmp_path):
     built[0].write_bytes(b"not a library")
     assert _in_a_process({native.NATIVE_DIR_ENV: str(tmp_path)}) == "loaded"
     assert built[0].read_bytes()[:4] == b"\x7fELF"
+
+
+@needs_compiler
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("height,width,splat,points", [(40, 60, 1, 500), (37, 81, 2, 2000), (5, 7, 0, 10),
+                                                       (20, 20, 3, 50), (1, 1, 1, 3), (9, 11, 1, 1)])
+def test_zbuffer_window_is_the_torch_codes(monkeypatch, dtype, height, width, splat, points):
+    """Depths rounded to a few values (ties at a centre and between centres), pixels reaching in from outside the
+    window (down to -splat), several points per centre: the same covered pixels and the same point at each."""
+    from dcslam.slam.pointmap import _zbuffer_window
+
+    g = torch.Generator().manual_seed(height * 1000 + points)
+    ids = torch.randperm(points * 3, generator=g)[:points]
+    px = torch.stack([torch.randint(-splat, width + splat, (points,), generator=g),
+                      torch.randint(-splat, height + splat, (points,), generator=g)], 1)
+    z = torch.round(torch.rand(points, generator=g, dtype=torch.float64) * 5).to(dtype) + 1
+    ours = _zbuffer_window(ids, px, z, height, width, splat)
+    theirs = _torch_path(monkeypatch, _zbuffer_window, ids, px, z, height, width, splat)
+    assert native.zbuffer_window(ids, px, z, height, width, splat) is not None
+    assert torch.equal(ours[0], theirs[0]) and torch.equal(ours[1], theirs[1]) and ours[0].numel() > 0
