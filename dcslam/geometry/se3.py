@@ -190,7 +190,10 @@ def rows_times(points: torch.Tensor, M: torch.Tensor) -> torch.Tensor:
     """
     if (points.ndim == 2 and M.ndim == 2 and points.device.type == "cpu" and points.shape[0] >= FAST_ROWS
             and not (torch.is_grad_enabled() and (points.requires_grad or M.requires_grad))):
-        return torch.mm(points, M.contiguous())
+        from dcslam.native import rows_times as native_rows_times
+
+        native = native_rows_times(points, M)      # torch.mm's sums in one pass (dcslam.native), where it applies
+        return torch.mm(points, M.contiguous()) if native is None else native
     return points @ M
 
 

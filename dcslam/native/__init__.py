@@ -126,6 +126,13 @@ def _load():
         getattr(lib, "dcslam_" + name).argtypes = [p, p, p, i64, i64, i64, i64]
         getattr(lib, "dcslam_" + name).restype = i64
     lib.dcslam_take_pairs.argtypes, lib.dcslam_take_pairs.restype = [p, p, i64], None
+    for name in ("rows_times_f32", "rows_times_f64"):
+        getattr(lib, "dcslam_" + name).argtypes = [p, p, i64, p, ctypes.c_int]
+        getattr(lib, "dcslam_" + name).restype = None
+    for name, real in (("pairs_f32", ctypes.c_float), ("pairs_f64", ctypes.c_double)):
+        getattr(lib, "dcslam_" + name).argtypes = [p, p, p, i64, p, p, p, p, real, real, real, real, i64, i64, p, p,
+                                                  real, real, ctypes.c_int, ctypes.c_int, p, p, p, p, p]
+        getattr(lib, "dcslam_" + name).restype = i64
     return lib
 
 
@@ -200,3 +207,99 @@ def zbuffer_window(ids, px, z, height: int, width: int, splat: int):
     pix, hit = torch.empty(count, dtype=torch.int64), torch.empty(count, dtype=torch.int64)
     lib.dcslam_take_pairs(pix.data_ptr(), hit.data_ptr(), count)
     return pix, hit
+
+
+def _rows_times_raw(lib, points, M, mode: int):
+    import torch
+
+    out = torch.empty_like(points)
+    kernel = lib.dcslam_rows_times_f32 if points.dtype == torch.float32 else lib.dcslam_rows_times_f64
+    kernel(points.data_ptr(), M.data_ptr(), points.shape[0], out.data_ptr(), mode)
+    return out
+
+
+def product_mode(dtype) -> int | None:
+    """How torch.mm of (N, 3) rows by a 3 x 3 matrix sums on this machine, as the kernels' ``mode``: 0 (each
+    product rounded, summed left to right: MKL's reproducible mode, which dcslam sets), 1 (fused multiply-adds: MKL's
+    own kernels), None (neither, or no library: the torch code runs). Found once per dtype on random rows."""
+    key = ("mm", str(dtype))
+    if key not in _loaded:
+        import torch
+
+        lib = library()
+        found = None
+        if lib is not None:
+            g = torch.Generator().manual_seed(0)
+            points = (torch.randn(4096, 3, generator=g, dtype=torch.float64) * 30).to(dtype)
+            M = torch.linalg.qr(torch.randn(3, 3, generator=g, dtype=torch.float64))[0].to(dtype).contiguous()
+            expected = torch.mm(points, M)
+            found = next((mode for mode in (0, 1) if torch.equal(_rows_times_raw(lib, points, M, mode), expected)),
+                         None)
+        _loaded[key] = found
+    return _loaded[key]
+
+
+def _plain(*tensors) -> bool:
+    """CPU float32 / float64 tensors of one dtype, none needing a gradient."""
+    import torch
+
+    dtype = tensors[0].dtype
+    return (dtype in (torch.float32, torch.float64) and all(t.dtype == dtype and t.device.type == "cpu"
+                                                            for t in tensors)
+            and not (torch.is_grad_enabled() and any(t.requires_grad for t in tensors)))
+
+
+def _in_dtype(dtype):
+    """A Python number as it meets a tensor of ``dtype`` in torch's arithmetic (cast to that dtype)."""
+    import numpy as np
+    import torch
+
+    return (lambda x: float(np.float32(x))) if dtype == torch.float32 else float
+
+
+def rows_times(points, M):
+    """The native ``torch.mm(points, M)`` of (N, 3) rows and a 3 x 3 matrix, or None where it does not apply."""
+    if not _plain(points, M) or points.ndim != 2 or points.shape[1] != 3 or M.shape != (3, 3):
+        return None
+    mode = product_mode(points.dtype) if enabled() else None
+    if mode is None:
+        return None
+    return _rows_times_raw(library(), points.detach().contiguous(), M.detach().contiguous(), mode)
+
+
+def point_to_plane_pairs(source, normals, usable, T, prepared, max_distance: float, cos_max_angle: float,
+                         min_rows: int):
+    """The native :meth:`dcslam.slam.odometry.PointToPlane.residuals` with projective association ``prepared``
+    (``ProjectiveAssociation._Prepared``) -> (residuals (M,), source index (M,), target points (M, 3), target
+    normals (M, 3)), or None where it does not apply (no library or product mode; a gradient; fewer than
+    ``min_rows`` sources or pairs, which the torch code multiplies by another kernel than torch.mm: it runs)."""
+    import torch
+
+    table, index = prepared.table, prepared.index
+    if not _plain(source, normals, T, table) or source.shape[0] < min_rows:
+        return None
+    mode = product_mode(source.dtype) if enabled() else None
+    if mode is None:
+        return None
+    dtype, F = source.dtype, source.shape[0]
+    source, normals = source.detach().contiguous(), normals.detach().contiguous()
+    R, t = T.detach()[:3, :3].contiguous(), T.detach()[:3, 3].contiguous()
+    RrT, tr = prepared.R_T.contiguous(), prepared.t.contiguous()
+    if RrT.dtype != dtype or index.dtype != torch.int64:
+        return None
+    table = table.detach().contiguous()
+    usable = None if usable is None else usable.contiguous()
+    r, src = torch.empty(F, dtype=dtype), torch.empty(F, dtype=torch.int64)
+    q, n = torch.empty(F, 3, dtype=dtype), torch.empty(F, 3, dtype=dtype)
+    paired = ctypes.c_int64(0)
+    real = _in_dtype(dtype)
+    kernel = library().dcslam_pairs_f32 if dtype == torch.float32 else library().dcslam_pairs_f64
+    count = kernel(source.data_ptr(), normals.data_ptr(), None if usable is None else usable.data_ptr(), F,
+                   R.data_ptr(), t.data_ptr(), RrT.data_ptr(), tr.data_ptr(), real(prepared.fx), real(prepared.fy),
+                   real(prepared.cx), real(prepared.cy), prepared.height, prepared.width, index.data_ptr(),
+                   table.data_ptr(), real(max_distance ** 2), real(cos_max_angle), mode,
+                   int(dtype == torch.float64 or prepared.few_pixels), r.data_ptr(), src.data_ptr(), q.data_ptr(),
+                   n.data_ptr(), ctypes.byref(paired))
+    if paired.value < min_rows:
+        return None              # the torch code rotates so few normals with another kernel: its bits, not ours
+    return r[:count], src[:count], q[:count], n[:count]

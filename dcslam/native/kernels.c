@@ -128,6 +128,109 @@ void dcslam_grid_finish_f64(const double *vertex, const uint8_t *valid, const ui
     grid_finish_f64(vertex, valid, ok, root, HW, normal);
 }
 
+/* Rows times a 3 x 3 matrix, out = points @ M (dcslam.geometry.se3.rows_times, torch.mm): each entry a sum of
+ * three products in the order MKL's kernel takes them; mode 0: each product rounded, summed left to right (MKL's
+ * conditional-numerical-reproducibility mode, which dcslam sets); mode 1: fma(p2, m2, fma(p1, m1, p0 m0)) (MKL's own
+ * AVX2 / AVX-512 kernels). The loader finds which one torch.mm is on this machine; neither: none is used. */
+#define DOT3(T, FMA, mode, a0, a1, a2, b0, b1, b2)                                                                \
+    ((mode) ? FMA(a2, b2, FMA(a1, b1, (T)(a0 * b0))) : ((T)((T)(a0 * b0) + (T)(a1 * b1)) + (T)(a2 * b2)))
+
+#define ROWS_TIMES(NAME, T, FMA, ATTR)                                                                            \
+    ATTR static void NAME(const T *points, const T *M, int64_t N, T *out, int mode) {                           \
+        const T m00 = M[0], m01 = M[1], m02 = M[2], m10 = M[3], m11 = M[4], m12 = M[5];                          \
+        const T m20 = M[6], m21 = M[7], m22 = M[8];                                                              \
+        for (int64_t i = 0; i < N; i++) {                                                                        \
+            const T a = points[3 * i], b = points[3 * i + 1], c = points[3 * i + 2];                             \
+            out[3 * i] = DOT3(T, FMA, mode, a, b, c, m00, m10, m20);                                             \
+            out[3 * i + 1] = DOT3(T, FMA, mode, a, b, c, m01, m11, m21);                                         \
+            out[3 * i + 2] = DOT3(T, FMA, mode, a, b, c, m02, m12, m22);                                         \
+        }                                                                                                        \
+    }
+
+ROWS_TIMES(rows_times_f32_hw, float, fmaf, __attribute__((target("fma"))))
+ROWS_TIMES(rows_times_f64_hw, double, fma, __attribute__((target("fma"))))
+ROWS_TIMES(rows_times_f32_sw, float, fmaf, )
+ROWS_TIMES(rows_times_f64_sw, double, fma, )
+
+void dcslam_rows_times_f32(const float *points, const float *M, int64_t N, float *out, int mode) {
+    if (mode && has_fma()) rows_times_f32_hw(points, M, N, out, mode); else rows_times_f32_sw(points, M, N, out, mode);
+}
+
+void dcslam_rows_times_f64(const double *points, const double *M, int64_t N, double *out, int mode) {
+    if (mode && has_fma()) rows_times_f64_hw(points, M, N, out, mode); else rows_times_f64_sw(points, M, N, out, mode);
+}
+
+/* One point-to-plane linearisation's pairs: dcslam.slam.odometry.PointToPlane.residuals with projective association
+ * (dcslam.slam.association.ProjectiveAssociation), for every source point in one pass.
+ * source, normals: (F, 3); usable: (F,) bytes or NULL; R, t: the pose's rotation (3 x 3, row-major) and translation;
+ * RrT, tr: the rendering camera's R^T (contiguous, as the association keeps it) and translation; fx, fy, cx, cy: K's
+ * entries; index: (height * width,) the rendered map's point per pixel (-1: none); table: (Q, 6) point, normal;
+ * max_d2, cos_max: the gates; mode: rows_times' summation (above); exact_f32: v * width + u in the float type (else
+ * in double). Out: r (M,), src (M,) ascending, q, n (M, 3); returns M, and the count before the gates in *paired
+ * (the torch code rotates the paired normals with a product whose kernel depends on that count). */
+#define PAIRS(NAME, T, FMA, ATTR)                                                                                 \
+    ATTR static int64_t NAME(const T *source, const T *normals, const uint8_t *usable, int64_t F, const T *R,    \
+                             const T *t, const T *RrT, const T *tr, T fx, T fy, T cx, T cy, int64_t height,     \
+                             int64_t width, const int64_t *index, const T *table, T max_d2, T cos_max, int mode,  \
+                             int exact_f32, T *r, int64_t *src, T *q, T *n, int64_t *paired) {                  \
+        int64_t M = 0, P = 0;                                                                                    \
+        const T W1 = (T)(width - 1), H1 = (T)(height - 1), Wf = (T)width, tiny = (T)1e-9;                        \
+        for (int64_t i = 0; i < F; i++) {                                                                        \
+            const T s0 = source[3 * i], s1 = source[3 * i + 1], s2 = source[3 * i + 2];                          \
+            /* p = source @ R^T + t */                                                                           \
+            const T p0 = DOT3(T, FMA, mode, s0, s1, s2, R[0], R[1], R[2]) + t[0];                                \
+            const T p1 = DOT3(T, FMA, mode, s0, s1, s2, R[3], R[4], R[5]) + t[1];                                \
+            const T p2 = DOT3(T, FMA, mode, s0, s1, s2, R[6], R[7], R[8]) + t[2];                                \
+            /* the pixel in the rendering camera: (p @ RrT + tr), projected and rounded */                       \
+            const T x = DOT3(T, FMA, mode, p0, p1, p2, RrT[0], RrT[3], RrT[6]) + tr[0];                          \
+            const T y = DOT3(T, FMA, mode, p0, p1, p2, RrT[1], RrT[4], RrT[7]) + tr[1];                          \
+            const T z = DOT3(T, FMA, mode, p0, p1, p2, RrT[2], RrT[5], RrT[8]) + tr[2];                          \
+            const T zs = (z < 0 ? -z : z) > tiny ? z : tiny;                                                     \
+            const T u = rint_t(fx * x / zs + cx), v = rint_t(fy * y / zs + cy);                                  \
+            if (!(z > 0 && u >= 0 && u <= W1 && v >= 0 && v <= H1)) continue;                                    \
+            const int64_t pixel = exact_f32 ? (int64_t)(v * Wf + u) : (int64_t)((double)v * (double)width + (double)u); \
+            const int64_t target = index[pixel];                                                                 \
+            if (target < 0) continue;                                                                            \
+            P++;                                                                                                 \
+            const T *row = table + 6 * target;                                                                   \
+            const T d0 = p0 - row[0], d1 = p1 - row[1], d2 = p2 - row[2];                                        \
+            const T o0 = normals[3 * i], o1 = normals[3 * i + 1], o2 = normals[3 * i + 2];                       \
+            const T m0 = DOT3(T, FMA, mode, o0, o1, o2, R[0], R[1], R[2]);                                       \
+            const T m1 = DOT3(T, FMA, mode, o0, o1, o2, R[3], R[4], R[5]);                                       \
+            const T m2 = DOT3(T, FMA, mode, o0, o1, o2, R[6], R[7], R[8]);                                       \
+            if (!(((T)(d0 * d0) + (T)(d1 * d1)) + (T)(d2 * d2) < max_d2)) continue;                              \
+            if (!(((T)(m0 * row[3]) + (T)(m1 * row[4])) + (T)(m2 * row[5]) > cos_max)) continue;                 \
+            if (usable && !usable[i]) continue;                                                                  \
+            r[M] = ((T)(d0 * row[3]) + (T)(d1 * row[4])) + (T)(d2 * row[5]);                                     \
+            src[M] = i;                                                                                          \
+            q[3 * M] = row[0]; q[3 * M + 1] = row[1]; q[3 * M + 2] = row[2];                                     \
+            n[3 * M] = row[3]; n[3 * M + 1] = row[4]; n[3 * M + 2] = row[5];                                     \
+            M++;                                                                                                 \
+        }                                                                                                        \
+        *paired = P;                                                                                             \
+        return M;                                                                                                \
+    }
+
+#define rint_t(x) _Generic((x), float: rintf, default: rint)(x)
+PAIRS(pairs_f32_hw, float, fmaf, __attribute__((target("fma"))))
+PAIRS(pairs_f64_hw, double, fma, __attribute__((target("fma"))))
+PAIRS(pairs_f32_sw, float, fmaf, )
+PAIRS(pairs_f64_sw, double, fma, )
+
+#define PAIRS_ARGS(T) const T *source, const T *normals, const uint8_t *usable, int64_t F, const T *R, const T *t,  \
+    const T *RrT, const T *tr, T fx, T fy, T cx, T cy, int64_t height, int64_t width, const int64_t *index,       \
+    const T *table, T max_d2, T cos_max, int mode, int exact_f32, T *r, int64_t *src, T *q, T *n, int64_t *paired
+#define PAIRS_CALL source, normals, usable, F, R, t, RrT, tr, fx, fy, cx, cy, height, width, index, table, max_d2,  \
+    cos_max, mode, exact_f32, r, src, q, n, paired
+
+int64_t dcslam_pairs_f32(PAIRS_ARGS(float)) {
+    return (mode && has_fma()) ? pairs_f32_hw(PAIRS_CALL) : pairs_f32_sw(PAIRS_CALL);
+}
+
+int64_t dcslam_pairs_f64(PAIRS_ARGS(double)) {
+    return (mode && has_fma()) ? pairs_f64_hw(PAIRS_CALL) : pairs_f64_sw(PAIRS_CALL);
+}
+
 /* Scratch memory kept by each thread between calls and grown as needed: a full image's buffers are megabytes, and
  * fresh ones cost a page fault per 4 kB every call (more than the work itself). */
 static __thread unsigned char *scratch = NULL;

@@ -17,7 +17,8 @@ import torch
 
 from dcslam.errors import DcslamError
 from dcslam.geometry.motion import relative_motion
-from dcslam.geometry.se3 import rotate, rows_times, transform_points
+from dcslam.geometry.se3 import FAST_ROWS, rotate, rows_times, transform_points
+from dcslam.native import point_to_plane_pairs
 from dcslam.slam.association import ProjectiveAssociation
 from dcslam.slam.frame import DENSE_FRACTION, Frame, valid_normals, valid_points
 from dcslam.slam.pointmap import ModelView, voxel_representatives
@@ -116,6 +117,12 @@ class PointToPlane:
 
     def residuals(self, T: torch.Tensor):
         """(residuals (M,), inlier source index (M,), target points (M, 3), target normals (M, 3)) at pose T."""
+        if type(self.associate) is ProjectiveAssociation._Prepared:
+            # the same pairs and residuals in one pass over the sources (dcslam.native), where it applies
+            native = point_to_plane_pairs(self.source, self.source_normals, self._usable, T, self.associate,
+                                          self.max_distance, self.cos_max_angle, FAST_ROWS)
+            if native is not None:
+                return native
         p = transform_points(T, self.source)
         src, q, n = self.associate(p)
         diff = p.index_select(0, src) - q

@@ -157,3 +157,93 @@ def test_zbuffer_window_is_the_torch_codes(monkeypatch, dtype, height, width, sp
     theirs = _torch_path(monkeypatch, _zbuffer_window, ids, px, z, height, width, splat)
     assert native.zbuffer_window(ids, px, z, height, width, splat) is not None
     assert torch.equal(ours[0], theirs[0]) and torch.equal(ours[1], theirs[1]) and ours[0].numel() > 0
+
+
+@needs_compiler
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_rows_times_is_torch_mm(dtype):
+    """Rows by a rotation's transpose (a strided view, as the poses give it): torch.mm's bits."""
+    from dcslam.geometry.se3 import rows_times
+
+    g = torch.Generator().manual_seed(5)
+    points = (torch.randn(5000, 3, generator=g, dtype=torch.float64) * 40).to(dtype)
+    R = torch.linalg.qr(torch.randn(3, 3, generator=g, dtype=torch.float64))[0].to(dtype)
+    assert native.product_mode(dtype) is not None
+    assert torch.equal(rows_times(points, R.T), torch.mm(points, R.T.contiguous()))
+    assert native.rows_times(points.requires_grad_(), R.T) is None       # a gradient: torch's
+
+
+MODES = """
+import sys, torch
+import dcslam, dcslam.native as native
+g = torch.Generator().manual_seed(1)
+ok = []
+for dtype in (torch.float32, torch.float64):
+    points = (torch.randn(3000, 3, generator=g, dtype=torch.float64) * 40).to(dtype)
+    M = torch.randn(3, 3, generator=g, dtype=torch.float64).to(dtype)
+    ok.append(native.product_mode(dtype) is not None and torch.equal(native.rows_times(points, M), torch.mm(points, M)))
+print(all(ok))
+"""
+
+
+@needs_compiler
+@pytest.mark.parametrize("cbwr", ["COMPATIBLE", "AUTO"])
+def test_rows_times_follows_mkls_mode(cbwr):
+    """MKL's reproducible kernels (dcslam's default) and its own (MKL_CBWR=AUTO) sum the three products otherwise;
+    the probe finds which, and the kernel gives its bits under either."""
+    done = subprocess.run([sys.executable, "-c", MODES], env={**os.environ, "MKL_CBWR": cbwr}, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "True"
+
+
+def _icp_problem(dtype, weights: bool, gate: float):
+    """Two frames of the analytic street at 0.5 m apart, the second's voxel-thinned sources against the first's
+    rendered view: a PointToPlane problem with projective association."""
+    from dcslam.slam.association import ProjectiveAssociation, view_from_frame
+    from dcslam.slam.frame import FrameSettings, prepare_frame
+    from dcslam.slam.odometry import PointToPlane
+    from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
+
+    H, W = 64, 208
+    scene, K = StreetScene(0), kitti_K(H, W)
+    T = street_trajectory(2, step=0.5)
+    mask = lidar_mask(H, W, row_step=3, col_step=2)
+    settings = FrameSettings(normal_search=12)
+    f0, f1 = (prepare_frame((scene.render(T[i], K, H, W) * mask).to(dtype), K.to(dtype), settings=settings)
+              for i in range(2))
+    pixels = torch.nonzero(f1.valid.reshape(-1)).squeeze(1)
+    source = f1.vertex.reshape(-1, 3).index_select(0, pixels)
+    normals = f1.normal.reshape(-1, 3).index_select(0, pixels)
+    w = (torch.rand(source.shape[0], generator=torch.Generator().manual_seed(2), dtype=torch.float64) > 0.3).to(dtype)
+    associate = ProjectiveAssociation().prepare(view_from_frame(f0, T[0].to(dtype)))
+    problem = PointToPlane(source, normals, associate, gate, 0.866, weights=w if weights else None)
+    return problem, T.to(dtype)
+
+
+@needs_compiler
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("weights", [False, True])
+@pytest.mark.parametrize("gate", [0.5, 0.1])
+def test_point_to_plane_pairs_are_the_torch_codes(monkeypatch, dtype, weights, gate):
+    """The pairs, residuals and targets of one linearisation at the prediction and at a pose off it, with and
+    without per-point weights and with a narrow gate: the same bits as the torch code."""
+    from dcslam.geometry.se3 import FAST_ROWS
+    from dcslam.geometry.se3 import se3_exp
+
+    problem, T = _icp_problem(dtype, weights, gate)
+    for pose in (T[0], se3_exp(torch.tensor([0.02, -0.01, 0.05, 0.002, -0.004, 0.001], dtype=dtype)) @ T[0]):
+        ours = problem.residuals(pose)
+        theirs = _torch_path(monkeypatch, problem.residuals, pose)
+        assert native.point_to_plane_pairs(problem.source, problem.source_normals, problem._usable, pose,
+                                           problem.associate, gate, problem.cos_max_angle, FAST_ROWS) is not None
+        assert ours[0].numel() > 0
+        for a, b in zip(ours, theirs):
+            assert a.dtype == b.dtype and torch.equal(a, b)
+
+
+def test_point_to_plane_pairs_leave_gradients_to_torch():
+    problem, T = _icp_problem(torch.float64, False, 0.5)
+    pose = T[0].clone().requires_grad_()
+    r, *_ = problem.residuals(pose)
+    assert r.requires_grad
