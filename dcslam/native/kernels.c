@@ -11,6 +11,7 @@
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 
 /* The normals of the pixel grid, dcslam.geometry.normals._grid_normals (search 1), in two passes around torch's own
  * square root (torch.sqrt is MKL's, which rounds a fraction of a per cent of its results otherwise than IEEE's sqrt):
@@ -237,6 +238,26 @@ static __thread unsigned char *scratch = NULL;
 static __thread size_t scratch_bytes = 0;
 static __thread int64_t *kept = NULL;   /* the last z-buffer's (pixel, point) pairs, until dcslam_take_pairs */
 static __thread int64_t kept_count = 0;
+/* The z-buffer's state, kept by each thread between calls: per centre pixel (of the padded window) its nearest depth
+ * and owner, per pixel of the window the nearest covering depth, its rank and the point shown; each entry with the
+ * stamp (call count) of the call that wrote it, so nothing is cleared between calls: stamps only ever hold earlier
+ * counts, whatever the window's size was. Depths as double (a float converts exactly, and compares alike); one
+ * entry is one cache line's part, as the points reach the pixels in no order. */
+typedef struct { double z; int64_t owner; uint32_t stamp; } Centre;
+typedef struct { double z; int64_t shown; uint32_t rank, stamp; } Cover;
+static __thread uint32_t stamp = 0;
+static __thread Centre *centres = NULL;
+static __thread Cover *covers = NULL;
+static __thread size_t n_centres = 0, n_covers = 0;
+
+static void *entries(void *array, size_t *size, size_t n, size_t item) {
+    if (n > *size) {
+        free(array);
+        array = calloc(n, item);
+        *size = array ? n : 0;
+    }
+    return array;
+}
 
 static void *grow(size_t bytes) {
     if (bytes > scratch_bytes) {
@@ -258,29 +279,32 @@ static void *grow(size_t bytes) {
 #define ZBUFFER(NAME, T)                                                                                          \
     static int64_t NAME(const int64_t *ids, const int64_t *px, const T *z, int64_t N, int64_t height,           \
                         int64_t width, int64_t splat) {                                                          \
-        const int64_t Hp = height + 2 * splat, Wp = width + 2 * splat, side = 2 * splat + 1;                     \
+        const int64_t Wp = width + 2 * splat, Hp = height + 2 * splat, side = 2 * splat + 1;                     \
         const size_t n_pad = (size_t)(Hp * Wp), n_out = (size_t)(height * width);                                \
-        unsigned char *base = grow(n_pad * (sizeof(T) + sizeof(int64_t))                                         \
-                                   + n_out * (sizeof(T) + 3 * sizeof(int64_t) + sizeof(int32_t)) + 64);          \
-        if (!base) return -1;                                                                                    \
-        int64_t *owner = (int64_t *)base, *out = owner + n_pad, *shown = out + 2 * n_out;                       \
-        T *zbuf = (T *)(shown + n_out), *best = zbuf + n_pad;                                                    \
-        int32_t *rank = (int32_t *)(best + n_out);                                                               \
-        for (size_t k = 0; k < n_pad; k++) { zbuf[k] = (T)INFINITY; owner[k] = -1; }                             \
-        for (size_t k = 0; k < n_out; k++) best[k] = (T)INFINITY;                                                \
+        centres = entries(centres, &n_centres, n_pad, sizeof(Centre));                                           \
+        covers = entries(covers, &n_covers, n_out, sizeof(Cover));                                               \
+        int64_t *out = grow(2 * (n_out + 1) * sizeof(int64_t));                                                  \
+        if (!centres || !covers || !out) return -1;                                                              \
+        if (++stamp == 0) {                                                                                      \
+            memset(centres, 0, n_centres * sizeof(Centre)); memset(covers, 0, n_covers * sizeof(Cover)); stamp = 1; \
+        }                                                                                                        \
+        const uint32_t now = stamp;                                                                              \
         for (int64_t i = 0; i < N; i++) {                                                                        \
-            const int64_t c = (px[2 * i + 1] + splat) * Wp + (px[2 * i] + splat);                               \
-            if (z[i] < zbuf[c]) zbuf[c] = z[i];                                                                  \
+            Centre *c = centres + (px[2 * i + 1] + splat) * Wp + (px[2 * i] + splat);                            \
+            const double zi = (double)z[i];                                                                      \
+            if (c->stamp != now) { c->stamp = now; c->z = zi; c->owner = -1; }                                    \
+            else if (zi < c->z) c->z = zi;                                                                       \
         }                                                                                                        \
         for (int64_t i = 0; i < N; i++) {                                                                        \
-            const int64_t c = (px[2 * i + 1] + splat) * Wp + (px[2 * i] + splat);                               \
-            if (z[i] <= zbuf[c] && ids[i] > owner[c]) owner[c] = ids[i];                                         \
+            Centre *c = centres + (px[2 * i + 1] + splat) * Wp + (px[2 * i] + splat);                            \
+            if ((double)z[i] <= c->z && ids[i] > c->owner) c->owner = ids[i];                                    \
         }                                                                                                        \
         /* each centre once: the point that owns it (its id is unique among the points) */                       \
         for (int64_t i = 0; i < N; i++) {                                                                        \
-            const int64_t cr = px[2 * i + 1] + splat, cc = px[2 * i] + splat, c = cr * Wp + cc;                  \
-            if (owner[c] != ids[i] || !(z[i] <= zbuf[c])) continue;                                              \
-            const T zc = zbuf[c];                                                                                \
+            const int64_t cr = px[2 * i + 1] + splat, cc = px[2 * i] + splat;                                    \
+            const Centre *c = centres + cr * Wp + cc;                                                            \
+            if (c->owner != ids[i] || !((double)z[i] <= c->z) || !isfinite(c->z)) continue;                      \
+            const double zc = c->z;                                                                              \
             /* centre (R, C) in the padded image covers pixel (R - 2 splat + ky, C - 2 splat + kx) */            \
             for (int64_t ky = 0; ky < side; ky++) {                                                              \
                 const int64_t v = cr - 2 * splat + ky;                                                           \
@@ -288,17 +312,18 @@ static void *grow(size_t bytes) {
                 for (int64_t kx = 0; kx < side; kx++) {                                                          \
                     const int64_t u = cc - 2 * splat + kx;                                                       \
                     if (u < 0 || u >= width) continue;                                                           \
-                    const int64_t k = v * width + u;                                                             \
-                    const int32_t r = (int32_t)(ky * side + kx);                                                 \
-                    if (zc < best[k] || (zc == best[k] && r > rank[k])) {                                        \
-                        best[k] = zc; rank[k] = r; shown[k] = owner[c];                                          \
+                    Cover *p = covers + v * width + u;                                                           \
+                    const uint32_t r = (uint32_t)(ky * side + kx);                                               \
+                    if (p->stamp != now || zc < p->z || (zc == p->z && r > p->rank)) {                           \
+                        p->stamp = now; p->z = zc; p->rank = r; p->shown = c->owner;                             \
                     }                                                                                            \
                 }                                                                                                \
             }                                                                                                    \
         }                                                                                                        \
         int64_t count = 0;                                                                                       \
-        for (size_t k = 0; k < n_out; k++)                                                                       \
-            if (isfinite(best[k])) { out[2 * count] = (int64_t)k; out[2 * count + 1] = shown[k]; count++; }      \
+        for (size_t k = 0; k < n_out; k++) {   /* without a branch: a covered pixel is unpredictable */          \
+            out[2 * count] = (int64_t)k; out[2 * count + 1] = covers[k].shown; count += covers[k].stamp == now;  \
+        }                                                                                                        \
         kept = out; kept_count = count;                                                                          \
         return count;                                                                                            \
     }
