@@ -198,6 +198,11 @@ def point_normals(points: torch.Tensor, idx: torch.Tensor, shape: tuple[int, int
     B, H, W = shape
     if idx.numel() == 0:
         return points.new_zeros(0, 3), torch.zeros(0, dtype=torch.bool, device=points.device)
+    from dcslam.native import point_normals as native_point_normals
+
+    native = native_point_normals(points, idx, shape, search, max_relative_gap)   # the same values, where it applies
+    if native is not None:
+        return native
     b, rem = torch.div(idx, H * W, rounding_mode="floor"), idx % (H * W)
     v, u = torch.div(rem, W, rounding_mode="floor"), rem % W
     # Rows: the raster order of idx is already scan-line order. Columns: sorted by (b, u, v); every key is unique,

@@ -126,6 +126,12 @@ def _load():
         getattr(lib, "dcslam_" + name).argtypes = [p, p, p, i64, i64, i64, i64]
         getattr(lib, "dcslam_" + name).restype = i64
     lib.dcslam_take_pairs.argtypes, lib.dcslam_take_pairs.restype = [p, p, i64], None
+    for name, real in (("point_normals_f32", ctypes.c_float), ("point_normals_f64", ctypes.c_double)):
+        getattr(lib, "dcslam_" + name).argtypes = [p, p, i64, i64, i64, i64, i64, real, p, p, p, p, p, ctypes.c_int]
+        getattr(lib, "dcslam_" + name).restype = None
+    for name in ("point_finish_f32", "point_finish_f64"):
+        getattr(lib, "dcslam_" + name).argtypes = [p, p, p, i64, p]
+        getattr(lib, "dcslam_" + name).restype = None
     for name in ("rows_times_f32", "rows_times_f64"):
         getattr(lib, "dcslam_" + name).argtypes = [p, p, i64, p, ctypes.c_int]
         getattr(lib, "dcslam_" + name).restype = None
@@ -183,6 +189,34 @@ def grid_normals(vertex, valid, max_relative_gap: float):
     for b in range(B):
         finish(vertex[b].data_ptr(), valid[b].data_ptr(), ok[b].data_ptr(), root[b].data_ptr(), H * W,
                normal[b].data_ptr())
+    return normal, ok
+
+
+def point_normals(points, idx, shape: tuple[int, int, int], search: int, max_relative_gap: float):
+    """The native :func:`dcslam.geometry.normals.point_normals`, or None where it does not apply (no library; not
+    float32 / float64 on the CPU; a gradient): the caller runs the torch code. Shape: points (N, 3), idx (N,) int64
+    flat indices into ``shape`` (B, H, W) in raster order -> (normals (N, 3), ok (N,) bool)."""
+    import torch
+
+    if not _plain(points) or idx.dtype != torch.int64 or idx.device.type != "cpu" or idx.numel() == 0:
+        return None
+    lib = library()
+    if lib is None:
+        return None
+    B, H, W = shape
+    N, dtype = idx.numel(), points.dtype
+    points, idx = points.detach().contiguous(), idx.contiguous()
+    normal, square = torch.empty(N, 3, dtype=dtype), torch.empty(N, dtype=dtype)
+    ok = torch.empty(N, dtype=torch.bool)
+    order, count = torch.empty(N, dtype=torch.int64), torch.empty(B * W + 1, dtype=torch.int64)
+    f32 = dtype == torch.float32
+    cross = lib.dcslam_point_normals_f32 if f32 else lib.dcslam_point_normals_f64
+    cross(points.data_ptr(), idx.data_ptr(), N, B, H, W, search, _in_dtype(dtype)(max_relative_gap),
+          normal.data_ptr(), square.data_ptr(), ok.data_ptr(), order.data_ptr(), count.data_ptr(),
+          int(cross_fused(dtype)))
+    root = torch.sqrt(square)   # torch's root, as the torch code takes it (MKL's: not always IEEE's)
+    finish = lib.dcslam_point_finish_f32 if f32 else lib.dcslam_point_finish_f64
+    finish(points.data_ptr(), ok.data_ptr(), root.data_ptr(), N, normal.data_ptr())
     return normal, ok
 
 

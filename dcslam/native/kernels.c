@@ -129,6 +129,116 @@ void dcslam_grid_finish_f64(const double *vertex, const uint8_t *valid, const ui
     grid_finish_f64(vertex, valid, ok, root, HW, normal);
 }
 
+/* The normals of a sparse frame's valid pixels along its scan lines: dcslam.geometry.normals.point_normals, in two
+ * passes around torch's square root as the grid's. points (N, 3) and idx (N,) their flat indices into (B, H, W) in
+ * raster order; search, gap: point_normals' arguments. POINT_NORMALS writes each point's cross product of its
+ * tangents along the row and the column into normal, the square to take the root of into square (its squared norm
+ * where the point has a normal, 1 elsewhere) and ok; POINT_FINISH divides by the root, zeroes where not ok and turns
+ * the normals to the camera. The column order is a counting sort of the points by column, stable, so each column's
+ * points come by row: argsort's order, whose keys are unique. order: (N,) and count: (B W + 1,) scratch. */
+#define SIDE(T, i, j, steps, use, q0, q1, q2)                                                                     \
+    do {                                                                                                         \
+        use = 0; q0 = P[3 * i]; q1 = P[3 * i + 1]; q2 = P[3 * i + 2];                                            \
+        if ((j) >= 0) {                                                                                          \
+            const T c0 = P[3 * (j)], c1 = P[3 * (j) + 1], c2 = P[3 * (j) + 2];                                  \
+            const T zi = P[3 * i + 2];                                                                           \
+            const T d = c2 - zi;                                                                                 \
+            if ((d < 0 ? -d : d) <= gap * (T)(steps) * zi) { use = 1; q0 = c0; q1 = c1; q2 = c2; }               \
+        }                                                                                                        \
+    } while (0)
+
+#define POINT_NORMALS(NAME, T, CROSS_EXPR, ATTR)                                                                  \
+    ATTR static void NAME(const T *P, const int64_t *idx, int64_t N, int64_t B, int64_t H, int64_t W,           \
+                          int64_t search, T gap, T *normal, T *square, uint8_t *ok, int64_t *order,              \
+                          int64_t *count) {                                                                      \
+        const int64_t HW = H * W;                                                                                \
+        /* rows: the raster order is the scan-line order */                                                      \
+        for (int64_t i = 0; i < N; i++) {                                                                        \
+            const int64_t line = idx[i] / W, u = idx[i] % W;                                                     \
+            int64_t nx = -1, pv = -1, sn = 0, sp = 0;                                                            \
+            if (i + 1 < N && idx[i + 1] / W == line && idx[i + 1] % W - u <= search) { nx = i + 1; sn = idx[i + 1] % W - u; } \
+            if (i > 0 && idx[i - 1] / W == line && u - idx[i - 1] % W <= search) { pv = i - 1; sp = u - idx[i - 1] % W; } \
+            int uf, ub; T f0, f1, f2, b0, b1, b2;                                                                \
+            SIDE(T, i, nx, sn, uf, f0, f1, f2);                                                                  \
+            SIDE(T, i, pv, sp, ub, b0, b1, b2);                                                                  \
+            normal[3 * i] = f0 - b0; normal[3 * i + 1] = f1 - b1; normal[3 * i + 2] = f2 - b2;                   \
+            ok[i] = (uint8_t)(uf | ub);                                                                          \
+        }                                                                                                        \
+        /* columns: a stable counting sort of the points by (b, u) */                                            \
+        const int64_t lines = B * W;                                                                             \
+        memset(count, 0, sizeof(int64_t) * (lines + 1));                                                        \
+        for (int64_t i = 0; i < N; i++) count[(idx[i] / HW) * W + idx[i] % W + 1]++;                             \
+        for (int64_t k = 0; k < lines; k++) count[k + 1] += count[k];                                            \
+        for (int64_t i = 0; i < N; i++) order[count[(idx[i] / HW) * W + idx[i] % W]++] = i;                      \
+        for (int64_t k = 0; k < N; k++) {                                                                        \
+            const int64_t i = order[k], col = (idx[i] / HW) * W + idx[i] % W, v = (idx[i] % HW) / W;             \
+            int64_t nx = -1, pv = -1, sn = 0, sp = 0;                                                            \
+            if (k + 1 < N) {                                                                                     \
+                const int64_t j = order[k + 1];                                                                  \
+                if ((idx[j] / HW) * W + idx[j] % W == col && (idx[j] % HW) / W - v <= search) { nx = j; sn = (idx[j] % HW) / W - v; } \
+            }                                                                                                    \
+            if (k > 0) {                                                                                         \
+                const int64_t j = order[k - 1];                                                                  \
+                if ((idx[j] / HW) * W + idx[j] % W == col && v - (idx[j] % HW) / W <= search) { pv = j; sp = v - (idx[j] % HW) / W; } \
+            }                                                                                                    \
+            int uf, ub; T f0, f1, f2, b0, b1, b2;                                                                \
+            SIDE(T, i, nx, sn, uf, f0, f1, f2);                                                                  \
+            SIDE(T, i, pv, sp, ub, b0, b1, b2);                                                                  \
+            const T tx0 = normal[3 * i], tx1 = normal[3 * i + 1], tx2 = normal[3 * i + 2];                       \
+            const T ty0 = f0 - b0, ty1 = f1 - b1, ty2 = f2 - b2;                                                 \
+            T n0, n1, n2;                                                                                        \
+            CROSS_EXPR                                                                                           \
+            const T norm2 = n0 * n0 + n1 * n1 + n2 * n2;                                                         \
+            const int good = ok[i] && (uf | ub) && norm2 > (T)1e-20;                                             \
+            normal[3 * i] = n0; normal[3 * i + 1] = n1; normal[3 * i + 2] = n2;                                 \
+            square[i] = good ? norm2 : (T)1;                                                                     \
+            ok[i] = (uint8_t)good;                                                                               \
+        }                                                                                                        \
+    }
+
+#define POINT_FINISH(NAME, T)                                                                                     \
+    static void NAME(const T *P, const uint8_t *ok, const T *root, int64_t N, T *normal) {                       \
+        for (int64_t i = 0; i < N; i++) {                                                                        \
+            T n0 = normal[3 * i] / root[i], n1 = normal[3 * i + 1] / root[i], n2 = normal[3 * i + 2] / root[i];  \
+            if (!ok[i]) n0 = n1 = n2 = (T)0;                                                                     \
+            if (n0 * P[3 * i] + n1 * P[3 * i + 1] + n2 * P[3 * i + 2] > (T)0) { n0 = -n0; n1 = -n1; n2 = -n2; }  \
+            normal[3 * i] = n0; normal[3 * i + 1] = n1; normal[3 * i + 2] = n2;                                  \
+        }                                                                                                        \
+    }
+
+POINT_NORMALS(point_normals_f32_hw, float, CROSS_FUSED(fmaf), __attribute__((target("fma"))))
+POINT_NORMALS(point_normals_f64_hw, double, CROSS_FUSED(fma), __attribute__((target("fma"))))
+POINT_NORMALS(point_normals_f32_sw, float, CROSS_FUSED(fmaf), )
+POINT_NORMALS(point_normals_f64_sw, double, CROSS_FUSED(fma), )
+POINT_NORMALS(point_normals_f32_plain, float, CROSS_PLAIN, )
+POINT_NORMALS(point_normals_f64_plain, double, CROSS_PLAIN, )
+POINT_FINISH(point_finish_f32, float)
+POINT_FINISH(point_finish_f64, double)
+
+#define POINT_ARGS(T) const T *P, const int64_t *idx, int64_t N, int64_t B, int64_t H, int64_t W, int64_t search,    \
+    T gap, T *normal, T *square, uint8_t *ok, int64_t *order, int64_t *count
+#define POINT_CALL P, idx, N, B, H, W, search, gap, normal, square, ok, order, count
+
+void dcslam_point_normals_f32(POINT_ARGS(float), int fused) {
+    if (!fused) point_normals_f32_plain(POINT_CALL);
+    else if (has_fma()) point_normals_f32_hw(POINT_CALL);
+    else point_normals_f32_sw(POINT_CALL);
+}
+
+void dcslam_point_normals_f64(POINT_ARGS(double), int fused) {
+    if (!fused) point_normals_f64_plain(POINT_CALL);
+    else if (has_fma()) point_normals_f64_hw(POINT_CALL);
+    else point_normals_f64_sw(POINT_CALL);
+}
+
+void dcslam_point_finish_f32(const float *P, const uint8_t *ok, const float *root, int64_t N, float *normal) {
+    point_finish_f32(P, ok, root, N, normal);
+}
+
+void dcslam_point_finish_f64(const double *P, const uint8_t *ok, const double *root, int64_t N, double *normal) {
+    point_finish_f64(P, ok, root, N, normal);
+}
+
 /* Rows times a 3 x 3 matrix, out = points @ M (dcslam.geometry.se3.rows_times, torch.mm): each entry a sum of
  * three products in the order MKL's kernel takes them; mode 0: each product rounded, summed left to right (MKL's
  * conditional-numerical-reproducibility mode, which dcslam sets); mode 1: fma(p2, m2, fma(p1, m1, p0 m0)) (MKL's own

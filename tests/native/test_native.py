@@ -247,3 +247,28 @@ def test_point_to_plane_pairs_leave_gradients_to_torch():
     pose = T[0].clone().requires_grad_()
     r, *_ = problem.residuals(pose)
     assert r.requires_grad
+
+
+@needs_compiler
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("search", [3, 5, 12])
+def test_scan_line_normals_are_the_torch_codes(monkeypatch, dtype, search):
+    """LiDAR-like scan lines (every third row, every other column), holes, a depth edge, a batch of two: the normals
+    of the valid pixels alone (point_normals, as sparse frames take them) and the images, the same bits."""
+    from dcslam.geometry.normals import _scan_line_normals, point_normals
+
+    g = torch.Generator().manual_seed(search)
+    depth = torch.cat([_street_depth(g, holes=0.1), _street_depth(g, holes=0.4)]).to(dtype)
+    depth[:, :, 1::3] = 0
+    depth[..., 1::2] = 0
+    vertex, valid = backproject(depth, K.to(dtype)), depth > 0
+    ours = _scan_line_normals(vertex, valid, search, 0.1)
+    theirs = _torch_path(monkeypatch, _scan_line_normals, vertex, valid, search, 0.1)
+    assert torch.equal(ours[1], theirs[1]) and 0 < int(ours[1].sum()) < int(valid.sum())
+    assert torch.equal(_bits(ours[0].contiguous()), _bits(theirs[0].contiguous()))
+    idx = torch.nonzero(valid.reshape(-1)).squeeze(1)
+    points = vertex.permute(0, 2, 3, 1).reshape(-1, 3).index_select(0, idx)
+    assert native.point_normals(points, idx, (2, 32, 81), search, 0.1) is not None
+    mine, yours = (point_normals(points, idx, (2, 32, 81), search, 0.1),
+                   _torch_path(monkeypatch, point_normals, points, idx, (2, 32, 81), search, 0.1))
+    assert torch.equal(mine[1], yours[1]) and torch.equal(_bits(mine[0]), _bits(yours[0]))
