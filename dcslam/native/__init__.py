@@ -132,6 +132,10 @@ def _load():
     for name in ("point_finish_f32", "point_finish_f64"):
         getattr(lib, "dcslam_" + name).argtypes = [p, p, p, i64, p]
         getattr(lib, "dcslam_" + name).restype = None
+    lib.dcslam_voxel_keys_f32.argtypes = [p, i64, ctypes.c_float, p]
+    lib.dcslam_voxel_keys_f64.argtypes = [p, i64, ctypes.c_double, p]
+    lib.dcslam_voxel_keys_f32.restype = lib.dcslam_voxel_keys_f64.restype = None
+    lib.dcslam_first_of_each.argtypes, lib.dcslam_first_of_each.restype = [p, i64, p], i64
     for name in ("rows_times_f32", "rows_times_f64"):
         getattr(lib, "dcslam_" + name).argtypes = [p, p, i64, p, ctypes.c_int]
         getattr(lib, "dcslam_" + name).restype = None
@@ -218,6 +222,41 @@ def point_normals(points, idx, shape: tuple[int, int, int], search: int, max_rel
     finish = lib.dcslam_point_finish_f32 if f32 else lib.dcslam_point_finish_f64
     finish(points.data_ptr(), ok.data_ptr(), root.data_ptr(), N, normal.data_ptr())
     return normal, ok
+
+
+def voxel_keys(points, voxel_size: float):
+    """The native :func:`dcslam.slam.pointmap.voxel_keys` (``voxel_size`` > 0, checked by the caller), or None where
+    it does not apply (no library; not float32 / float64 on the CPU). Shape: (P, 3) -> (P,) int64."""
+    import torch
+
+    if not _plain(points) or points.ndim != 2 or points.shape[1] != 3:
+        return None
+    lib = library()
+    if lib is None:
+        return None
+    points = points.detach().contiguous()
+    keys = torch.empty(points.shape[0], dtype=torch.int64)
+    kernel = lib.dcslam_voxel_keys_f32 if points.dtype == torch.float32 else lib.dcslam_voxel_keys_f64
+    kernel(points.data_ptr(), points.shape[0], _in_dtype(points.dtype)(voxel_size), keys.data_ptr())
+    return keys
+
+
+def first_of_each(keys):
+    """Indices of the first of each distinct key, increasing (:func:`dcslam.slam.pointmap.voxel_representatives`
+    after its keys), or None where it does not apply. keys: (N,) int64 >= 0 on the CPU -> (Q,) int64."""
+    import torch
+
+    if keys.dtype != torch.int64 or keys.device.type != "cpu" or keys.ndim != 1:
+        return None
+    lib = library()
+    if lib is None:
+        return None
+    keys = keys.contiguous()
+    first = torch.empty(keys.shape[0], dtype=torch.int64)
+    count = lib.dcslam_first_of_each(keys.data_ptr(), keys.shape[0], first.data_ptr())
+    if count < 0:
+        raise MemoryError("dcslam.native: no memory for the voxels' table")
+    return first[:count].clone()
 
 
 def zbuffer_window(ids, px, z, height: int, width: int, splat: int):

@@ -239,6 +239,80 @@ void dcslam_point_finish_f64(const double *P, const uint8_t *ok, const double *r
     point_finish_f64(P, ok, root, N, normal);
 }
 
+/* Voxel keys: dcslam.slam.pointmap.voxel_keys. Each coordinate divided by the voxel size (true division, as
+ * torch.div by a number), floored, converted to int64 as the CPU converts (out of range or NaN: INT64_MIN), offset by
+ * 2^20, clamped to [0, 2^21 - 1] and packed 21 bits each: (i << 42) | (j << 21) | k. points (N, 3) -> keys (N,). */
+#define VOXEL_KEYS(NAME, T, FLOOR)                                                                                \
+    static void NAME(const T *points, int64_t N, T voxel, int64_t *keys) {                                       \
+        for (int64_t i = 0; i < N; i++) {                                                                        \
+            int64_t c[3];                                                                                        \
+            for (int a = 0; a < 3; a++) {                                                                        \
+                const T f = FLOOR(points[3 * i + a] / voxel);                                                    \
+                int64_t k = (f >= (T)-9.2e18 && f <= (T)9.2e18) ? (int64_t)f : INT64_MIN;                        \
+                k = k < INT64_MAX - 1048576 ? k + 1048576 : INT64_MAX;  /* +2^20, as int64 wraps: never here */  \
+                c[a] = k < 0 ? 0 : (k > 2097151 ? 2097151 : k);                                                  \
+            }                                                                                                    \
+            keys[i] = (c[0] << 42) | (c[1] << 21) | c[2];                                                        \
+        }                                                                                                        \
+    }
+
+VOXEL_KEYS(voxel_keys_f32, float, floorf)
+VOXEL_KEYS(voxel_keys_f64, double, floor)
+
+void dcslam_voxel_keys_f32(const float *points, int64_t N, float voxel, int64_t *keys) {
+    voxel_keys_f32(points, N, voxel, keys);
+}
+
+void dcslam_voxel_keys_f64(const double *points, int64_t N, double voxel, int64_t *keys) {
+    voxel_keys_f64(points, N, voxel, keys);
+}
+
+/* An open-addressing hash table of non-negative int64 keys (voxel keys) to int64 values, -1 = empty; kept by each
+ * thread and cleared per use. */
+static __thread int64_t *table_keys = NULL, *table_values = NULL;
+static __thread size_t table_size = 0;
+
+static int64_t table_open(size_t n) {       /* a power of two >= 2 n; 0 when memory ran out */
+    size_t size = 16;
+    while (size < 2 * n) size <<= 1;
+    if (size > table_size) {
+        free(table_keys); free(table_values);
+        table_keys = malloc(size * sizeof(int64_t)); table_values = malloc(size * sizeof(int64_t));
+        if (!table_keys || !table_values) { free(table_keys); free(table_values); table_keys = table_values = NULL; table_size = 0; return 0; }
+        table_size = size;
+    }
+    memset(table_keys, 0xff, size * sizeof(int64_t));
+    return (int64_t)size;
+}
+
+static inline size_t slot_of(int64_t key, size_t mask) {
+    uint64_t x = (uint64_t)key;                /* splitmix64's finaliser */
+    x ^= x >> 30; x *= 0xbf58476d1ce4e5b9ULL; x ^= x >> 27; x *= 0x94d049bb133111ebULL; x ^= x >> 31;
+    return (size_t)x & mask;
+}
+
+/* The slot holding key, or the empty slot where it would go. */
+static inline size_t probe(int64_t key, size_t mask) {
+    size_t h = slot_of(key, mask);
+    while (table_keys[h] != -1 && table_keys[h] != key) h = (h + 1) & mask;
+    return h;
+}
+
+/* dcslam.slam.pointmap.voxel_representatives after its keys: the index of the first key of each distinct value, in
+ * increasing order (the first point of each voxel in input order). keys (N,) >= 0 -> first (Q,); returns Q, or -1
+ * when memory ran out. */
+int64_t dcslam_first_of_each(const int64_t *keys, int64_t N, int64_t *first) {
+    const int64_t size = table_open((size_t)N);
+    if (!size) return -1;
+    const size_t mask = (size_t)size - 1;
+    int64_t Q = 0;
+    for (int64_t i = 0; i < N; i++) {
+        const size_t h = probe(keys[i], mask);
+        if (table_keys[h] == -1) { table_keys[h] = keys[i]; first[Q++] = i; }
+    }
+    return Q;
+}
+
 /* Rows times a 3 x 3 matrix, out = points @ M (dcslam.geometry.se3.rows_times, torch.mm): each entry a sum of
  * three products in the order MKL's kernel takes them; mode 0: each product rounded, summed left to right (MKL's
  * conditional-numerical-reproducibility mode, which dcslam sets); mode 1: fma(p2, m2, fma(p1, m1, p0 m0)) (MKL's own

@@ -272,3 +272,21 @@ def test_scan_line_normals_are_the_torch_codes(monkeypatch, dtype, search):
     mine, yours = (point_normals(points, idx, (2, 32, 81), search, 0.1),
                    _torch_path(monkeypatch, point_normals, points, idx, (2, 32, 81), search, 0.1))
     assert torch.equal(mine[1], yours[1]) and torch.equal(_bits(mine[0]), _bits(yours[0]))
+
+
+@needs_compiler
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("voxel", [0.2, 0.05, 0.3])
+def test_voxel_keys_and_representatives_are_the_torch_codes(monkeypatch, dtype, voxel):
+    """Many points per voxel, points on voxel borders, and points far enough out to be clamped."""
+    from dcslam.slam.pointmap import voxel_keys, voxel_representatives
+
+    g = torch.Generator().manual_seed(int(voxel * 100))
+    points = (torch.randn(20000, 3, generator=g, dtype=torch.float64) * 3).to(dtype)
+    points[:500] = torch.round(points[:500] / voxel) * voxel
+    points[500:510], points[510:520] = 1e9, -1e9
+    keys = voxel_keys(points, voxel)
+    assert torch.equal(keys, _torch_path(monkeypatch, voxel_keys, points, voxel))
+    first = voxel_representatives(points, voxel)
+    assert torch.equal(first, _torch_path(monkeypatch, voxel_representatives, points, voxel))
+    assert native.voxel_keys(points, voxel) is not None and 100 < first.numel() < 20000
