@@ -136,6 +136,7 @@ def _load():
     lib.dcslam_voxel_keys_f64.argtypes = [p, i64, ctypes.c_double, p]
     lib.dcslam_voxel_keys_f32.restype = lib.dcslam_voxel_keys_f64.restype = None
     lib.dcslam_first_of_each.argtypes, lib.dcslam_first_of_each.restype = [p, i64, p], i64
+    lib.dcslam_voxel_lookup.argtypes, lib.dcslam_voxel_lookup.restype = [p, i64, p, p, i64, p, p, p, p, p], i64
     for name in ("rows_times_f32", "rows_times_f64"):
         getattr(lib, "dcslam_" + name).argtypes = [p, p, i64, p, ctypes.c_int]
         getattr(lib, "dcslam_" + name).restype = None
@@ -257,6 +258,33 @@ def first_of_each(keys):
     if count < 0:
         raise MemoryError("dcslam.native: no memory for the voxels' table")
     return first[:count].clone()
+
+
+def voxel_lookup(map_keys, keys, target):
+    """What :func:`dcslam.slam.pointmap.assign_voxels` looks up, by hashes of the keys: (free (M,) the frame points
+    without a target, voxel_of (M,) each one's voxel, voxels (D,) the distinct voxels in order of first appearance,
+    slot (D,) each one's map point or -1), or None where it does not apply (no library; not on the CPU; a key twice
+    in the map). Shape: map_keys (P,), keys (F,), target (F,) int64."""
+    import torch
+
+    if any(t.dtype != torch.int64 or t.device.type != "cpu" for t in (map_keys, keys, target)):
+        return None
+    lib = library()
+    if lib is None:
+        return None
+    map_keys, keys, target = map_keys.contiguous(), keys.contiguous(), target.contiguous()
+    F = keys.shape[0]
+    free, voxel_of, voxels, slot = (torch.empty(F, dtype=torch.int64) for _ in range(4))
+    n_free = ctypes.c_int64(0)
+    D = lib.dcslam_voxel_lookup(map_keys.data_ptr(), map_keys.shape[0], keys.data_ptr(), target.data_ptr(), F,
+                                free.data_ptr(), voxel_of.data_ptr(), voxels.data_ptr(), slot.data_ptr(),
+                                ctypes.byref(n_free))
+    if D == -2:
+        return None
+    if D < 0:
+        raise MemoryError("dcslam.native: no memory for the voxels' tables")
+    M = n_free.value
+    return free[:M], voxel_of[:M], voxels[:D], slot[:D]
 
 
 def zbuffer_window(ids, px, z, height: int, width: int, splat: int):

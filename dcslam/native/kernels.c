@@ -267,34 +267,29 @@ void dcslam_voxel_keys_f64(const double *points, int64_t N, double voxel, int64_
     voxel_keys_f64(points, N, voxel, keys);
 }
 
-/* An open-addressing hash table of non-negative int64 keys (voxel keys) to int64 values, -1 = empty; kept by each
- * thread and cleared per use. */
-static __thread int64_t *table_keys = NULL, *table_values = NULL;
-static __thread size_t table_size = 0;
+/* Open-addressing hash tables of non-negative int64 keys (voxel keys) to int64 values, -1 = empty; kept by each
+ * thread (two: a map's keys and a frame's) and cleared per use. */
+typedef struct { int64_t *keys, *values; size_t size; } Table;
+static __thread Table tables[2] = {{NULL, NULL, 0}, {NULL, NULL, 0}};
 
-static int64_t table_open(size_t n) {       /* a power of two >= 2 n; 0 when memory ran out */
+static size_t table_open(Table *t, size_t n) {   /* its mask (a power of two >= 2 n, less 1); 0: no memory */
     size_t size = 16;
     while (size < 2 * n) size <<= 1;
-    if (size > table_size) {
-        free(table_keys); free(table_values);
-        table_keys = malloc(size * sizeof(int64_t)); table_values = malloc(size * sizeof(int64_t));
-        if (!table_keys || !table_values) { free(table_keys); free(table_values); table_keys = table_values = NULL; table_size = 0; return 0; }
-        table_size = size;
+    if (size > t->size) {
+        free(t->keys); free(t->values);
+        t->keys = malloc(size * sizeof(int64_t)); t->values = malloc(size * sizeof(int64_t));
+        if (!t->keys || !t->values) { free(t->keys); free(t->values); t->keys = t->values = NULL; t->size = 0; return 0; }
+        t->size = size;
     }
-    memset(table_keys, 0xff, size * sizeof(int64_t));
-    return (int64_t)size;
+    memset(t->keys, 0xff, size * sizeof(int64_t));
+    return size - 1;
 }
 
-static inline size_t slot_of(int64_t key, size_t mask) {
+static inline size_t probe(const Table *t, int64_t key, size_t mask) {   /* key's slot, or the empty one for it */
     uint64_t x = (uint64_t)key;                /* splitmix64's finaliser */
     x ^= x >> 30; x *= 0xbf58476d1ce4e5b9ULL; x ^= x >> 27; x *= 0x94d049bb133111ebULL; x ^= x >> 31;
-    return (size_t)x & mask;
-}
-
-/* The slot holding key, or the empty slot where it would go. */
-static inline size_t probe(int64_t key, size_t mask) {
-    size_t h = slot_of(key, mask);
-    while (table_keys[h] != -1 && table_keys[h] != key) h = (h + 1) & mask;
+    size_t h = (size_t)x & mask;
+    while (t->keys[h] != -1 && t->keys[h] != key) h = (h + 1) & mask;
     return h;
 }
 
@@ -302,15 +297,50 @@ static inline size_t probe(int64_t key, size_t mask) {
  * increasing order (the first point of each voxel in input order). keys (N,) >= 0 -> first (Q,); returns Q, or -1
  * when memory ran out. */
 int64_t dcslam_first_of_each(const int64_t *keys, int64_t N, int64_t *first) {
-    const int64_t size = table_open((size_t)N);
-    if (!size) return -1;
-    const size_t mask = (size_t)size - 1;
+    Table *t = &tables[0];
+    const size_t mask = table_open(t, (size_t)N);
+    if (!mask) return -1;
     int64_t Q = 0;
     for (int64_t i = 0; i < N; i++) {
-        const size_t h = probe(keys[i], mask);
-        if (table_keys[h] == -1) { table_keys[h] = keys[i]; first[Q++] = i; }
+        const size_t h = probe(t, keys[i], mask);
+        if (t->keys[h] == -1) { t->keys[h] = keys[i]; first[Q++] = i; }
     }
     return Q;
+}
+
+/* The lookups of dcslam.slam.pointmap.assign_voxels: the frame's points without a target (target < 0), their
+ * distinct voxels in order of first appearance, and each voxel's map point (the map's keys are unique; -1: a new
+ * voxel). map_keys (P,), keys and target (F,) -> free (M,) the points without a target, voxel_of (M,) each one's
+ * voxel, voxels (D,) the distinct keys, slot (D,) their map points; returns D, with M in *n_free; -1: no memory;
+ * -2: a key twice in the map (the torch code's answer then depends on its sort: it runs). */
+int64_t dcslam_voxel_lookup(const int64_t *map_keys, int64_t P, const int64_t *keys, const int64_t *target, int64_t F,
+                            int64_t *free_points, int64_t *voxel_of, int64_t *voxels, int64_t *slot, int64_t *n_free) {
+    Table *map = &tables[0], *frame = &tables[1];
+    const size_t map_mask = table_open(map, (size_t)P);
+    if (!map_mask) return -1;
+    for (int64_t i = 0; i < P; i++) {
+        const size_t h = probe(map, map_keys[i], map_mask);
+        if (map->keys[h] != -1) return -2;
+        map->keys[h] = map_keys[i]; map->values[h] = i;
+    }
+    int64_t M = 0;
+    for (int64_t i = 0; i < F; i++) M += target[i] < 0;
+    const size_t mask = table_open(frame, (size_t)M);
+    if (!mask) return -1;
+    int64_t D = 0, m = 0;
+    for (int64_t i = 0; i < F; i++) {
+        if (target[i] >= 0) continue;
+        const size_t h = probe(frame, keys[i], mask);
+        if (frame->keys[h] == -1) {
+            frame->keys[h] = keys[i]; frame->values[h] = D;
+            const size_t g = probe(map, keys[i], map_mask);
+            voxels[D] = keys[i]; slot[D] = map->keys[g] == -1 ? -1 : map->values[g];
+            D++;
+        }
+        free_points[m] = i; voxel_of[m] = frame->values[h]; m++;
+    }
+    *n_free = M;
+    return D;
 }
 
 /* Rows times a 3 x 3 matrix, out = points @ M (dcslam.geometry.se3.rows_times, torch.mm): each entry a sum of

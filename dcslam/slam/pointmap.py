@@ -12,7 +12,7 @@ import torch
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_K, project
 from dcslam.geometry.se3 import inverse, transform_points
-from dcslam.native import first_of_each
+from dcslam.native import first_of_each, voxel_lookup
 from dcslam.native import voxel_keys as native_voxel_keys
 from dcslam.slam.archive import MapArchive
 
@@ -247,6 +247,13 @@ def assign_voxels(pm: PointMap, keys: torch.Tensor, target: torch.Tensor,
     if voxel_size <= 0:
         target[free] = n + torch.arange(free.numel(), device=target.device)
         return target, keys.index_select(0, free)
+    looked = voxel_lookup(pm.voxel_key, keys, target)   # by hashes of the keys (dcslam.native), where it applies
+    if looked is not None:
+        free, voxel_of, voxels, slot = looked
+        fresh = torch.nonzero(slot < 0).squeeze(1)
+        new_keys, rank = torch.sort(voxels.index_select(0, fresh))       # distinct keys: one order
+        slot = slot.index_copy(0, fresh.index_select(0, rank), n + torch.arange(fresh.numel()))
+        return target.index_copy(0, free, slot.index_select(0, voxel_of)), new_keys
     # the frame's distinct voxels, looked up once each: sorting the frame's keys and searching the distinct ones in
     # the sorted map keys is several times faster than a binary search per frame point
     voxels, voxel_of = torch.unique(keys.index_select(0, free), return_inverse=True)

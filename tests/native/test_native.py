@@ -290,3 +290,40 @@ def test_voxel_keys_and_representatives_are_the_torch_codes(monkeypatch, dtype, 
     first = voxel_representatives(points, voxel)
     assert torch.equal(first, _torch_path(monkeypatch, voxel_representatives, points, voxel))
     assert native.voxel_keys(points, voxel) is not None and 100 < first.numel() < 20000
+
+
+class _Keys:
+    """What assign_voxels reads of a map: its length and its voxel keys."""
+
+    def __init__(self, keys: torch.Tensor):
+        self.voxel_key = keys
+
+    def __len__(self) -> int:
+        return self.voxel_key.shape[0]
+
+
+@needs_compiler
+@pytest.mark.parametrize("map_points,frame_points", [(0, 500), (1000, 3000), (20000, 8000), (300, 0), (5, 100)])
+def test_assign_voxels_is_the_torch_codes(monkeypatch, map_points, frame_points):
+    """An empty map, a frame whose voxels are half in the map, points already matched (target >= 0), no frame
+    points: the same targets and new keys (slots after the map's in the order of keys); the caller's target kept."""
+    from dcslam.slam.pointmap import assign_voxels
+
+    g = torch.Generator().manual_seed(map_points + frame_points)
+    span = 4000 + 3 * map_points
+    pm = _Keys(torch.randperm(span, generator=g)[:map_points] * 7)
+    keys = torch.randint(0, span, (frame_points,), generator=g) * 7
+    target = torch.where(torch.rand(frame_points, generator=g) < 0.5,
+                         torch.randint(0, max(map_points, 1), (frame_points,), generator=g), -1)
+    before = target.clone()
+    ours = assign_voxels(pm, keys, target, 0.2)
+    theirs = _torch_path(monkeypatch, assign_voxels, pm, keys, target, 0.2)
+    assert torch.equal(target, before)
+    assert torch.equal(ours[0], theirs[0]) and torch.equal(ours[1], theirs[1])
+    assert native.voxel_lookup(pm.voxel_key, keys, target) is not None
+
+
+@needs_compiler
+def test_assign_voxels_with_a_key_twice_in_the_map_is_left_to_torch():
+    keys = torch.tensor([7, 14, 7])
+    assert native.voxel_lookup(keys, torch.tensor([7, 21]), torch.tensor([-1, -1])) is None
