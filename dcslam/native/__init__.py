@@ -137,6 +137,9 @@ def _load():
     lib.dcslam_voxel_keys_f32.restype = lib.dcslam_voxel_keys_f64.restype = None
     lib.dcslam_first_of_each.argtypes, lib.dcslam_first_of_each.restype = [p, i64, p], i64
     lib.dcslam_voxel_lookup.argtypes, lib.dcslam_voxel_lookup.restype = [p, i64, p, p, i64, p, p, p, p, p], i64
+    for name in ("merge_f32", "merge_f64"):
+        getattr(lib, "dcslam_" + name).argtypes = [i64, i64, p, i64] + [p] * 17
+        getattr(lib, "dcslam_" + name).restype = None
     for name in ("rows_times_f32", "rows_times_f64"):
         getattr(lib, "dcslam_" + name).argtypes = [p, p, i64, p, ctypes.c_int]
         getattr(lib, "dcslam_" + name).restype = None
@@ -285,6 +288,32 @@ def voxel_lookup(map_keys, keys, target):
         raise MemoryError("dcslam.native: no memory for the voxels' tables")
     M = n_free.value
     return free[:M], voxel_of[:M], voxels[:D], slot[:D]
+
+
+def merge_averages(pm, target, new_count: int, points, normals, colors, radius, weight):
+    """The sums and averages of :func:`dcslam.slam.pointmap.merge` in one pass: (points, normals, colors (S, 3),
+    radius (S,), confidence (S,), observed (S,) int64, square (S,)), S = len(pm) + new_count, the normals averaged
+    but not yet divided by the root of ``square``; or None where it does not apply (no library; not one CPU float
+    dtype; a gradient). Shape: target (F,) int64, points / normals / colors (F, 3), radius, weight (F,)."""
+    import torch
+
+    old = (pm.points, pm.normals, pm.colors, pm.radius, pm.confidence)
+    if not _plain(points, normals, colors, radius, weight, *old) or target.dtype != torch.int64:
+        return None
+    lib = library()
+    if lib is None:
+        return None
+    dtype, P, F = points.dtype, len(pm), target.shape[0]
+    S = P + new_count
+    args = [t.detach().contiguous() for t in (weight, pm.confidence, points, normals, colors, radius, pm.points,
+                                                pm.normals, pm.colors, pm.radius)]
+    out = [torch.empty(S, 3, dtype=dtype) for _ in range(3)] + [torch.empty(S, dtype=dtype) for _ in range(2)]
+    observed, square = torch.empty(S, dtype=torch.int64), torch.empty(S, dtype=dtype)
+    kernel = lib.dcslam_merge_f32 if dtype == torch.float32 else lib.dcslam_merge_f64
+    target = target.contiguous()
+    kernel(P, new_count, target.data_ptr(), F, *(t.data_ptr() for t in args), *(t.data_ptr() for t in out),
+           observed.data_ptr(), square.data_ptr())
+    return (*out, observed, square)
 
 
 def zbuffer_window(ids, px, z, height: int, width: int, splat: int):

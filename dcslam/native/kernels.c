@@ -343,6 +343,71 @@ int64_t dcslam_voxel_lookup(const int64_t *map_keys, int64_t P, const int64_t *k
     return D;
 }
 
+/* The confidence-weighted averages of dcslam.slam.pointmap.merge: a map of P points and Q new slots (S = P + Q),
+ * frame surfels i (F of them) into slots target[i]. The sums run as torch's index_add runs them (zero, then each
+ * frame point in order, each product w_i x_i rounded first). Per slot j: wsum the frame weights, total = c + wsum
+ * (c: the map point's confidence, 0 for a new slot), and each attribute (points, normals, colors: (.., 3); radius)
+ * (c old + sum w x) / total where the slot was touched (wsum > 0), else old (0 for a new slot); observed the frame
+ * points it took; square the averaged normal's squared norm where above 1e-20, else 1 (merge takes its root). */
+#define MERGE(NAME, T)                                                                                            \
+    static void NAME(int64_t P, int64_t Q, const int64_t *target, int64_t F, const T *weight, const T *conf,     \
+                     const T *new3[3], const T *new_radius, const T *old3[3], const T *old_radius, T *out3[3],   \
+                     T *out_radius, T *total, int64_t *observed, T *square) {                                    \
+        const int64_t S = P + Q;                                                                                 \
+        for (int64_t j = 0; j < S; j++) {                                                                        \
+            total[j] = 0; observed[j] = 0; out_radius[j] = 0;                                                    \
+            for (int a = 0; a < 3; a++) { out3[a][3 * j] = 0; out3[a][3 * j + 1] = 0; out3[a][3 * j + 2] = 0; }  \
+        }                                                                                                        \
+        for (int64_t i = 0; i < F; i++) { total[target[i]] += weight[i]; observed[target[i]] += 1; }            \
+        for (int64_t i = 0; i < F; i++) {                                                                        \
+            const int64_t j = target[i];                                                                         \
+            const T w = weight[i];                                                                               \
+            for (int a = 0; a < 3; a++)                                                                          \
+                for (int c = 0; c < 3; c++) out3[a][3 * j + c] += (T)(w * new3[a][3 * i + c]);                   \
+            out_radius[j] += (T)(w * new_radius[i]);                                                             \
+        }                                                                                                        \
+        for (int64_t j = 0; j < S; j++) {                                                                        \
+            const T wsum = total[j], c = j < P ? conf[j] : (T)0;                                                 \
+            const int touched = wsum > 0;                                                                        \
+            const T t = c + wsum, safe = touched ? t : (T)1;                                                     \
+            total[j] = t;                                                                                        \
+            for (int a = 0; a < 3; a++)                                                                          \
+                for (int k = 0; k < 3; k++) {                                                                    \
+                    const T old = j < P ? old3[a][3 * j + k] : (T)0;                                             \
+                    out3[a][3 * j + k] = touched ? ((T)(c * old) + out3[a][3 * j + k]) / safe : old;             \
+                }                                                                                                \
+            const T old_r = j < P ? old_radius[j] : (T)0;                                                        \
+            out_radius[j] = touched ? ((T)(c * old_r) + out_radius[j]) / safe : old_r;                           \
+            const T *n = out3[1] + 3 * j;                                                                        \
+            const T n2 = (T)((T)(n[0] * n[0]) + (T)(n[1] * n[1])) + (T)(n[2] * n[2]);                            \
+            square[j] = n2 > (T)1e-20 ? n2 : (T)1;                                                               \
+        }                                                                                                        \
+    }
+
+MERGE(merge_f32, float)
+MERGE(merge_f64, double)
+
+void dcslam_merge_f32(int64_t P, int64_t Q, const int64_t *target, int64_t F, const float *weight, const float *conf,
+                      const float *new_points, const float *new_normals, const float *new_colors,
+                      const float *new_radius, const float *old_points, const float *old_normals,
+                      const float *old_colors, const float *old_radius, float *points, float *normals,
+                      float *colors, float *radius, float *total, int64_t *observed, float *square) {
+    const float *n3[3] = {new_points, new_normals, new_colors}, *o3[3] = {old_points, old_normals, old_colors};
+    float *out3[3] = {points, normals, colors};
+    merge_f32(P, Q, target, F, weight, conf, n3, new_radius, o3, old_radius, out3, radius, total, observed, square);
+}
+
+void dcslam_merge_f64(int64_t P, int64_t Q, const int64_t *target, int64_t F, const double *weight,
+                      const double *conf, const double *new_points, const double *new_normals,
+                      const double *new_colors, const double *new_radius, const double *old_points,
+                      const double *old_normals, const double *old_colors, const double *old_radius, double *points,
+                      double *normals, double *colors, double *radius, double *total, int64_t *observed,
+                      double *square) {
+    const double *n3[3] = {new_points, new_normals, new_colors}, *o3[3] = {old_points, old_normals, old_colors};
+    double *out3[3] = {points, normals, colors};
+    merge_f64(P, Q, target, F, weight, conf, n3, new_radius, o3, old_radius, out3, radius, total, observed, square);
+}
+
 /* Rows times a 3 x 3 matrix, out = points @ M (dcslam.geometry.se3.rows_times, torch.mm): each entry a sum of
  * three products in the order MKL's kernel takes them; mode 0: each product rounded, summed left to right (MKL's
  * conditional-numerical-reproducibility mode, which dcslam sets); mode 1: fma(p2, m2, fma(p1, m1, p0 m0)) (MKL's own

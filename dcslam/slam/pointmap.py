@@ -12,7 +12,7 @@ import torch
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_K, project
 from dcslam.geometry.se3 import inverse, transform_points
-from dcslam.native import first_of_each, voxel_lookup
+from dcslam.native import first_of_each, merge_averages, voxel_lookup
 from dcslam.native import voxel_keys as native_voxel_keys
 from dcslam.slam.archive import MapArchive
 
@@ -281,6 +281,16 @@ def merge(pm: PointMap, target: torch.Tensor, new_keys: torch.Tensor, points: to
     P, Q = len(pm), new_keys.shape[0]
     size = P + Q
     dtype, device = points.dtype, points.device
+    native = merge_averages(pm, target, Q, points, normals, colors, radius, weight)   # one pass, where it applies
+    if native is not None:
+        p, n, col, rad, total, observed, square = native
+        return PointMap(
+            points=p, normals=n / torch.sqrt(square)[:, None], colors=col, confidence=total, radius=rad,
+            last_seen=torch.where(observed > 0, frame_index,
+                                  torch.cat([pm.last_seen, torch.zeros(Q, dtype=torch.int64, device=device)])),
+            observations=torch.cat([pm.observations, torch.zeros(Q, dtype=torch.int64, device=device)])
+            + (observed > 0).to(torch.int64),
+            voxel_key=torch.cat([pm.voxel_key, new_keys]))
     pad3 = torch.zeros(Q, 3, dtype=dtype, device=device)
     pad1 = torch.zeros(Q, dtype=dtype, device=device)
     c = torch.cat([pm.confidence, pad1])

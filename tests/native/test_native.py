@@ -327,3 +327,32 @@ def test_assign_voxels_is_the_torch_codes(monkeypatch, map_points, frame_points)
 def test_assign_voxels_with_a_key_twice_in_the_map_is_left_to_torch():
     keys = torch.tensor([7, 14, 7])
     assert native.voxel_lookup(keys, torch.tensor([7, 21]), torch.tensor([-1, -1])) is None
+
+
+@needs_compiler
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("map_points,new_points,frame_points", [(0, 50, 200), (500, 100, 3000), (40, 0, 10)])
+def test_merge_is_the_torch_codes(monkeypatch, dtype, map_points, new_points, frame_points):
+    """Several frame points per slot, slots left untouched, new slots, weights of zero: every field the same."""
+    from dcslam.slam.pointmap import PointMap, merge
+
+    g = torch.Generator().manual_seed(map_points + frame_points)
+
+    def rand(*shape):
+        return torch.randn(*shape, generator=g, dtype=torch.float64).to(dtype)
+
+    P, Q, F = map_points, new_points, frame_points
+    unit = torch.nn.functional.normalize(rand(P, 3), dim=1)
+    pm = PointMap(rand(P, 3) * 10, unit, rand(P, 3).abs(), rand(P).abs() * 3, rand(P).abs() * 0.1,
+                  torch.randint(0, 5, (P,), generator=g), torch.randint(1, 5, (P,), generator=g),
+                  torch.randperm(10 * P + 1, generator=g)[:P])
+    target = torch.randint(0, max(P + Q, 1), (F,), generator=g) if P + Q else torch.zeros(0, dtype=torch.int64)
+    weight = rand(F).abs()
+    weight[::7] = 0
+    args = (pm, target, torch.randperm(10 * Q + 1, generator=g)[:Q] + 10 * P + 1, rand(F, 3) * 10,
+            torch.nn.functional.normalize(rand(F, 3), dim=1), rand(F, 3).abs(), rand(F).abs() * 0.1, weight, 7)
+    ours, theirs = merge(*args), _torch_path(monkeypatch, merge, *args)
+    assert native.merge_averages(pm, target, Q, *args[3:8]) is not None
+    for name in ("points", "normals", "colors", "confidence", "radius", "last_seen", "observations", "voxel_key"):
+        a, b = getattr(ours, name), getattr(theirs, name)
+        assert a.dtype == b.dtype and torch.equal(*((_bits(a), _bits(b)) if a.is_floating_point() else (a, b))), name
