@@ -203,12 +203,13 @@ def to_toml(config, title: str | None = None) -> str:
 
 
 def code_version() -> str:
-    """dcslam's version and a hash of its Python sources: changes when the code that makes outputs changes."""
+    """dcslam's version and a hash of its Python and C sources (dcslam.native): changes when the code that makes
+    outputs changes."""
     from dcslam.version import __version__
 
     root = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
+    for path in sorted([*root.rglob("*.py"), *root.rglob("*.c")]):
         digest.update(str(path.relative_to(root)).encode())
         digest.update(path.read_bytes())
     return f"{__version__}+{digest.hexdigest()[:16]}"

@@ -95,6 +95,9 @@ def test_code_version_changes_with_the_sources(tmp_path, monkeypatch):
     first = code_version()
     (fake_root / "a.py").write_text("x = 2\n")
     assert code_version() != first != before
+    second = code_version()
+    (fake_root / "kernels.c").write_text("int x;\n")      # the native kernels make outputs too
+    assert code_version() != second
 
 
 def test_failed_stage_stops_the_pipeline_with_one_line(tmp_path, monkeypatch):
