@@ -57,6 +57,18 @@ def _folders() -> list[Path]:
     return [cache, Path(tempfile.gettempdir()) / f"dcslam-native-{os.getuid() if hasattr(os, 'getuid') else 0}"]
 
 
+def _trusted(folder: Path) -> bool:
+    """Whether a library in ``folder`` may be loaded: the folder is this user's and no one else may write it (a
+    shared temporary folder could otherwise hold another user's library under the expected name)."""
+    if not hasattr(os, "getuid") or os.environ.get(NATIVE_DIR_ENV):
+        return True
+    try:
+        info = folder.stat()
+    except OSError:
+        return False
+    return info.st_uid == os.getuid() and not info.st_mode & 0o022
+
+
 def _build(compiler: str, again: bool = False) -> Path | None:
     """The built library's path (built now when missing, or when ``again``: a cached file that would not load), or
     None when it cannot be built or written."""
@@ -65,10 +77,15 @@ def _build(compiler: str, again: bool = False) -> Path | None:
                          sys.platform.encode()).hexdigest()[:16]
     for folder in _folders():
         target = folder / f"dcslam-native-{key}.so"
+        try:
+            folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+        except OSError:
+            continue
+        if not _trusted(folder):
+            continue
         if target.is_file() and not again:
             return target
         try:
-            folder.mkdir(parents=True, exist_ok=True)
             fd, partial = tempfile.mkstemp(prefix=target.name + ".", suffix=".part", dir=folder)
             os.close(fd)
         except OSError:

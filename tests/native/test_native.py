@@ -356,3 +356,16 @@ def test_merge_is_the_torch_codes(monkeypatch, dtype, map_points, new_points, fr
     for name in ("points", "normals", "colors", "confidence", "radius", "last_seen", "observations", "voxel_key"):
         a, b = getattr(ours, name), getattr(theirs, name)
         assert a.dtype == b.dtype and torch.equal(*((_bits(a), _bits(b)) if a.is_floating_point() else (a, b))), name
+
+
+@pytest.mark.skipif(not hasattr(os, "getuid"), reason="POSIX permissions")
+def test_a_folder_others_may_write_is_not_trusted(tmp_path, monkeypatch):
+    """A library is loaded only from a folder of this user's that no one else may write."""
+    monkeypatch.delenv(native.NATIVE_DIR_ENV, raising=False)
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    shared.chmod(0o777)
+    assert not native._trusted(shared)
+    shared.chmod(0o700)
+    assert native._trusted(shared)
+    assert not native._trusted(tmp_path / "missing")
