@@ -140,7 +140,7 @@ def _load():
     for name in ("grid_normals_f32", "grid_normals_f64", "grid_finish_f32", "grid_finish_f64"):
         getattr(lib, "dcslam_" + name).restype = None
     for name in ("zbuffer_window_f32", "zbuffer_window_f64"):
-        getattr(lib, "dcslam_" + name).argtypes = [p, p, p, i64, i64, i64, i64]
+        getattr(lib, "dcslam_" + name).argtypes = [p, p, p, i64, i64, i64, i64, i64]
         getattr(lib, "dcslam_" + name).restype = i64
     lib.dcslam_take_pairs.argtypes, lib.dcslam_take_pairs.restype = [p, p, i64], None
     for name, real in (("point_normals_f32", ctypes.c_float), ("point_normals_f64", ctypes.c_double)):
@@ -333,10 +333,11 @@ def merge_averages(pm, target, new_count: int, points, normals, colors, radius, 
     return (*out, observed, square)
 
 
-def zbuffer_window(ids, px, z, height: int, width: int, splat: int):
+def zbuffer_window(ids, px, z, height: int, width: int, splat: int, capacity: int = 0):
     """The native :func:`dcslam.slam.pointmap._zbuffer_window`, or None where it does not apply (no library; not
-    on the CPU; depths not float32/float64): the caller runs the torch code. Shape: ids (N,) int64, px (N, 2) int64,
-    z (N,) -> (pixels (C,) flat indices into the window in raster order, points (C,) int64)."""
+    on the CPU; depths not float32/float64): the caller runs the torch code. ``capacity``: the padded pixels of the
+    whole image (0: unknown), the memory the kernel keeps from the first call. Shape: ids (N,) int64, px (N, 2)
+    int64, z (N,) -> (pixels (C,) flat indices into the window in raster order, points (C,) int64)."""
     import torch
 
     if z.dtype not in (torch.float32, torch.float64) or z.device.type != "cpu" or px.dtype != torch.int64:
@@ -346,7 +347,7 @@ def zbuffer_window(ids, px, z, height: int, width: int, splat: int):
         return None
     ids, px, z = ids.contiguous(), px.contiguous(), z.detach().contiguous()
     kernel = lib.dcslam_zbuffer_window_f32 if z.dtype == torch.float32 else lib.dcslam_zbuffer_window_f64
-    count = kernel(ids.data_ptr(), px.data_ptr(), z.data_ptr(), z.shape[0], height, width, splat)
+    count = kernel(ids.data_ptr(), px.data_ptr(), z.data_ptr(), z.shape[0], height, width, splat, capacity)
     if count == -2:          # a footprint wider than the kernel's offsets hold
         return None
     if count < 0:

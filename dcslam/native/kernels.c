@@ -533,10 +533,10 @@ static __thread size_t n_centres = 0, n_covers = 0;
  * the kernel's shared zero page, and each first write to it a copy-on-write fault that, with a second thread of the
  * process running on another core (dcslam slam's prefetch), flushes that core's TLB by an interrupt: measured as a
  * tenth of a sparse SLAM run's CPU time. */
-static void *entries(void *array, size_t *size, size_t n, size_t item) {
+static void *entries(void *array, size_t *size, size_t n, size_t item, size_t capacity) {
     if (n > *size) {
         free(array);
-        n += n / 2;
+        n = capacity >= n ? capacity : n + n / 2;     /* the caller's bound, else half again */
         array = malloc(n * item);
         if (array) memset(array, 0, n * item);
         *size = array ? n : 0;
@@ -544,10 +544,10 @@ static void *entries(void *array, size_t *size, size_t n, size_t item) {
     return array;
 }
 
-static void *grow(size_t bytes) {
+static void *grow(size_t bytes, size_t capacity) {
     if (bytes > scratch_bytes) {
         free(scratch);
-        bytes += bytes / 2;
+        bytes = capacity >= bytes ? capacity : bytes + bytes / 2;
         scratch = malloc(bytes);
         if (scratch) memset(scratch, 0, bytes);
         scratch_bytes = scratch ? bytes : 0;
@@ -565,12 +565,12 @@ static void *grow(size_t bytes) {
  * the cost follows the points, not the window (a sparse map covers a few per cent of it). */
 #define ZBUFFER(NAME, T)                                                                                          \
     static int64_t NAME(const int64_t *ids, const int64_t *px, const T *z, int64_t N, int64_t height,           \
-                        int64_t width, int64_t splat) {                                                          \
+                        int64_t width, int64_t splat, int64_t capacity) {                                        \
         const int64_t Wp = width + 2 * splat, Hp = height + 2 * splat, side = 2 * splat + 1;                     \
-        const size_t n_pad = (size_t)(Hp * Wp), n_out = (size_t)(height * width);                                \
-        centres = entries(centres, &n_centres, n_pad, sizeof(Centre));                                           \
-        covers = entries(covers, &n_covers, n_out, sizeof(Cover));                                               \
-        int64_t *out = grow(2 * (n_out + 1) * sizeof(int64_t));                                                  \
+        const size_t n_pad = (size_t)(Hp * Wp), n_out = (size_t)(height * width), cap = (size_t)capacity;        \
+        centres = entries(centres, &n_centres, n_pad, sizeof(Centre), cap);                                      \
+        covers = entries(covers, &n_covers, n_out, sizeof(Cover), cap);                                          \
+        int64_t *out = grow(2 * (n_out + 1) * sizeof(int64_t), 2 * (cap + 1) * sizeof(int64_t));                \
         if (!centres || !covers || !out) return -1;                                                              \
         if (++stamp == 0) {                                                                                      \
             memset(centres, 0, n_centres * sizeof(Centre)); memset(covers, 0, n_covers * sizeof(Cover)); stamp = 1; \
@@ -618,14 +618,16 @@ static void *grow(size_t bytes) {
 ZBUFFER(zbuffer_f32, float)
 ZBUFFER(zbuffer_f64, double)
 
+/* capacity: the padded pixels of the whole image the windows lie in (0: unknown), allocated at once so that the
+ * memory a run holds does not grow as its windows do. */
 int64_t dcslam_zbuffer_window_f32(const int64_t *ids, const int64_t *px, const float *z, int64_t N, int64_t height,
-                                  int64_t width, int64_t splat) {
-    return splat < 1024 ? zbuffer_f32(ids, px, z, N, height, width, splat) : -2;
+                                  int64_t width, int64_t splat, int64_t capacity) {
+    return splat < 1024 ? zbuffer_f32(ids, px, z, N, height, width, splat, capacity) : -2;
 }
 
 int64_t dcslam_zbuffer_window_f64(const int64_t *ids, const int64_t *px, const double *z, int64_t N, int64_t height,
-                                  int64_t width, int64_t splat) {
-    return splat < 1024 ? zbuffer_f64(ids, px, z, N, height, width, splat) : -2;
+                                  int64_t width, int64_t splat, int64_t capacity) {
+    return splat < 1024 ? zbuffer_f64(ids, px, z, N, height, width, splat, capacity) : -2;
 }
 
 /* The last z-buffer's pixels and points of this thread, count of each (as that call returned). */

@@ -182,19 +182,21 @@ def _zbuffer(pm: PointMap, T_world_cam: torch.Tensor, K: torch.Tensor, height: i
     # leaves the sky empty)
     (c0, r0), (c1, r1) = px.amin(0).tolist(), px.amax(0).tolist()
     c0, r0, c1, r1 = max(0, c0 - splat), max(0, r0 - splat), min(width - 1, c1 + splat), min(height - 1, r1 + splat)
-    pix, hit = _zbuffer_window(ids, px - torch.tensor([c0, r0], device=device), z, r1 - r0 + 1, c1 - c0 + 1, splat)
+    pix, hit = _zbuffer_window(ids, px - torch.tensor([c0, r0], device=device), z, r1 - r0 + 1, c1 - c0 + 1, splat,
+                               (height + 2 * splat) * (width + 2 * splat))
     w = c1 - c0 + 1
     return (torch.div(pix, w, rounding_mode="floor") + r0) * width + pix % w + c0, hit
 
 
 def _zbuffer_window(ids: torch.Tensor, px: torch.Tensor, z: torch.Tensor, height: int, width: int,
-                    splat: int) -> tuple[torch.Tensor, torch.Tensor]:
+                    splat: int, capacity: int = 0) -> tuple[torch.Tensor, torch.Tensor]:
     """:func:`_zbuffer` in a window of (height, width) pixels holding every pixel the points' squares reach.
-    Shape: ids (N,) the points' indices, px (N, 2) int64 their pixels (u, v) in the window, z (N,) their depths ->
-    (pixels (C,) flat indices into the window, in raster order; points (C,) int64)."""
+    ``capacity``: the padded pixels of the whole image, which the native kernel holds from its first call (0:
+    unknown). Shape: ids (N,) the points' indices, px (N, 2) int64 their pixels (u, v) in the window, z (N,) their
+    depths -> (pixels (C,) flat indices into the window, in raster order; points (C,) int64)."""
     from dcslam.native import zbuffer_window
 
-    native = zbuffer_window(ids, px, z, height, width, splat)    # the same pixels and points in one pass
+    native = zbuffer_window(ids, px, z, height, width, splat, capacity)    # the same pixels and points in one pass
     if native is not None:
         return native
     device, dtype = z.device, z.dtype
