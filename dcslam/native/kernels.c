@@ -98,25 +98,24 @@ static int has_fma(void) {
     return __builtin_cpu_supports("fma");
 }
 
+/* The variant of a kernel made by the macros above: as torch.cross without FMA (fused 0), or with it, by the
+ * instruction where the CPU has one. */
+#define DISPATCH(fused, kernel, ...)                                                                              \
+    do {                                                                                                         \
+        if (!(fused)) kernel##_plain(__VA_ARGS__);                                                               \
+        else if (has_fma()) kernel##_fma_hw(__VA_ARGS__);                                                        \
+        else kernel##_fma_sw(__VA_ARGS__);                                                                       \
+    } while (0)
+
 /* Exported: the float32 and float64 kernels; fused: 1 as torch.cross with FMA, 0 without. */
 void dcslam_grid_normals_f32(const float *vertex, const uint8_t *valid, int64_t H, int64_t W, float gap,
                              float *normal, float *square, uint8_t *ok, int fused) {
-    if (!fused)
-        grid_normals_f32_plain(vertex, valid, H, W, gap, normal, square, ok);
-    else if (has_fma())
-        grid_normals_f32_fma_hw(vertex, valid, H, W, gap, normal, square, ok);
-    else
-        grid_normals_f32_fma_sw(vertex, valid, H, W, gap, normal, square, ok);
+    DISPATCH(fused, grid_normals_f32, vertex, valid, H, W, gap, normal, square, ok);
 }
 
 void dcslam_grid_normals_f64(const double *vertex, const uint8_t *valid, int64_t H, int64_t W, double gap,
                              double *normal, double *square, uint8_t *ok, int fused) {
-    if (!fused)
-        grid_normals_f64_plain(vertex, valid, H, W, gap, normal, square, ok);
-    else if (has_fma())
-        grid_normals_f64_fma_hw(vertex, valid, H, W, gap, normal, square, ok);
-    else
-        grid_normals_f64_fma_sw(vertex, valid, H, W, gap, normal, square, ok);
+    DISPATCH(fused, grid_normals_f64, vertex, valid, H, W, gap, normal, square, ok);
 }
 
 void dcslam_grid_finish_f32(const float *vertex, const uint8_t *valid, const uint8_t *ok, const float *root,
@@ -206,10 +205,10 @@ void dcslam_grid_finish_f64(const double *vertex, const uint8_t *valid, const ui
         }                                                                                                        \
     }
 
-POINT_NORMALS(point_normals_f32_hw, float, CROSS_FUSED(fmaf), __attribute__((target("fma"))))
-POINT_NORMALS(point_normals_f64_hw, double, CROSS_FUSED(fma), __attribute__((target("fma"))))
-POINT_NORMALS(point_normals_f32_sw, float, CROSS_FUSED(fmaf), )
-POINT_NORMALS(point_normals_f64_sw, double, CROSS_FUSED(fma), )
+POINT_NORMALS(point_normals_f32_fma_hw, float, CROSS_FUSED(fmaf), __attribute__((target("fma"))))
+POINT_NORMALS(point_normals_f64_fma_hw, double, CROSS_FUSED(fma), __attribute__((target("fma"))))
+POINT_NORMALS(point_normals_f32_fma_sw, float, CROSS_FUSED(fmaf), )
+POINT_NORMALS(point_normals_f64_fma_sw, double, CROSS_FUSED(fma), )
 POINT_NORMALS(point_normals_f32_plain, float, CROSS_PLAIN, )
 POINT_NORMALS(point_normals_f64_plain, double, CROSS_PLAIN, )
 POINT_FINISH(point_finish_f32, float)
@@ -219,17 +218,9 @@ POINT_FINISH(point_finish_f64, double)
     T gap, T *normal, T *square, uint8_t *ok, int64_t *order, int64_t *count
 #define POINT_CALL P, idx, N, B, H, W, search, gap, normal, square, ok, order, count
 
-void dcslam_point_normals_f32(POINT_ARGS(float), int fused) {
-    if (!fused) point_normals_f32_plain(POINT_CALL);
-    else if (has_fma()) point_normals_f32_hw(POINT_CALL);
-    else point_normals_f32_sw(POINT_CALL);
-}
+void dcslam_point_normals_f32(POINT_ARGS(float), int fused) { DISPATCH(fused, point_normals_f32, POINT_CALL); }
 
-void dcslam_point_normals_f64(POINT_ARGS(double), int fused) {
-    if (!fused) point_normals_f64_plain(POINT_CALL);
-    else if (has_fma()) point_normals_f64_hw(POINT_CALL);
-    else point_normals_f64_sw(POINT_CALL);
-}
+void dcslam_point_normals_f64(POINT_ARGS(double), int fused) { DISPATCH(fused, point_normals_f64, POINT_CALL); }
 
 void dcslam_point_finish_f32(const float *P, const uint8_t *ok, const float *root, int64_t N, float *normal) {
     point_finish_f32(P, ok, root, N, normal);
