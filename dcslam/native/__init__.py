@@ -4,8 +4,8 @@ Contract: a kernel gives the values of the torch code it stands for, bit for bit
 ``tests/native/`` compare them), so whether it is used changes the speed only. Where no C compiler is found, the
 build fails, or ``DCSLAM_NATIVE=0`` is set, :func:`library` returns None and the callers run their torch code.
 
-Why C and not a compiled extension: nothing to build at install (an editable install keeps working), no torch headers
-(the build takes a fraction of a second), and a machine without a compiler still runs dcslam.
+Why C through ctypes and not a compiled extension: nothing to build at install (an editable install keeps working),
+no torch headers (the build takes about 1.5 s, once), and a machine without a compiler still runs dcslam.
 
 The library is built once per machine and source into ``DCSLAM_NATIVE_DIR`` (default ``$XDG_CACHE_HOME/dcslam`` or
 ``~/.cache/dcslam``, else the system's temporary folder when that is not writable), written under a temporary name

@@ -243,19 +243,19 @@ def assign_voxels(pm: PointMap, keys: torch.Tensor, target: torch.Tensor,
     Shape: keys (F,) int64, target (F,) int64 (-1 = unassigned) -> (target (F,) all >= 0, new voxel keys (Q,)),
     where slots ``len(pm) ... len(pm) + Q - 1`` are new points.
     """
-    free = torch.nonzero(target < 0).squeeze(1)           # only these are looked up (few where projective
-    target = target.clone()                                # association matched most of the frame)
     n = len(pm)
-    if voxel_size <= 0:
-        target[free] = n + torch.arange(free.numel(), device=target.device)
-        return target, keys.index_select(0, free)
-    looked = voxel_lookup(pm.voxel_key, keys, target)   # by hashes of the keys (dcslam.native), where it applies
+    looked = voxel_lookup(pm.voxel_key, keys, target) if voxel_size > 0 else None   # by hashes (dcslam.native)
     if looked is not None:
         free, voxel_of, voxels, slot = looked
         fresh = torch.nonzero(slot < 0).squeeze(1)
         new_keys, rank = torch.sort(voxels.index_select(0, fresh))       # distinct keys: one order
         slot = slot.index_copy(0, fresh.index_select(0, rank), n + torch.arange(fresh.numel()))
         return target.index_copy(0, free, slot.index_select(0, voxel_of)), new_keys
+    free = torch.nonzero(target < 0).squeeze(1)           # only these are looked up (few where projective
+    target = target.clone()                                # association matched most of the frame)
+    if voxel_size <= 0:
+        target[free] = n + torch.arange(free.numel(), device=target.device)
+        return target, keys.index_select(0, free)
     # the frame's distinct voxels, looked up once each: sorting the frame's keys and searching the distinct ones in
     # the sorted map keys is several times faster than a binary search per frame point
     voxels, voxel_of = torch.unique(keys.index_select(0, free), return_inverse=True)

@@ -96,7 +96,6 @@ def test_cross_probe_says_what_torch_cross_does():
 
 
 RUN = """
-import sys, torch
 import dcslam.native as native
 print("none" if native.library() is None else "loaded")
 """
