@@ -13,7 +13,8 @@ from dcslam.geometry.camera import backproject
 from dcslam.geometry.normals import _grid_normals
 
 K = torch.tensor([[60.0, 0, 40.5], [0, 60.0, 15.5], [0, 0, 1]], dtype=torch.float64)
-needs_compiler = pytest.mark.skipif(native._compiler() is None, reason="no C compiler on this machine")
+needs_compiler = pytest.mark.skipif(native._compiler() is None or not native.enabled(),
+                                    reason="no C compiler on this machine, or DCSLAM_NATIVE=0")
 
 
 def _bits(x: torch.Tensor) -> torch.Tensor:
