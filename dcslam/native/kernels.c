@@ -2,9 +2,10 @@
  *
  * Contract: each kernel gives the values of the torch code it stands for, bit for bit, on the machine it runs on
  * (tests/native/ compares the two). So the arithmetic below is that code's, in its order, with no contraction of
- * products into sums (built with -ffp-contract=off) except where torch's own kernel contracts: torch.cross computes
- * fma(a1, b2, -(a2 * b1)) where it was built for FMA, and the loader (dcslam/native/__init__.py) picks the variant
- * that torch on this machine uses.
+ * products into sums (built with -ffp-contract=off) except where the library doing torch's work contracts them:
+ * torch.cross computes fma(a1, b2, -(a2 * b1)) where it was built for FMA, and MKL's 3 x 3 products sum by a chain of
+ * FMAs outside its reproducible mode; the loader (dcslam/native/__init__.py) probes which this machine does. Square
+ * roots are left to torch (MKL's, not always IEEE's): the kernels around them run in two passes.
  *
  * Built by the loader with the system's C compiler on first use, cached by the hash of this file and the flags.
  */
