@@ -133,38 +133,44 @@ def _load():
         lib = None
     if lib is None:
         return None
-    p, i64 = ctypes.c_void_p, ctypes.c_int64
-    lib.dcslam_grid_normals_f32.argtypes = [p, p, i64, i64, ctypes.c_float, p, p, p, ctypes.c_int]
-    lib.dcslam_grid_normals_f64.argtypes = [p, p, i64, i64, ctypes.c_double, p, p, p, ctypes.c_int]
-    lib.dcslam_grid_finish_f32.argtypes = lib.dcslam_grid_finish_f64.argtypes = [p, p, p, p, i64, p]
-    for name in ("grid_normals_f32", "grid_normals_f64", "grid_finish_f32", "grid_finish_f64"):
-        getattr(lib, "dcslam_" + name).restype = None
-    for name in ("zbuffer_window_f32", "zbuffer_window_f64"):
-        getattr(lib, "dcslam_" + name).argtypes = [p, p, p, i64, i64, i64, i64, i64]
-        getattr(lib, "dcslam_" + name).restype = i64
-    lib.dcslam_take_pairs.argtypes, lib.dcslam_take_pairs.restype = [p, p, i64], None
-    for name, real in (("point_normals_f32", ctypes.c_float), ("point_normals_f64", ctypes.c_double)):
-        getattr(lib, "dcslam_" + name).argtypes = [p, p, i64, i64, i64, i64, i64, real, p, p, p, p, p, ctypes.c_int]
-        getattr(lib, "dcslam_" + name).restype = None
-    for name in ("point_finish_f32", "point_finish_f64"):
-        getattr(lib, "dcslam_" + name).argtypes = [p, p, p, i64, p]
-        getattr(lib, "dcslam_" + name).restype = None
-    lib.dcslam_voxel_keys_f32.argtypes = [p, i64, ctypes.c_float, p]
-    lib.dcslam_voxel_keys_f64.argtypes = [p, i64, ctypes.c_double, p]
-    lib.dcslam_voxel_keys_f32.restype = lib.dcslam_voxel_keys_f64.restype = None
-    lib.dcslam_first_of_each.argtypes, lib.dcslam_first_of_each.restype = [p, i64, p], i64
-    lib.dcslam_voxel_lookup.argtypes, lib.dcslam_voxel_lookup.restype = [p, i64, p, p, i64, p, p, p, p, p], i64
-    for name in ("merge_f32", "merge_f64"):
-        getattr(lib, "dcslam_" + name).argtypes = [i64, i64, p, i64] + [p] * 17
-        getattr(lib, "dcslam_" + name).restype = None
-    for name in ("rows_times_f32", "rows_times_f64"):
-        getattr(lib, "dcslam_" + name).argtypes = [p, p, i64, p, ctypes.c_int]
-        getattr(lib, "dcslam_" + name).restype = None
-    for name, real in (("pairs_f32", ctypes.c_float), ("pairs_f64", ctypes.c_double)):
-        getattr(lib, "dcslam_" + name).argtypes = [p, p, p, i64, p, p, p, p, real, real, real, real, i64, i64, p, p,
-                                                  real, real, ctypes.c_int, ctypes.c_int, p, p, p, p, p]
-        getattr(lib, "dcslam_" + name).restype = i64
+    for name, (argtypes, restype) in _signatures().items():
+        function = getattr(lib, "dcslam_" + name)
+        function.argtypes, function.restype = argtypes, restype
     return lib
+
+
+def _signatures() -> dict[str, tuple[list, object]]:
+    """Each exported function of kernels.c (less its ``dcslam_`` prefix) -> (argument types, result type)."""
+    p, i64, i32 = ctypes.c_void_p, ctypes.c_int64, ctypes.c_int
+    out = {"take_pairs": ([p, p, i64], None), "first_of_each": ([p, i64, p], i64),
+           "voxel_lookup": ([p, i64, p, p, i64, p, p, p, p, p], i64)}
+    for suffix, real in (("f32", ctypes.c_float), ("f64", ctypes.c_double)):
+        out.update({f"{name}_{suffix}": types for name, types in {
+            "grid_normals": ([p, p, i64, i64, real, p, p, p, i32], None),
+            "grid_finish": ([p, p, p, p, i64, p], None),
+            "point_normals": ([p, p, i64, i64, i64, i64, i64, real, p, p, p, p, p, i32], None),
+            "point_finish": ([p, p, p, i64, p], None),
+            "zbuffer_window": ([p, p, p, i64, i64, i64, i64, i64], i64),
+            "voxel_keys": ([p, i64, real, p], None),
+            "merge": ([i64, i64, p, i64] + [p] * 17, None),
+            "rows_times": ([p, p, i64, p, i32], None),
+            "pairs": ([p, p, p, i64, p, p, p, p, real, real, real, real, i64, i64, p, p, real, real, i32, i32,
+                       p, p, p, p, p], i64),
+        }.items()})
+    return out
+
+
+def _kernel(name: str, dtype=None):
+    """The loaded function ``dcslam_<name>`` (with ``_f32`` or ``_f64`` for a float ``dtype``), or None without the
+    library."""
+    lib = library()
+    if lib is None:
+        return None
+    if dtype is not None:
+        import torch
+
+        name += "_f32" if dtype == torch.float32 else "_f64"
+    return getattr(lib, "dcslam_" + name)
 
 
 def cross_fused(dtype) -> bool:
@@ -189,21 +195,15 @@ def grid_normals(vertex, valid, max_relative_gap: float):
     Shape: vertex (B, 3, H, W), valid (B, 1, H, W) bool -> (normals (B, 3, H, W), valid (B, 1, H, W) bool)."""
     import torch
 
-    if (vertex.dtype not in (torch.float32, torch.float64) or vertex.device.type != "cpu"
-            or (torch.is_grad_enabled() and vertex.requires_grad)):
+    if not _plain(vertex) or (cross := _kernel("grid_normals", vertex.dtype)) is None:
         return None
-    lib = library()
-    if lib is None:
-        return None
+    finish = _kernel("grid_finish", vertex.dtype)
     B, _, H, W = vertex.shape
     vertex = vertex.detach().contiguous()
     valid = valid.contiguous()
     normal = torch.empty_like(vertex)
     square = torch.empty(B, 1, H, W, dtype=vertex.dtype)
     ok = torch.empty(B, 1, H, W, dtype=torch.bool)
-    f32 = vertex.dtype == torch.float32
-    cross = lib.dcslam_grid_normals_f32 if f32 else lib.dcslam_grid_normals_f64
-    finish = lib.dcslam_grid_finish_f32 if f32 else lib.dcslam_grid_finish_f64
     # the gap as torch multiplies it: a Python float times a 0-d tensor of the vertex's dtype
     gap = float(torch.tensor(max_relative_gap, dtype=vertex.dtype))
     fused = int(cross_fused(vertex.dtype))
@@ -223,24 +223,20 @@ def point_normals(points, idx, shape: tuple[int, int, int], search: int, max_rel
     flat indices into ``shape`` (B, H, W) in raster order -> (normals (N, 3), ok (N,) bool)."""
     import torch
 
-    if not _plain(points) or idx.dtype != torch.int64 or idx.device.type != "cpu" or idx.numel() == 0:
+    if (not _plain(points) or idx.dtype != torch.int64 or idx.device.type != "cpu" or idx.numel() == 0
+            or (cross := _kernel("point_normals", points.dtype)) is None):
         return None
-    lib = library()
-    if lib is None:
-        return None
+    finish = _kernel("point_finish", points.dtype)
     B, H, W = shape
     N, dtype = idx.numel(), points.dtype
     points, idx = points.detach().contiguous(), idx.contiguous()
     normal, square = torch.empty(N, 3, dtype=dtype), torch.empty(N, dtype=dtype)
     ok = torch.empty(N, dtype=torch.bool)
     order, count = torch.empty(N, dtype=torch.int64), torch.empty(B * W + 1, dtype=torch.int64)
-    f32 = dtype == torch.float32
-    cross = lib.dcslam_point_normals_f32 if f32 else lib.dcslam_point_normals_f64
     cross(points.data_ptr(), idx.data_ptr(), N, B, H, W, search, _in_dtype(dtype)(max_relative_gap),
           normal.data_ptr(), square.data_ptr(), ok.data_ptr(), order.data_ptr(), count.data_ptr(),
           int(cross_fused(dtype)))
     root = torch.sqrt(square)   # torch's root, as the torch code takes it (MKL's: not always IEEE's)
-    finish = lib.dcslam_point_finish_f32 if f32 else lib.dcslam_point_finish_f64
     finish(points.data_ptr(), ok.data_ptr(), root.data_ptr(), N, normal.data_ptr())
     return normal, ok
 
@@ -250,14 +246,11 @@ def voxel_keys(points, voxel_size: float):
     it does not apply (no library; not float32 / float64 on the CPU). Shape: (P, 3) -> (P,) int64."""
     import torch
 
-    if not _plain(points) or points.ndim != 2 or points.shape[1] != 3:
-        return None
-    lib = library()
-    if lib is None:
+    if (not _plain(points) or points.ndim != 2 or points.shape[1] != 3
+            or (kernel := _kernel("voxel_keys", points.dtype)) is None):
         return None
     points = points.detach().contiguous()
     keys = torch.empty(points.shape[0], dtype=torch.int64)
-    kernel = lib.dcslam_voxel_keys_f32 if points.dtype == torch.float32 else lib.dcslam_voxel_keys_f64
     kernel(points.data_ptr(), points.shape[0], _in_dtype(points.dtype)(voxel_size), keys.data_ptr())
     return keys
 
@@ -267,14 +260,12 @@ def first_of_each(keys):
     after its keys), or None where it does not apply. keys: (N,) int64 >= 0 on the CPU -> (Q,) int64."""
     import torch
 
-    if keys.dtype != torch.int64 or keys.device.type != "cpu" or keys.ndim != 1:
-        return None
-    lib = library()
-    if lib is None:
+    if (keys.dtype != torch.int64 or keys.device.type != "cpu" or keys.ndim != 1
+            or (kernel := _kernel("first_of_each")) is None):
         return None
     keys = keys.contiguous()
     first = torch.empty(keys.shape[0], dtype=torch.int64)
-    count = lib.dcslam_first_of_each(keys.data_ptr(), keys.shape[0], first.data_ptr())
+    count = kernel(keys.data_ptr(), keys.shape[0], first.data_ptr())
     if count < 0:
         raise MemoryError("dcslam.native: no memory for the voxels' table")
     return first[:count].clone()
@@ -287,18 +278,15 @@ def voxel_lookup(map_keys, keys, target):
     in the map). Shape: map_keys (P,), keys (F,), target (F,) int64."""
     import torch
 
-    if any(t.dtype != torch.int64 or t.device.type != "cpu" for t in (map_keys, keys, target)):
-        return None
-    lib = library()
-    if lib is None:
+    if (any(t.dtype != torch.int64 or t.device.type != "cpu" for t in (map_keys, keys, target))
+            or (kernel := _kernel("voxel_lookup")) is None):
         return None
     map_keys, keys, target = map_keys.contiguous(), keys.contiguous(), target.contiguous()
     F = keys.shape[0]
     free, voxel_of, voxels, slot = (torch.empty(F, dtype=torch.int64) for _ in range(4))
     n_free = ctypes.c_int64(0)
-    D = lib.dcslam_voxel_lookup(map_keys.data_ptr(), map_keys.shape[0], keys.data_ptr(), target.data_ptr(), F,
-                                free.data_ptr(), voxel_of.data_ptr(), voxels.data_ptr(), slot.data_ptr(),
-                                ctypes.byref(n_free))
+    D = kernel(map_keys.data_ptr(), map_keys.shape[0], keys.data_ptr(), target.data_ptr(), F, free.data_ptr(),
+               voxel_of.data_ptr(), voxels.data_ptr(), slot.data_ptr(), ctypes.byref(n_free))
     if D == -2:
         return None
     if D < 0:
@@ -315,10 +303,8 @@ def merge_averages(pm, target, new_count: int, points, normals, colors, radius, 
     import torch
 
     old = (pm.points, pm.normals, pm.colors, pm.radius, pm.confidence)
-    if not _plain(points, normals, colors, radius, weight, *old) or target.dtype != torch.int64:
-        return None
-    lib = library()
-    if lib is None:
+    if (not _plain(points, normals, colors, radius, weight, *old) or target.dtype != torch.int64
+            or (kernel := _kernel("merge", points.dtype)) is None):
         return None
     dtype, P, F = points.dtype, len(pm), target.shape[0]
     S = P + new_count
@@ -326,7 +312,6 @@ def merge_averages(pm, target, new_count: int, points, normals, colors, radius, 
                                                 pm.normals, pm.colors, pm.radius)]
     out = [torch.empty(S, 3, dtype=dtype) for _ in range(3)] + [torch.empty(S, dtype=dtype) for _ in range(2)]
     observed, square = torch.empty(S, dtype=torch.int64), torch.empty(S, dtype=dtype)
-    kernel = lib.dcslam_merge_f32 if dtype == torch.float32 else lib.dcslam_merge_f64
     target = target.contiguous()
     kernel(P, new_count, target.data_ptr(), F, *(t.data_ptr() for t in args), *(t.data_ptr() for t in out),
            observed.data_ptr(), square.data_ptr())
@@ -340,29 +325,24 @@ def zbuffer_window(ids, px, z, height: int, width: int, splat: int, capacity: in
     int64, z (N,) -> (pixels (C,) flat indices into the window in raster order, points (C,) int64)."""
     import torch
 
-    if z.dtype not in (torch.float32, torch.float64) or z.device.type != "cpu" or px.dtype != torch.int64:
-        return None
-    lib = library()
-    if lib is None:
+    if not _plain(z) or px.dtype != torch.int64 or (kernel := _kernel("zbuffer_window", z.dtype)) is None:
         return None
     ids, px, z = ids.contiguous(), px.contiguous(), z.detach().contiguous()
-    kernel = lib.dcslam_zbuffer_window_f32 if z.dtype == torch.float32 else lib.dcslam_zbuffer_window_f64
     count = kernel(ids.data_ptr(), px.data_ptr(), z.data_ptr(), z.shape[0], height, width, splat, capacity)
     if count == -2:          # a footprint wider than the kernel's offsets hold
         return None
     if count < 0:
         raise MemoryError("dcslam.native: no memory for the z-buffer")
     pix, hit = torch.empty(count, dtype=torch.int64), torch.empty(count, dtype=torch.int64)
-    lib.dcslam_take_pairs(pix.data_ptr(), hit.data_ptr(), count)
+    _kernel("take_pairs")(pix.data_ptr(), hit.data_ptr(), count)
     return pix, hit
 
 
-def _rows_times_raw(lib, points, M, mode: int):
+def _rows_times_raw(points, M, mode: int):
     import torch
 
     out = torch.empty_like(points)
-    kernel = lib.dcslam_rows_times_f32 if points.dtype == torch.float32 else lib.dcslam_rows_times_f64
-    kernel(points.data_ptr(), M.data_ptr(), points.shape[0], out.data_ptr(), mode)
+    _kernel("rows_times", points.dtype)(points.data_ptr(), M.data_ptr(), points.shape[0], out.data_ptr(), mode)
     return out
 
 
@@ -370,20 +350,18 @@ def product_mode(dtype) -> int | None:
     """How torch.mm of (N, 3) rows by a 3 x 3 matrix sums on this machine, as the kernels' ``mode``: 0 (each
     product rounded, summed left to right: MKL's reproducible mode, which dcslam sets), 1 (fused multiply-adds: MKL's
     own kernels), None (neither, or no library: the torch code runs). Found once per dtype on random rows."""
+    if library() is None:
+        return None
     key = ("mm", str(dtype))
     if key not in _loaded:
         import torch
 
-        lib = library()
-        found = None
-        if lib is not None:
-            g = torch.Generator().manual_seed(0)
-            points = (torch.randn(4096, 3, generator=g, dtype=torch.float64) * 30).to(dtype)
-            M = torch.linalg.qr(torch.randn(3, 3, generator=g, dtype=torch.float64))[0].to(dtype).contiguous()
-            expected = torch.mm(points, M)
-            found = next((mode for mode in (0, 1) if torch.equal(_rows_times_raw(lib, points, M, mode), expected)),
-                         None)
-        _loaded[key] = found
+        g = torch.Generator().manual_seed(0)
+        points = (torch.randn(4096, 3, generator=g, dtype=torch.float64) * 30).to(dtype)
+        M = torch.linalg.qr(torch.randn(3, 3, generator=g, dtype=torch.float64))[0].to(dtype).contiguous()
+        expected = torch.mm(points, M)
+        _loaded[key] = next((mode for mode in (0, 1) if torch.equal(_rows_times_raw(points, M, mode), expected)),
+                            None)
     return _loaded[key]
 
 
@@ -409,10 +387,10 @@ def rows_times(points, M):
     """The native ``torch.mm(points, M)`` of (N, 3) rows and a 3 x 3 matrix, or None where it does not apply."""
     if not _plain(points, M) or points.ndim != 2 or points.shape[1] != 3 or M.shape != (3, 3):
         return None
-    mode = product_mode(points.dtype) if enabled() else None
+    mode = product_mode(points.dtype)
     if mode is None:
         return None
-    return _rows_times_raw(library(), points.detach().contiguous(), M.detach().contiguous(), mode)
+    return _rows_times_raw(points.detach().contiguous(), M.detach().contiguous(), mode)
 
 
 def point_to_plane_pairs(source, normals, usable, T, prepared, max_distance: float, cos_max_angle: float,
@@ -426,7 +404,7 @@ def point_to_plane_pairs(source, normals, usable, T, prepared, max_distance: flo
     table, index = prepared.table, prepared.index
     if not _plain(source, normals, T, table) or source.shape[0] < min_rows:
         return None
-    mode = product_mode(source.dtype) if enabled() else None
+    mode = product_mode(source.dtype)
     if mode is None:
         return None
     dtype, F = source.dtype, source.shape[0]
@@ -441,7 +419,7 @@ def point_to_plane_pairs(source, normals, usable, T, prepared, max_distance: flo
     q, n = torch.empty(F, 3, dtype=dtype), torch.empty(F, 3, dtype=dtype)
     paired = ctypes.c_int64(0)
     real = _in_dtype(dtype)
-    kernel = library().dcslam_pairs_f32 if dtype == torch.float32 else library().dcslam_pairs_f64
+    kernel = _kernel("pairs", dtype)
     count = kernel(source.data_ptr(), normals.data_ptr(), None if usable is None else usable.data_ptr(), F,
                    R.data_ptr(), t.data_ptr(), RrT.data_ptr(), tr.data_ptr(), real(prepared.fx), real(prepared.fy),
                    real(prepared.cx), real(prepared.cy), prepared.height, prepared.width, index.data_ptr(),

@@ -12,7 +12,7 @@ import torch
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import check_K, project
 from dcslam.geometry.se3 import inverse, transform_points
-from dcslam.native import first_of_each, merge_averages, voxel_lookup
+from dcslam.native import first_of_each, merge_averages, voxel_lookup, zbuffer_window
 from dcslam.native import voxel_keys as native_voxel_keys
 from dcslam.slam.archive import MapArchive
 
@@ -194,8 +194,6 @@ def _zbuffer_window(ids: torch.Tensor, px: torch.Tensor, z: torch.Tensor, height
     ``capacity``: the padded pixels of the whole image, which the native kernel holds from its first call (0:
     unknown). Shape: ids (N,) the points' indices, px (N, 2) int64 their pixels (u, v) in the window, z (N,) their
     depths -> (pixels (C,) flat indices into the window, in raster order; points (C,) int64)."""
-    from dcslam.native import zbuffer_window
-
     native = zbuffer_window(ids, px, z, height, width, splat, capacity)    # the same pixels and points in one pass
     if native is not None:
         return native
