@@ -233,15 +233,16 @@ void dcslam_point_finish_f64(const double *P, const uint8_t *ok, const double *r
 
 /* Voxel keys: dcslam.slam.pointmap.voxel_keys. Each coordinate divided by the voxel size (true division, as
  * torch.div by a number), floored, converted to int64 as the CPU converts (out of range or NaN: INT64_MIN), offset by
- * 2^20, clamped to [0, 2^21 - 1] and packed 21 bits each: (i << 42) | (j << 21) | k. points (N, 3) -> keys (N,). */
+ * 2^20 (wrapping), clamped to [0, 2^21 - 1] and packed 21 bits each: (i << 42) | (j << 21) | k.
+ * points (N, 3) -> keys (N,). */
 #define VOXEL_KEYS(NAME, T, FLOOR)                                                                                \
     static void NAME(const T *points, int64_t N, T voxel, int64_t *keys) {                                       \
         for (int64_t i = 0; i < N; i++) {                                                                        \
             int64_t c[3];                                                                                        \
             for (int a = 0; a < 3; a++) {                                                                        \
                 const T f = FLOOR(points[3 * i + a] / voxel);                                                    \
-                int64_t k = (f >= (T)-9.2e18 && f <= (T)9.2e18) ? (int64_t)f : INT64_MIN;                        \
-                k = k < INT64_MAX - 1048576 ? k + 1048576 : INT64_MAX;  /* +2^20, as int64 wraps: never here */  \
+                const int64_t whole = (f >= (T)-0x1p63 && f < (T)0x1p63) ? (int64_t)f : INT64_MIN;              \
+                const int64_t k = (int64_t)((uint64_t)whole + 1048576u);   /* wrapping, as torch's int64 add */ \
                 c[a] = k < 0 ? 0 : (k > 2097151 ? 2097151 : k);                                                  \
             }                                                                                                    \
             keys[i] = (c[0] << 42) | (c[1] << 21) | c[2];                                                        \

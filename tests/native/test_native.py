@@ -285,6 +285,8 @@ def test_voxel_keys_and_representatives_are_the_torch_codes(monkeypatch, dtype, 
     points = (torch.randn(20000, 3, generator=g, dtype=torch.float64) * 3).to(dtype)
     points[:500] = torch.round(points[:500] / voxel) * voxel
     points[500:510], points[510:520] = 1e9, -1e9
+    points[520:523], points[523:526] = 4e17, -4e17           # near int64's range once divided (0.05 m voxels)
+    points[526:529] = 1e30                                    # beyond it: the CPU's conversion
     keys = voxel_keys(points, voxel)
     assert torch.equal(keys, _torch_path(monkeypatch, voxel_keys, points, voxel))
     first = voxel_representatives(points, voxel)
