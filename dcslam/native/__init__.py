@@ -329,8 +329,6 @@ def zbuffer_window(ids, px, z, height: int, width: int, splat: int, capacity: in
         return None
     ids, px, z = ids.contiguous(), px.contiguous(), z.detach().contiguous()
     count = kernel(ids.data_ptr(), px.data_ptr(), z.data_ptr(), z.shape[0], height, width, splat, capacity)
-    if count == -2:          # a footprint wider than the kernel's offsets hold
-        return None
     if count < 0:
         raise MemoryError("dcslam.native: no memory for the z-buffer")
     pix, hit = torch.empty(count, dtype=torch.int64), torch.empty(count, dtype=torch.int64)

@@ -20,9 +20,9 @@
  * (its squared norm where the pixel has a normal, 1 elsewhere); GRID_FINISH: the cross product divided by that root,
  * zeroed where the pixel has none, and turned to face the camera.
  * vertex: (3, H, W) planes; valid: (H, W) bytes 0/1; normal: (3, H, W); square, root: (H, W); ok: (H, W) out. */
-#define GRID_NORMALS(NAME, T, SQRT, ABS, FMA_EXPR)                                                                \
+#define GRID_NORMALS(NAME, T, ABS, FMA_EXPR)                                                                      \
     static void NAME(const T *vertex, const uint8_t *valid, int64_t H, int64_t W, T gap, T *normal,             \
-                     T *square, uint8_t *ok_out) {                                                                          \
+                     T *square, uint8_t *ok_out) {                                                        \
         const int64_t HW = H * W;                                                                                \
         const T *X = vertex, *Y = vertex + HW, *Z = vertex + 2 * HW;                                             \
         for (int64_t i = 0; i < H; i++) {                                                                        \
@@ -87,12 +87,12 @@ GRID_FINISH(grid_finish_f64, double)
     n0 = tx1 * ty2 - tx2 * ty1; n1 = tx2 * ty0 - tx0 * ty2; n2 = tx0 * ty1 - tx1 * ty0;
 
 /* fmaf / fma are correctly rounded wherever they run; with the target "fma" the compiler emits the instruction */
-__attribute__((target("fma"))) GRID_NORMALS(grid_normals_f32_fma_hw, float, sqrtf, fabsf, CROSS_FUSED(fmaf))
-__attribute__((target("fma"))) GRID_NORMALS(grid_normals_f64_fma_hw, double, sqrt, fabs, CROSS_FUSED(fma))
-GRID_NORMALS(grid_normals_f32_fma_sw, float, sqrtf, fabsf, CROSS_FUSED(fmaf))
-GRID_NORMALS(grid_normals_f64_fma_sw, double, sqrt, fabs, CROSS_FUSED(fma))
-GRID_NORMALS(grid_normals_f32_plain, float, sqrtf, fabsf, CROSS_PLAIN)
-GRID_NORMALS(grid_normals_f64_plain, double, sqrt, fabs, CROSS_PLAIN)
+__attribute__((target("fma"))) GRID_NORMALS(grid_normals_f32_fma_hw, float, fabsf, CROSS_FUSED(fmaf))
+__attribute__((target("fma"))) GRID_NORMALS(grid_normals_f64_fma_hw, double, fabs, CROSS_FUSED(fma))
+GRID_NORMALS(grid_normals_f32_fma_sw, float, fabsf, CROSS_FUSED(fmaf))
+GRID_NORMALS(grid_normals_f64_fma_sw, double, fabs, CROSS_FUSED(fma))
+GRID_NORMALS(grid_normals_f32_plain, float, fabsf, CROSS_PLAIN)
+GRID_NORMALS(grid_normals_f64_plain, double, fabs, CROSS_PLAIN)
 
 static int has_fma(void) {
     __builtin_cpu_init();
@@ -147,6 +147,19 @@ void dcslam_grid_finish_f64(const double *vertex, const uint8_t *valid, const ui
         }                                                                                                        \
     } while (0)
 
+/* A point's line and its step along it, in the rows' order (raster) and in the columns' (by (b, u), then v) */
+#define ROW_LINE(j) (idx[j] / W)
+#define ROW_STEP(j) (idx[j] % W)
+#define COL_LINE(j) ((idx[j] / HW) * W + idx[j] % W)
+#define COL_STEP(j) ((idx[j] % HW) / W)
+
+/* The neighbours of point ``at`` among the points next (jn) and previous (jp) in a line order (-1: none): nx and pv,
+ * those on its line within ``search`` steps (else -1), sn and sp their steps away. */
+#define NEAR(LINE, STEP, at, jn, jp)                                                                              \
+    const int64_t sn = ((jn) >= 0 && LINE(jn) == LINE(at)) ? STEP(jn) - STEP(at) : search + 1;                  \
+    const int64_t sp = ((jp) >= 0 && LINE(jp) == LINE(at)) ? STEP(at) - STEP(jp) : search + 1;                  \
+    const int64_t nx = sn <= search ? (jn) : -1, pv = sp <= search ? (jp) : -1;
+
 #define POINT_NORMALS(NAME, T, CROSS_EXPR, ATTR)                                                                  \
     ATTR static void NAME(const T *P, const int64_t *idx, int64_t N, int64_t B, int64_t H, int64_t W,           \
                           int64_t search, T gap, T *normal, T *square, uint8_t *ok, int64_t *order,              \
@@ -154,10 +167,7 @@ void dcslam_grid_finish_f64(const double *vertex, const uint8_t *valid, const ui
         const int64_t HW = H * W;                                                                                \
         /* rows: the raster order is the scan-line order */                                                      \
         for (int64_t i = 0; i < N; i++) {                                                                        \
-            const int64_t line = idx[i] / W, u = idx[i] % W;                                                     \
-            int64_t nx = -1, pv = -1, sn = 0, sp = 0;                                                            \
-            if (i + 1 < N && idx[i + 1] / W == line && idx[i + 1] % W - u <= search) { nx = i + 1; sn = idx[i + 1] % W - u; } \
-            if (i > 0 && idx[i - 1] / W == line && u - idx[i - 1] % W <= search) { pv = i - 1; sp = u - idx[i - 1] % W; } \
+            NEAR(ROW_LINE, ROW_STEP, i, i + 1 < N ? i + 1 : -1, i > 0 ? i - 1 : -1)                              \
             int uf, ub; T f0, f1, f2, b0, b1, b2;                                                                \
             SIDE(T, i, nx, sn, uf, f0, f1, f2);                                                                  \
             SIDE(T, i, pv, sp, ub, b0, b1, b2);                                                                  \
@@ -167,20 +177,12 @@ void dcslam_grid_finish_f64(const double *vertex, const uint8_t *valid, const ui
         /* columns: a stable counting sort of the points by (b, u) */                                            \
         const int64_t lines = B * W;                                                                             \
         memset(count, 0, sizeof(int64_t) * (lines + 1));                                                        \
-        for (int64_t i = 0; i < N; i++) count[(idx[i] / HW) * W + idx[i] % W + 1]++;                             \
+        for (int64_t i = 0; i < N; i++) count[COL_LINE(i) + 1]++;                                                \
         for (int64_t k = 0; k < lines; k++) count[k + 1] += count[k];                                            \
-        for (int64_t i = 0; i < N; i++) order[count[(idx[i] / HW) * W + idx[i] % W]++] = i;                      \
+        for (int64_t i = 0; i < N; i++) order[count[COL_LINE(i)]++] = i;                                         \
         for (int64_t k = 0; k < N; k++) {                                                                        \
-            const int64_t i = order[k], col = (idx[i] / HW) * W + idx[i] % W, v = (idx[i] % HW) / W;             \
-            int64_t nx = -1, pv = -1, sn = 0, sp = 0;                                                            \
-            if (k + 1 < N) {                                                                                     \
-                const int64_t j = order[k + 1];                                                                  \
-                if ((idx[j] / HW) * W + idx[j] % W == col && (idx[j] % HW) / W - v <= search) { nx = j; sn = (idx[j] % HW) / W - v; } \
-            }                                                                                                    \
-            if (k > 0) {                                                                                         \
-                const int64_t j = order[k - 1];                                                                  \
-                if ((idx[j] / HW) * W + idx[j] % W == col && v - (idx[j] % HW) / W <= search) { pv = j; sp = v - (idx[j] % HW) / W; } \
-            }                                                                                                    \
+            const int64_t i = order[k];                                                                          \
+            NEAR(COL_LINE, COL_STEP, i, k + 1 < N ? order[k + 1] : -1, k > 0 ? order[k - 1] : -1)                \
             int uf, ub; T f0, f1, f2, b0, b1, b2;                                                                \
             SIDE(T, i, nx, sn, uf, f0, f1, f2);                                                                  \
             SIDE(T, i, pv, sp, ub, b0, b1, b2);                                                                  \
@@ -271,7 +273,11 @@ static size_t table_open(Table *t, size_t n) {   /* its mask (a power of two >= 
     if (size > t->size) {
         free(t->keys); free(t->values);
         t->keys = malloc(size * sizeof(int64_t)); t->values = malloc(size * sizeof(int64_t));
-        if (!t->keys || !t->values) { free(t->keys); free(t->values); t->keys = t->values = NULL; t->size = 0; return 0; }
+        if (!t->keys || !t->values) {
+            free(t->keys); free(t->values);
+            t->keys = t->values = NULL; t->size = 0;
+            return 0;
+        }
         t->size = size;
     }
     memset(t->keys, 0xff, size * sizeof(int64_t));
@@ -461,7 +467,8 @@ void dcslam_rows_times_f64(const double *points, const double *M, int64_t N, dou
             const T zs = (z < 0 ? -z : z) > tiny ? z : tiny;                                                     \
             const T u = rint_t(fx * x / zs + cx), v = rint_t(fy * y / zs + cy);                                  \
             if (!(z > 0 && u >= 0 && u <= W1 && v >= 0 && v <= H1)) continue;                                    \
-            const int64_t pixel = exact_f32 ? (int64_t)(v * Wf + u) : (int64_t)((double)v * (double)width + (double)u); \
+            const int64_t pixel = exact_f32 ? (int64_t)(v * Wf + u)                                             \
+                                            : (int64_t)((double)v * (double)width + (double)u);                   \
             const int64_t target = index[pixel];                                                                 \
             if (target < 0) continue;                                                                            \
             P++;                                                                                                 \
@@ -615,12 +622,12 @@ ZBUFFER(zbuffer_f64, double)
  * memory a run holds does not grow as its windows do. */
 int64_t dcslam_zbuffer_window_f32(const int64_t *ids, const int64_t *px, const float *z, int64_t N, int64_t height,
                                   int64_t width, int64_t splat, int64_t capacity) {
-    return splat < 1024 ? zbuffer_f32(ids, px, z, N, height, width, splat, capacity) : -2;
+    return zbuffer_f32(ids, px, z, N, height, width, splat, capacity);
 }
 
 int64_t dcslam_zbuffer_window_f64(const int64_t *ids, const int64_t *px, const double *z, int64_t N, int64_t height,
                                   int64_t width, int64_t splat, int64_t capacity) {
-    return splat < 1024 ? zbuffer_f64(ids, px, z, N, height, width, splat, capacity) : -2;
+    return zbuffer_f64(ids, px, z, N, height, width, splat, capacity);
 }
 
 /* The last z-buffer's pixels and points of this thread, count of each (as that call returned). */
