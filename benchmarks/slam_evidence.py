@@ -8,11 +8,17 @@ verdicts (``stored``: the health in each JSON as written) and for the candidate 
 ``--min-pairs``); ``--json`` also writes the per-run rows, ``--flags`` prints every false flag and miss of the stored
 verdicts with its reasons, ``--drives 1000-1003`` keeps those drives only (a half of the test set), ``--group`` prints
 the stored verdicts once more with the inputs grouped by kind (sparse, dense, exact, classical completers, networks;
-each with measured sources apart).
+each with measured sources apart). ``--rejudge`` judges every completion under the evidence rule of this checkout
+rather than as stored: each companion (the sparse run of a drive's measured kind, with the settings of the runs it
+judges) is run again, one at a time, and :func:`dcslam.slam.drive.companion_verdict` judges the stored trajectory
+against it (a minute or two for a workspace's companions; the completions are not re-run). A rerun companion that does
+not reproduce the stored sparse run is named with its difference (MKL's summation order: a workspace made under
+``MKL_CBWR=AUTO`` needs it set again).
 
     python benchmarks/slam_evidence.py /tmp/repro-ws-b --floors 0.2,0.3,0.4 --sigmas 3 --min-pairs 250,150
     python benchmarks/slam_evidence.py /tmp/calib-ws --flags --drives 1000-1003
     python benchmarks/slam_evidence.py /tmp/study-ws --group
+    python benchmarks/slam_evidence.py /tmp/study-ws --group --rejudge
 """
 from __future__ import annotations
 
@@ -24,6 +30,7 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
+import numpy as np
 
 from dcslam.slam.evidence import EvidenceRules, judge, merge
 from dcslam.slam.health import HealthRules
@@ -103,6 +110,39 @@ def rejudge(health: dict, rules: HealthRules) -> dict:
             "suspect": bool(reasons), "reasons": reasons}
 
 
+def own_health(health: dict) -> dict:
+    """A stored run's health without its evidence verdict (the reasons its own steps gave, those a companion that
+    agreed overruled included): what :func:`dcslam.slam.evidence.merge` started from."""
+    evidence = health.get("evidence") or {}
+    reasons = list(health.get("overruled") or [r for r in health["reasons"] if r != evidence.get("reason")])
+    own = {k: v for k, v in health.items() if k not in ("evidence", "overruled")}
+    return {**own, "reasons": reasons, "suspect": bool(reasons)}
+
+
+class Companions:
+    """The companion runs of a workspace, run again on demand (one per measured kind, drive and SLAM settings) so
+    that stored completions can be judged under this checkout's evidence rule."""
+
+    def __init__(self, workspace: Path, runs: dict):
+        self.workspace, self.runs, self.made, self.differences = workspace, runs, {}, {}
+
+    def run(self, kind: str, drive: str, record: dict):
+        from dcslam.slam.config import SlamSettings, build_slam
+        from dcslam.stages.slam import run_drive_file
+
+        fields = SlamSettings.__dataclass_fields__
+        settings = SlamSettings(**{k: v for k, v in record.get("settings", {}).items() if k in fields})
+        key = (kind, drive, repr(settings), record["frames"])
+        if key not in self.made:
+            run = run_drive_file(self.workspace / "drives" / f"{drive}.h5", kind, build_slam(settings),
+                                 record["frames"], description=f"{drive} companion {kind}")
+            stored = self.runs.get((kind, drive))
+            if stored is not None and len(stored["T"]) == len(run.T_world_cam):
+                self.differences[(kind, drive)] = float(np.abs(stored["T"] - run.T_world_cam).max())
+            self.made[key] = run
+        return self.made[key]
+
+
 def load_runs(slam_dir: Path) -> dict[tuple[str, str], dict]:
     """{(layer, drive): {"record": summary JSON, "T": (N, 4, 4) trajectory}} of every run under ``slam_dir``."""
     from dcslam.io.tum import read_tum
@@ -118,16 +158,26 @@ def load_runs(slam_dir: Path) -> dict[tuple[str, str], dict]:
     return runs
 
 
-def verdicts(runs: dict, rules: HealthRules | None, evidence: EvidenceRules | None) -> list[dict]:
+def verdicts(runs: dict, rules: HealthRules | None, evidence: EvidenceRules | None,
+             companions: Companions | None = None) -> list[dict]:
     """One row per run: input, beams, drive, final error, flagged (and why). ``rules`` None: the stored health;
-    ``evidence`` None: no companion."""
+    ``evidence`` None: no companion; ``companions``: each completion judged against its companion run again
+    (:func:`dcslam.slam.drive.companion_verdict`, this checkout's rule) instead of as stored."""
     rows = []
     for (layer, drive), run in sorted(runs.items()):
         record = run["record"]
         health = record["health"] if rules is None else rejudge(record["health"], rules)
         verdict = None
         kind = companion_layer(layer, record)
-        if evidence is not None and kind is not None:
+        if companions is not None and kind is not None:
+            from types import SimpleNamespace
+
+            from dcslam.slam.drive import companion_verdict
+
+            companion = companions.run(kind, drive, record)
+            health = merge(own_health(health), companion_verdict(SimpleNamespace(T_world_cam=run["T"]), companion,
+                                                                 kind))
+        elif evidence is not None and kind is not None:
             companion = runs.get((kind, drive))
             if companion is None:
                 verdict = "no companion run"
@@ -230,6 +280,8 @@ def main(argv=None) -> int:
     parser.add_argument("--drives", help="only these drives, by number: 1000-1003 or 1000,1002")
     parser.add_argument("--group", action="store_true",
                         help="also print the stored verdicts with the inputs grouped by kind")
+    parser.add_argument("--rejudge", action="store_true",
+                        help="judge the completions under this checkout's evidence rule (the companions run again)")
     args = parser.parse_args(argv)
     runs = load_runs(args.workspace / "slam")
     if args.drives:
@@ -238,11 +290,20 @@ def main(argv=None) -> int:
     if not runs:
         print(f"no SLAM outputs under {args.workspace / 'slam'}", file=sys.stderr)
         return 1
-    results = {"stored": verdicts(runs, None, None)}
-    print_table("stored verdicts (the health as written, with its evidence)", table(results["stored"], args.truth),
-                args.truth)
+    if args.rejudge:
+        companions = Companions(args.workspace, runs)
+        results = {"stored": verdicts(runs, None, None, companions)}
+        title = "rejudged verdicts (the steps' health as written, the evidence of this checkout's rule)"
+        for (kind, drive), difference in sorted(companions.differences.items()):
+            if difference > 1e-6:
+                print(f"{kind} {drive}: the companion run again differs from the stored run by up to "
+                      f"{difference:.3g} m", file=sys.stderr)
+    else:
+        results = {"stored": verdicts(runs, None, None)}
+        title = "stored verdicts (the health as written, with its evidence)"
+    print_table(title, table(results["stored"], args.truth), args.truth)
     if args.group:
-        print_table("stored verdicts, inputs grouped by kind", table(grouped(results["stored"]), args.truth),
+        print_table(title.split(" (")[0] + ", inputs grouped by kind", table(grouped(results["stored"]), args.truth),
                     args.truth)
     if args.flags:
         print_flags(results["stored"], args.truth)

@@ -7,12 +7,15 @@ prediction, yet the trajectory ends metres off. The LiDAR's measured pixels behi
 (:func:`dcslam.io.drive.measured_kind`) give an odometry of their own whose errors are not those of the completion;
 the main run must stay within that companion's trajectory plus the companion's own uncertainty.
 
-:func:`judge` compares the two position by position: the main run *departs* when its largest position gap to the
-companion exceeds ``max(floor_m, sigmas * companion drift_sigma_m)``; the evidence is *unbounded* (and the run
-suspect: nothing independent vouches for it) when the companion is itself suspect; :func:`unavailable` records a
-run for which no companion could be made (a layer that does not say what it was predicted from) or that was not
-asked for. :func:`merge` folds the verdict into a health summary so that every reader of ``health.suspect`` and
-``health.reasons`` follows. Calibration: docs/slam.md, "Independent evidence for completed depth".
+:func:`judge` compares the two: the main run *departs* when it ends further from the companion than
+``max(floor_m, sigmas * companion drift_sigma_m)``; the evidence is *unbounded* (and the run suspect: nothing
+independent vouches for it) when the companion is itself suspect; :func:`unavailable` records a run for which no
+companion could be made (a layer that does not say what it was predicted from) or that was not asked for.
+:func:`merge` folds the verdict into a health summary so that every reader of ``health.suspect`` and
+``health.reasons`` follows. The SLAM stage hands :func:`judge` the companion's road-corrected trajectory
+(:func:`dcslam.slam.road.road_corrected`) and judges the companion without its road rule: sparse LiDAR odometry's
+largest error is vertical at 8 and 16 beams, and the road measures it (a companion that sank is a witness again
+once corrected). Calibration: docs/slam.md, "Independent evidence for completed depth".
 """
 from __future__ import annotations
 
@@ -52,29 +55,40 @@ def position_gaps(T_main: np.ndarray, T_companion: np.ndarray) -> np.ndarray:
 
 
 def judge(T_main: np.ndarray, T_companion: np.ndarray, companion_health: dict, companion: str,
-          rules: EvidenceRules = EvidenceRules()) -> dict:
+          rules: EvidenceRules = EvidenceRules(), road_corrected: bool = False) -> dict:
     """The evidence verdict of a run against its companion (``companion``: the measured depth kind it ran on;
-    ``companion_health``: its :func:`dcslam.slam.health.summarise`).
+    ``companion_health``: its :func:`dcslam.slam.health.summarise`; ``road_corrected``: ``T_companion`` is its
+    road-corrected trajectory, said so in the reason).
 
-    Returns ``{"verdict": "agrees" | "departs" | "unbounded", "companion": str, "suspect": bool, "reason": str | None,
-    "gap_m": largest gap, "gap_frame": its frame, "bound_m": the bound, "companion_sigma_m": s,
-    "companion_reasons": [str]}``.
+    The gap that counts is the one at the last frame both have: the question, as for every figure of the health
+    verdict, is how far the run *ends* from the truth (a gap beyond the bound that closes again is not counted; the
+    largest gap is kept beside it).
+
+    Returns ``{"verdict": "agrees" | "departs" | "unbounded", "companion": str, "road_corrected": bool,
+    "suspect": bool, "reason": str | None, "gap_m": the last frame's gap, "gap_frame": the first frame from which
+    the gap stays beyond the bound (the last frame when it ends within it), "max_gap_m": the largest gap,
+    "max_gap_frame": its frame, "bound_m": the bound, "companion_sigma_m": s, "companion_reasons": [str]}``.
     """
     gaps = position_gaps(T_main, T_companion)
-    frame = int(np.argmax(gaps)) if len(gaps) else 0
-    gap = float(gaps[frame]) if len(gaps) else 0.0
     sigma = float(companion_health.get("drift_sigma_m", 0.0))
     bound = rules.bound_m(sigma)
-    record = {"companion": companion, "gap_m": round(gap, 4), "gap_frame": frame, "bound_m": round(bound, 4),
-              "companion_sigma_m": round(sigma, 4),
+    last = len(gaps) - 1
+    gap = float(gaps[-1]) if len(gaps) else 0.0
+    within = np.flatnonzero(gaps <= bound)
+    frame = (int(within[-1]) + 1 if len(within) else 0) if gap > bound else max(last, 0)
+    largest = int(np.argmax(gaps)) if len(gaps) else 0
+    name = f"the {companion} companion" + (" (road-corrected)" if road_corrected else "")
+    record = {"companion": companion, "road_corrected": road_corrected, "gap_m": round(gap, 4), "gap_frame": frame,
+              "max_gap_m": round(float(gaps[largest]) if len(gaps) else 0.0, 4), "max_gap_frame": largest,
+              "bound_m": round(bound, 4), "companion_sigma_m": round(sigma, 4),
               "companion_reasons": [str(r) for r in companion_health.get("reasons", [])]}
     if companion_health.get("suspect"):
         why = "; ".join(record["companion_reasons"]) or "suspect"
         return {"verdict": "unbounded", "suspect": True, **record,
-                "reason": f"no evidence bounds the drift (the {companion} companion is itself suspect: {why})"}
+                "reason": f"no evidence bounds the drift ({name} is itself suspect: {why})"}
     if gap > bound:
         return {"verdict": "departs", "suspect": True, **record,
-                "reason": f"{gap:.2f} m from the {companion} companion at frame {frame} (bound {bound:.2f} m: "
+                "reason": f"ends {gap:.2f} m from {name}, past the bound from frame {frame} (bound {bound:.2f} m: "
                           f"{rules.sigmas:g} x its sigma {sigma:.3f} m, at least {rules.floor_m:g} m)"}
     return {"verdict": "agrees", "suspect": False, **record, "reason": None}
 
@@ -111,7 +125,9 @@ def evidence_line(health: dict) -> str | None:
     if not ev:
         return None
     if ev["verdict"] == "agrees":
-        return f"within {ev['gap_m']:.2f} m of the {ev['companion']} companion (bound {ev['bound_m']:.2f} m)"
+        corrected = " (road-corrected)" if ev.get("road_corrected") else ""
+        return (f"ends within {ev['gap_m']:.2f} m of the {ev['companion']} companion{corrected} "
+                f"(bound {ev['bound_m']:.2f} m)")
     if ev["verdict"] == "unavailable":
         return ev["reason"]
     if ev["verdict"] == "off":

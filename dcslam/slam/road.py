@@ -99,14 +99,12 @@ def align_planes(n_from: np.ndarray, d_from: float, n_to: np.ndarray, d_to: floa
     return T
 
 
-def road_drift(T_world_cam: np.ndarray, planes: list, over_m: float = 0.0) -> dict:
-    """The road figure of a run: per frame, the vertical distance (along the first frame's camera y, down) of the
-    estimated position from the road-corrected one, positive when the estimate sank below the road. A step is
-    corrected only when both its frames saw the road. Shape: T_world_cam (N, 4, 4); planes: N RoadPlane or None.
-
-    Returns ``{"drift_m": |final distance|, "vertical": "sank" or "rose", "frames_seen": n, "frames_skipped": n,
-    "from_frame": the first frame whose distance exceeds ``over_m`` (None when none does or ``over_m`` is 0)}``.
-    """
+def road_corrected(T_world_cam: np.ndarray, planes: list) -> np.ndarray:
+    """The road-corrected trajectory: each estimated step composed with the smallest motion taking the previous
+    frame's road plane, carried into the frame by the step, onto the frame's own (its pitch, roll and height error
+    as the road sees them); a step is taken as estimated unless both its frames saw the road. The motion along and
+    across the road and the heading stay the estimate's. Shape: T_world_cam (N, 4, 4); planes: N RoadPlane or None
+    -> (N, 4, 4), starting at the estimate's first pose."""
     T = np.asarray(T_world_cam, np.float64)
     corrected = [T[0]]
     for k in range(1, len(T)):
@@ -117,8 +115,20 @@ def road_drift(T_world_cam: np.ndarray, planes: list, over_m: float = 0.0) -> di
             m = rel[:3, :3] @ before.normal                        # the previous plane, carried into frame k
             C = align_planes(m, before.offset - float(m @ rel[:3, 3]), now.normal, now.offset)
         corrected.append(corrected[-1] @ np.linalg.inv(C @ rel))
+    return np.stack(corrected)
+
+
+def road_drift(T_world_cam: np.ndarray, planes: list, over_m: float = 0.0) -> dict:
+    """The road figure of a run: per frame, the vertical distance (along the first frame's camera y, down) of the
+    estimated position from the road-corrected one (:func:`road_corrected`), positive when the estimate sank below
+    the road. Shape: T_world_cam (N, 4, 4); planes: N RoadPlane or None.
+
+    Returns ``{"drift_m": |final distance|, "vertical": "sank" or "rose", "frames_seen": n, "frames_skipped": n,
+    "from_frame": the first frame whose distance exceeds ``over_m`` (None when none does or ``over_m`` is 0)}``.
+    """
+    T = np.asarray(T_world_cam, np.float64)
     down = T[0, :3, 1]
-    gaps = (T[:, :3, 3] - np.stack(corrected)[:, :3, 3]) @ down
+    gaps = (T[:, :3, 3] - road_corrected(T, planes)[:, :3, 3]) @ down
     over = np.flatnonzero(np.abs(gaps) > over_m) if over_m > 0 else []
     seen = sum(p is not None for p in planes)
     return {"drift_m": round(float(abs(gaps[-1])), 4), "vertical": "sank" if gaps[-1] >= 0 else "rose",

@@ -1,5 +1,6 @@
 """The drive loop as library code: frames in (any iterable, no files), trajectory, map and summary out."""
 import numpy as np
+import pytest
 
 from dcslam.io.drive import DriveFile
 from dcslam.io.drive_frames import DepthFrame, DriveFrames, drive_frames
@@ -39,8 +40,6 @@ def test_frames_from_memory_give_the_run_of_the_drive_file(tmp_path):
 
 
 def test_too_few_frames_is_an_error_naming_the_drive(tmp_path):
-    import pytest
-
     from dcslam.errors import DcslamError
 
     T = np.stack([np.eye(4)] * 3)
@@ -61,3 +60,32 @@ def test_the_companion_verdict_carries_the_companions_error_and_time(tmp_path):
     assert verdict["companion_final_error_m"] == round(float(final), 4)
     assert verdict["companion_seconds"] == round(companion.seconds, 3)
     assert verdict["companion"] == "sparse" and verdict["verdict"] in ("agrees", "departs", "unbounded")
+
+
+def test_a_companion_that_sank_is_road_corrected_before_it_judges():
+    """A companion that sinks 0.021 m a step ends 0.63 m below the truth: its road rule makes it suspect, and it would
+    bound nothing. Corrected by the road planes of its own frames it is the truth again, and vouches for a main run
+    that drove the truth; without the road rule it is left as run."""
+    from dataclasses import replace
+
+    from dcslam.slam.drive import DriveRun
+    from dcslam.slam.health import HealthRules
+
+    from tests.fixtures.road import step_reports, seen, sinking
+
+    truth, sunk = sinking()
+    planes = [seen(T) for T in truth]
+    stamps = np.arange(len(truth)) * 0.1
+
+    def run(T, reports, rules=None):
+        return DriveRun("d", T, stamps, truth, None, reports, 1.0, health_rules=rules)
+
+    main = run(truth, step_reports(truth, planes))
+    verdict = companion_verdict(main, run(sunk, step_reports(sunk, planes)), "sparse@8")
+    assert verdict["verdict"] == "agrees" and verdict["road_corrected"] and verdict["gap_m"] < 1e-6
+    assert verdict["companion_final_error_m"] == pytest.approx(0.63, abs=1e-3)
+    assert verdict["companion_corrected_error_m"] < 1e-6
+    no_road = replace(HealthRules(), max_road_drift_m=0.0)
+    as_run = companion_verdict(main, run(sunk, step_reports(sunk, planes), no_road), "sparse@8")
+    assert not as_run["road_corrected"] and as_run["verdict"] == "departs"
+    assert as_run["gap_m"] == pytest.approx(0.63, abs=1e-3)

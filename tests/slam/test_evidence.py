@@ -24,16 +24,27 @@ def test_a_run_that_agrees_with_its_companion_is_ok():
     assert verdict["gap_m"] == pytest.approx(0.1) and verdict["bound_m"] == 0.5
     health = merge({"suspect": False, "reasons": []}, verdict)
     assert not health["suspect"] and health["evidence"] is verdict
-    assert evidence_line(health) == "within 0.10 m of the sparse@16 companion (bound 0.50 m)"
+    assert evidence_line(health) == "ends within 0.10 m of the sparse@16 companion (bound 0.50 m)"
 
 
 def test_a_gap_beyond_the_bound_flags_the_run_and_says_why():
     verdict = judge(_trajectory([0, 1.2, 2.8, 3.9]), _trajectory([0, 1, 2, 3]), GOOD, "sparse")
-    assert verdict["verdict"] == "departs" and verdict["suspect"] and verdict["gap_frame"] == 3
-    assert verdict["reason"] == ("0.90 m from the sparse companion at frame 3 (bound 0.50 m: 3 x its sigma 0.020 m, "
-                                 "at least 0.5 m)")
+    assert verdict["verdict"] == "departs" and verdict["suspect"] and verdict["gap_frame"] == 2
+    assert verdict["gap_m"] == pytest.approx(0.9) and verdict["max_gap_m"] == pytest.approx(0.9)
+    assert verdict["reason"] == ("ends 0.90 m from the sparse companion, past the bound from frame 2 (bound 0.50 m: "
+                                 "3 x its sigma 0.020 m, at least 0.5 m)")
     health = merge({"suspect": False, "reasons": ["x"], "accepted": 3}, verdict)
     assert health["suspect"] and health["reasons"] == ["x", verdict["reason"]] and health["accepted"] == 3
+
+
+def test_the_gap_that_counts_is_where_the_run_ends():
+    back = judge(_trajectory([0, 1.9, 3.0, 3.1]), _trajectory([0, 1, 2, 3]), GOOD, "sparse")
+    assert back["verdict"] == "agrees" and back["gap_m"] == pytest.approx(0.1) and back["gap_frame"] == 3
+    assert back["max_gap_m"] == pytest.approx(1.0) and back["max_gap_frame"] == 2   # kept, not counted
+    away = judge(_trajectory([0, 1.9, 2.1, 3.7]), _trajectory([0, 1, 2, 3]), GOOD, "sparse@8", road_corrected=True)
+    assert away["verdict"] == "departs" and away["gap_frame"] == 3 and away["road_corrected"]
+    assert away["reason"].startswith("ends 0.70 m from the sparse@8 companion (road-corrected), past the bound from "
+                                     "frame 3")
 
 
 def test_the_bound_grows_with_the_companions_own_uncertainty():

@@ -9,45 +9,25 @@ import torch
 
 from dcslam.slam.health import HealthRules, summarise
 from dcslam.slam.pipeline import StepReport
-from dcslam.slam.road import RoadPlane, fit_road, frame_road, road_drift
+from dcslam.slam.road import fit_road, frame_road, road_corrected, road_drift
+from tests.fixtures.road import HEIGHT, pose, step_reports, seen, sinking
 
-HEIGHT = 1.6   # the camera above a flat road (world y down: the road is y = HEIGHT)
-
-
-def _pose(z: float, y: float = 0.0, pitch_rad: float = 0.0) -> np.ndarray:
-    """A camera at (0, y, z), pitched about its x axis. (4, 4)"""
-    c, s = math.cos(pitch_rad), math.sin(pitch_rad)
-    T = np.eye(4)
-    T[:3, :3] = [[1, 0, 0], [0, c, -s], [0, s, c]]
-    T[:3, 3] = [0.0, y, z]
-    return T
-
-
-def _seen(T_true: np.ndarray) -> RoadPlane:
-    """The flat road as a camera at the true pose sees it: n . x + d = 0 in its frame."""
-    n_world, d_world = np.array([0.0, -1.0, 0.0]), HEIGHT
-    return RoadPlane(T_true[:3, :3].T @ n_world, float(d_world + n_world @ T_true[:3, 3]), 1000)
-
-
-def _reports(estimated: np.ndarray, planes: list) -> list:
-    return [StepReport(i, torch.from_numpy(T), True, "", 0, 0, 0.0, 0, 0.0, road=p)
-            for i, (T, p) in enumerate(zip(estimated, planes))]
-
-
-def _sinking(frames: int = 31, per_step_m: float = 0.021):
-    """The truth drives 1 m per frame on the flat road; the estimate sinks ``per_step_m`` more each step."""
-    truth = np.stack([_pose(float(k)) for k in range(frames)])
-    estimated = np.stack([_pose(float(k), y=per_step_m * k) for k in range(frames)])
-    return truth, estimated
+def test_the_road_corrected_trajectory_of_a_sinking_run_is_the_truth():
+    truth, estimated = sinking()
+    corrected = road_corrected(estimated, [seen(T) for T in truth])
+    assert np.allclose(corrected, truth, atol=1e-9)                  # height and pitch from the road, the rest kept
+    assert np.allclose(road_corrected(estimated, [None] * len(truth)), estimated)   # no road: as estimated
+    pitched = np.stack([pose(float(k), pitch_rad=0.002 * k) for k in range(len(truth))])
+    assert np.allclose(road_corrected(pitched, [seen(T) for T in truth])[:, :3, :3], truth[:, :3, :3], atol=1e-9)
 
 
 def test_a_run_sinking_by_steps_is_measured_by_the_road():
-    truth, estimated = _sinking()
-    road = road_drift(estimated, [_seen(T) for T in truth], over_m=0.5)
+    truth, estimated = sinking()
+    road = road_drift(estimated, [seen(T) for T in truth], over_m=0.5)
     assert road["drift_m"] == pytest.approx(0.63, abs=1e-9) and road["vertical"] == "sank"
     assert road["from_frame"] == 24                                  # 0.021 m x 24 > 0.5 m, x 23 is not
     assert road["frames_seen"] == 31 and road["frames_skipped"] == 0
-    rising = road_drift(truth, [_seen(T) for T in estimated])        # the truth, against planes of a sunk camera
+    rising = road_drift(truth, [seen(T) for T in estimated])        # the truth, against planes of a sunk camera
     assert rising["drift_m"] == pytest.approx(0.63, abs=1e-9) and rising["vertical"] == "rose"
 
 
@@ -55,23 +35,23 @@ def test_a_pitch_drift_is_measured_as_the_height_it_costs():
     """Each step pitches the estimate 0.05 deg nose-down more than the truth: after 20 steps of 1 m it has sunk by
     sum_{j < 20} sin(0.05 deg j) (each step drives forward along the pitch of the frame it leaves)."""
     frames, step = 21, math.radians(0.05)
-    truth = np.stack([_pose(float(k)) for k in range(frames)])
-    estimated = [_pose(0.0)]
+    truth = np.stack([pose(float(k)) for k in range(frames)])
+    estimated = [pose(0.0)]
     for k in range(1, frames):
         rel = np.linalg.solve(truth[k - 1], truth[k])
-        estimated.append(estimated[-1] @ rel @ _pose(0.0, pitch_rad=-step))
+        estimated.append(estimated[-1] @ rel @ pose(0.0, pitch_rad=-step))
     estimated = np.stack(estimated)
     sank = float((estimated[-1, :3, 3] - truth[-1, :3, 3]) @ np.array([0.0, 1.0, 0.0]))
     assert sank == pytest.approx(sum(math.sin(step * j) for j in range(frames - 1)), rel=1e-6) and sank > 0.1
-    road = road_drift(estimated, [_seen(T) for T in truth])
+    road = road_drift(estimated, [seen(T) for T in truth])
     assert road["drift_m"] == pytest.approx(sank, abs=1e-4) and road["vertical"] == "sank"
 
 
 def test_a_consistent_run_gives_nothing_and_frames_without_road_are_skipped():
-    truth, _ = _sinking()
-    assert road_drift(truth, [_seen(T) for T in truth])["drift_m"] == pytest.approx(0.0, abs=1e-9)
-    truth, estimated = _sinking(frames=11)
-    planes = [_seen(T) for T in truth]
+    truth, _ = sinking()
+    assert road_drift(truth, [seen(T) for T in truth])["drift_m"] == pytest.approx(0.0, abs=1e-9)
+    truth, estimated = sinking(frames=11)
+    planes = [seen(T) for T in truth]
     planes[4] = planes[5] = None                     # steps 3-4, 4-5 and 5-6 taken as estimated: 3 x 0.021 m stay
     road = road_drift(estimated, planes, over_m=0.5)
     assert road["frames_seen"] == 9 and road["frames_skipped"] == 2
@@ -94,23 +74,23 @@ def test_the_road_plane_of_a_vertex_map():
 
 
 def test_a_sinking_run_is_flagged_with_the_road_reason():
-    truth, estimated = _sinking()
-    s = summarise(_reports(estimated, [_seen(T) for T in truth]))
+    truth, estimated = sinking()
+    s = summarise(step_reports(estimated, [seen(T) for T in truth]))
     assert s["suspect"]
     assert ("the road says the run sank 0.63 m (vertical, camera y), past 0.5 m from frame 24 (road seen in 31 of "
             "31 frames)") in s["reasons"]
     assert s["road"] == {"drift_m": 0.63, "vertical": "sank", "frames_seen": 31, "frames_skipped": 0,
                          "from_frame": 24}
     assert json.loads(json.dumps(s))["road"] == s["road"]             # written as is in the run's summary
-    assert not summarise(_reports(truth, [_seen(T) for T in truth]))["suspect"]
-    assert summarise(_reports(estimated, [_seen(T) for T in truth]), HealthRules(max_road_drift_m=0))["road"] is None
+    assert not summarise(step_reports(truth, [seen(T) for T in truth]))["suspect"]
+    assert summarise(step_reports(estimated, [seen(T) for T in truth]), HealthRules(max_road_drift_m=0))["road"] is None
 
 
 def test_the_drift_bound_counts_only_where_a_step_is_degenerate():
     """Steps of 5 cm standard deviation, well measured in every direction (their information an even share each):
     the bound exceeds 0.5 m and is written, but only a degenerate step would make it count."""
     C, H = np.diag([0.05 ** 2] * 3 + [1e-10] * 3), np.eye(6)
-    estimated = np.stack([_pose(float(k)) for k in range(8)])
+    estimated = np.stack([pose(float(k)) for k in range(8)])
     reports = [StepReport(i, torch.from_numpy(T), True, "", 0, 0, 0.0, 0, 0.0, covariance=torch.from_numpy(C),
                           information=torch.from_numpy(H)) for i, T in enumerate(estimated)]
     s = summarise(reports)

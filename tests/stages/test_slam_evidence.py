@@ -50,7 +50,8 @@ def test_consistently_wrong_completion_is_flagged_by_its_companion(scaled, tmp_p
     evidence = health["evidence"]
     assert health["suspect"] and evidence["verdict"] == "departs" and evidence["companion"] == "sparse"
     assert evidence["gap_m"] > evidence["bound_m"] and evidence["companion_final_error_m"] < 0.5
-    assert health["reasons"][-1].startswith(f"{evidence['gap_m']:.2f} m from the sparse companion at frame")
+    assert health["reasons"][-1].startswith(f"ends {evidence['gap_m']:.2f} m from the sparse companion "
+                                            "(road-corrected), past the bound from frame")
     assert np.allclose(checked.summary["translation_error_m"]["final"], alone.summary["translation_error_m"]["final"])
     written = json.loads(checked.written["summary"].read_text())
     assert written["health"]["suspect"] and written["health"]["evidence"]["verdict"] == "departs"
