@@ -62,8 +62,8 @@ def complete(ws: Path, beams: list[int]) -> list[str]:
     layers = []
     for b in beams:
         run = f"sparse-conv{b}"
-        if not (ws / "runs" / run / "best.pt").exists():
-            dcslam(ws, "train", *TRAIN_MSE, "--input", kind(b), "--name", run)
+        if not (ws / "runs" / run / "model.pt").exists():   # the trained model (an interrupted run: again)
+            dcslam(ws, "train", *TRAIN_MSE, "--input", kind(b), "--name", run, "--force")
         for layer, source in ((f"sparse-conv-sparse{b}", ["--run", run]),
                               (f"ip-basic-fast-sparse{b}", ["--model", "ip-basic-fast"])):
             out = ws / "predictions" / layer
