@@ -4,10 +4,12 @@ memory of every SLAM run, on the same generated drives, in one run.
 Rows: dcslam with its default settings (``dcslam.run_slam``: the frames streamed from the drive file with the
 prefetch thread, as ``dcslam slam`` runs them) on the LiDAR's sparse 64-beam depth, on the annotated dense depth and
 on two completions of the sparse depth (IP-Basic fast and planefit, written by ``dcslam.complete_drive`` before the
-runs); Open3D's point-to-plane ICP frame to frame on the same depths; KISS-ICP 1.3.0 on the 360 degree Velodyne
-scans (the ``bench`` extra; a line says so when it is missing). ``--open3d-completed`` chooses which completions
-Open3D also runs on (default IP-Basic only), and ``--open3d-completed-drives`` over how many drives (default the
-first: Open3D takes 3-5 CPU-seconds a frame there).
+runs); the same on one thread (``dcslam, one thread``: no prefetch thread, as the workers of ``dcslam reproduce
+--jobs N`` run when they fill the cores, and as KISS-ICP's and Open3D's rows run); Open3D's point-to-plane ICP frame
+to frame on the same depths; KISS-ICP 1.3.0 on the 360 degree Velodyne scans (the ``bench`` extra; a line says so
+when it is missing). ``--open3d-completed`` chooses which completions Open3D also runs on (default IP-Basic only),
+and ``--open3d-completed-drives`` over how many drives (default the first: Open3D takes 3-5 CPU-seconds a frame
+there).
 
 Each run is a child process of its own with one torch / OpenMP thread (KISS-ICP's registration on one thread too),
 so that its peak memory (``VmHWM``, the imports included) is its own; the runs go drive by drive, dcslam and its
@@ -44,8 +46,11 @@ from slam_drives import score  # noqa: E402
 from slam_references import kiss_icp_available, run_kiss_icp, run_open3d  # noqa: E402
 
 from dcslam.allocator import SLAM_MMAP_THRESHOLD, heap_mb, trim  # noqa: E402
+from dcslam.workers import SHARED_CORES  # noqa: E402
 
 COMPLETERS = {"ip-basic": "ip-basic-fast", "planefit": "planefit"}   # row name -> registered completer
+ONE_THREAD = "dcslam, one thread"                 # the row without the prefetch thread, and its child's name
+CHILD = {ONE_THREAD: "dcslam1"}
 DEPTHS = ("sparse", "dense", *COMPLETERS)
 
 
@@ -104,7 +109,7 @@ def _child(system: str, drive: Path, source: str, frames: int, kitti_root: Path)
 
     torch.set_num_threads(1)
     depth = Path(source) if source.endswith(".h5") else source
-    if system == "dcslam":
+    if system in ("dcslam", "dcslam1"):
         import dcslam
 
         def run(n: int):
@@ -128,6 +133,8 @@ def _child(system: str, drive: Path, source: str, frames: int, kitti_root: Path)
 
 def _run_child(args, system: str, drive: Path, source: str, kitti_root: Path) -> dict:
     env = dict(os.environ, DCSLAM_PROGRESS="0", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    if system == "dcslam1":
+        env[SHARED_CORES] = "1"                    # no prefetch thread: the frame loop alone
     cmd = [sys.executable, __file__, "--child", system, "--child-drive", str(drive), "--child-source", source,
            "--frames", str(args.frames), "--child-kitti", str(kitti_root)]
     done = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, text=True)
@@ -142,7 +149,7 @@ def _tasks(args, paths: list[Path], layers: dict, kiss: bool) -> list[tuple[str,
     tasks = []
     for k, drive in enumerate(paths):
         peers = ("sparse", "dense", *(args.open3d_completed if k < args.open3d_completed_drives else ()))
-        rows = [("dcslam", d) for d in DEPTHS] + [("Open3D", d) for d in peers]
+        rows = [(system, d) for system in ("dcslam", ONE_THREAD) for d in DEPTHS] + [("Open3D", d) for d in peers]
         rows += [("KISS-ICP", "velodyne 360")] if kiss else []
         tasks += [(system, depth, drive, str(layers[drive.stem, depth]) if depth in COMPLETERS else depth)
                   for system, depth in rows]
@@ -171,8 +178,8 @@ def side_by_side(args) -> None:
                                         else f"{kitti_root / 'raw'} holds no Velodyne scans") + ")", flush=True)
     tasks = _tasks(args, paths, layers, kiss)
     with ThreadPoolExecutor(args.jobs) as pool:       # each thread waits on its child process
-        done = list(pool.map(lambda t: _run_child(args, t[0].lower().replace("-", ""), t[2], t[3], kitti_root),
-                             tasks))
+        done = list(pool.map(lambda t: _run_child(args, CHILD.get(t[0], t[0].lower().replace("-", "")), t[2], t[3],
+                                                  kitti_root), tasks))
     results: dict[tuple[str, str], list[dict]] = {}
     for (system, depth, drive, _), run in zip(tasks, done):
         results.setdefault((system, depth), []).append({**run, "drive": drive.stem})
@@ -192,12 +199,13 @@ def side_by_side(args) -> None:
     load_after = os.getloadavg()
     print(f"\nload average {load_before[0]:.1f} before, {load_after[0]:.1f} after ({os.cpu_count()} cores, "
           f"{platform.processor() or platform.machine()})")
-    if kiss:
-        ratio = fps["dcslam", "sparse"] / fps["KISS-ICP", "velodyne 360"]
-        print(f"dcslam sparse / KISS-ICP frames per CPU-s: {ratio:.2f} (target >= 1.5; a diverging KISS-ICP iterates "
-              f"to its cap, so read it beside the ATE of each drive)")
-    print(f"dcslam on IP-Basic's completion: {fps['dcslam', 'ip-basic']:.2f} frames per CPU-s (target >= 8), "
-          f"on planefit's {fps['dcslam', 'planefit']:.2f}", flush=True)
+    for system in ("dcslam", ONE_THREAD):
+        if kiss:
+            ratio = fps[system, "sparse"] / fps["KISS-ICP", "velodyne 360"]
+            print(f"{system} sparse / KISS-ICP frames per CPU-s: {ratio:.2f} (target >= 1.5; a diverging KISS-ICP "
+                  f"iterates to its cap, so read it beside the ATE of each drive)")
+        print(f"{system} on IP-Basic's completion: {fps[system, 'ip-basic']:.2f} frames per CPU-s (target >= 8), "
+              f"on planefit's {fps[system, 'planefit']:.2f}", flush=True)
 
 
 def _rss_mb() -> float:
@@ -297,7 +305,7 @@ def main() -> None:
     parser.add_argument("--probe-trim", action="store_true",
                         help="memory run: at each mark, also the RSS after malloc_trim(0) (how much malloc held free)")
     parser.add_argument("--memory-child", choices=("sparse", "dense"), help=argparse.SUPPRESS)
-    parser.add_argument("--child", choices=("dcslam", "open3d", "kissicp"), help=argparse.SUPPRESS)
+    parser.add_argument("--child", choices=("dcslam", "dcslam1", "open3d", "kissicp"), help=argparse.SUPPRESS)
     parser.add_argument("--child-drive", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--child-source", help=argparse.SUPPRESS)
     parser.add_argument("--child-kitti", type=Path, help=argparse.SUPPRESS)
