@@ -5,15 +5,17 @@ the truth being whether it ends (final translation error) more than ``--truth`` 
 
 Prints, per input and beam count, runs / ending > truth / flagged of those / flagged of the others, for the stored
 verdicts (``stored``: the health in each JSON as written) and for the candidate rules (``--floors``, ``--sigmas``,
-``--min-pairs``); ``--json`` also writes the per-run rows, ``--flags`` prints every false flag and miss of the stored
-verdicts with its reasons, ``--drives 1000-1003`` keeps those drives only (a half of the test set), ``--group`` prints
-the stored verdicts once more with the inputs grouped by kind (sparse, dense, exact, classical completers, networks;
-each with measured sources apart). ``--rejudge`` judges every completion under the evidence rule of this checkout
-rather than as stored: each companion (the sparse run of a drive's measured kind, with the settings of the runs it
-judges) is run again, one at a time, and :func:`dcslam.slam.drive.companion_verdict` judges the stored trajectory
-against it (a minute or two for a workspace's companions; the completions are not re-run). A rerun companion that does
-not reproduce the stored sparse run is named with its difference (MKL's summation order: a workspace made under
-``MKL_CBWR=AUTO`` needs it set again).
+``--min-pairs``); ``--json`` also writes the per-run rows, ``--flags`` prints every false flag and miss of the
+stored verdicts with its reasons, ``--weak-steps`` what the flagged steps of each sparse, dense and exact run were
+(held on a measured velocity, held from step 1, or a jump or rejection), ``--drives 1000-1003`` keeps those drives
+only (a half of the test set), ``--group`` prints the stored verdicts once more with the inputs grouped by kind
+(sparse, dense, exact, classical completers, networks; each with measured sources apart). ``--rejudge`` judges every
+completion under the evidence rule of this checkout rather than as stored: each companion (the sparse run of a
+drive's measured kind, with the settings of the runs it judges) is run again, one at a time, and
+:func:`dcslam.slam.drive.companion_verdict` judges the stored trajectory against it (a minute or two for a
+workspace's companions; the completions are not re-run). A rerun companion that does not reproduce the stored sparse
+run is named with its difference (MKL's summation order: a workspace made under ``MKL_CBWR=AUTO`` needs it set
+again).
 
     python benchmarks/slam_evidence.py /tmp/repro-ws-b --floors 0.2,0.3,0.4 --sigmas 3 --min-pairs 250,150
     python benchmarks/slam_evidence.py /tmp/calib-ws --flags --drives 1000-1003
@@ -249,6 +251,46 @@ def drive_numbers(text: str) -> set[str]:
     return out
 
 
+def weak_steps(health: dict) -> tuple[str, list[str]]:
+    """What a run's flagged steps were, from its stored health: ``(kind, steps)`` with kind ``"held"`` when every
+    degraded step was only weakly constrained and came after a measured velocity (a step accepted or held on one
+    before it: the odometry held its constant-velocity prediction along the weak direction), ``"unmeasured"`` when
+    weak steps hold from step 1 on, before any velocity was measured, ``"jumped or rejected"`` when a step was far
+    from its prediction, short of pairs, or rejected, ``""`` without flagged steps; steps as ``<frame><codes>`` (W weak,
+    J far from the prediction, P few pairs, R rejected)."""
+    steps, measured, kinds = [], False, set()
+    flagged = {s["frame"]: s for s in health.get("flagged_steps", [])}
+    for frame in range(1, health["accepted"] + health["degraded"] + health["rejected"] + 1):
+        step = flagged.get(frame)
+        if step is None:
+            measured = True
+            continue
+        codes = "R" if step["verdict"] == "rejected" else "".join(
+            "W" if w.startswith("weakly") else "P" if PAIRS.match(w) else "J" for w in step["why"])
+        steps.append(f"{frame}{codes}")
+        if codes != "W":
+            kinds.add("jumped or rejected")
+            measured = False
+        else:
+            kinds.add("held" if measured else "unmeasured")
+    kind = next((k for k in ("jumped or rejected", "unmeasured", "held") if k in kinds), "")
+    return kind, steps
+
+
+def print_weak_steps(runs: dict, truth: float) -> None:
+    """Every sparse, dense and exact run with a flagged step: its final error and what its steps were
+    (:func:`weak_steps`)."""
+    print(f"\nflagged steps of sparse, dense and exact runs (bad: ending more than {truth:g} m off)")
+    for (layer, drive), run in sorted(runs.items()):
+        if companion_layer(layer, run["record"]) is not None and layer not in ("dense", "exact"):
+            continue
+        kind, steps = weak_steps(run["record"]["health"])
+        if steps:
+            final = float(run["record"]["translation_error_m"]["final"])
+            print(f"{'bad ' if final > truth else 'good'} {layer:10s} {drive[-9:-5]} final {final:6.3f} m  "
+                  f"{kind:18s} {' '.join(steps)}")
+
+
 def print_flags(rows: list[dict], truth: float) -> None:
     """Every false flag (a run within ``truth`` flagged) and every miss (a run beyond it not flagged), with the
     reasons of its summary, the evidence verdict and its gap, the road figure and the drift bound."""
@@ -280,6 +322,8 @@ def main(argv=None) -> int:
     parser.add_argument("--drives", help="only these drives, by number: 1000-1003 or 1000,1002")
     parser.add_argument("--group", action="store_true",
                         help="also print the stored verdicts with the inputs grouped by kind")
+    parser.add_argument("--weak-steps", action="store_true",
+                        help="print what the flagged steps of every sparse, dense and exact run were")
     parser.add_argument("--rejudge", action="store_true",
                         help="judge the completions under this checkout's evidence rule (the companions run again)")
     args = parser.parse_args(argv)
@@ -307,6 +351,8 @@ def main(argv=None) -> int:
                     args.truth)
     if args.flags:
         print_flags(results["stored"], args.truth)
+    if args.weak_steps:
+        print_weak_steps(runs, args.truth)
     for pairs in (int(p) for p in args.min_pairs.split(",")):
         for drift in (float(d) for d in args.drift_sigmas.split(",")):
             for sigmas in (float(s) for s in args.sigmas.split(",")):
