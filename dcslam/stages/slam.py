@@ -67,8 +67,8 @@ class SlamStageConfig(SlamSettings):
         "the input a layer was predicted from (sparse for dense and exact)."))
     evidence: str = option("auto", choices=EVIDENCE_USES, help=(
         "auto: beside a run on completed depth (dense, exact, a predicted or filtered layer), run SLAM on the "
-        "measured LiDAR pixels behind it and flag the run when its trajectory leaves that companion's by more than "
-        "the companion's own uncertainty allows; none: no companion (the summary says that no evidence bounds "
+        "measured LiDAR pixels behind it and flag the run when it ends further from that companion (its height and "
+        "tilt corrected by the road it saw) than the companion's own uncertainty allows; none: no companion (the summary says that no evidence bounds "
         "the drift). A sparse input is its own evidence."))
     record: bool = option(False, help=(
         "Also write a Rerun recording <out>/<drive>.rrd per drive: per frame the camera image, input depth, points, "

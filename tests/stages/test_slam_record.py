@@ -57,6 +57,9 @@ def test_a_recorded_run_reads_back_with_its_frames_and_trajectory(ws):
     np.testing.assert_allclose(np.array(strip), T[:, :3, 3].astype(np.float32), rtol=0, atol=1e-6)
     (truth,) = column(chunks["/world/trajectory/ground_truth"], "LineStrips3D:strips")[0]
     assert len(truth) == 4
+    (companion,) = column(chunks["/world/trajectory/companion"], "LineStrips3D:strips")[0]
+    (corrected,) = column(chunks["/world/trajectory/companion_road_corrected"], "LineStrips3D:strips")[0]
+    assert len(corrected) == len(companion) == 4 and np.allclose(corrected[0], companion[0])
     (blob, *_), meter = column(chunks["/world/camera/image/depth"], "EncodedDepthImage:blob")[1], \
         column(chunks["/world/camera/image/depth"], "EncodedDepthImage:meter")[1]
     with DriveFile(ws.drives / "drive_d.h5") as drive:
