@@ -5,14 +5,15 @@ the truth being whether it ends (final translation error) more than ``--truth`` 
 
 Prints, per input and beam count, runs / ending > truth / flagged of those / flagged of the others, for the stored
 verdicts (``stored``: the health in each JSON as written) and for the candidate rules (``--floors``, ``--sigmas``,
-``--min-pairs``); ``--json`` also writes the per-run rows, ``--flags`` prints every false flag and miss of the
-stored verdicts with its reasons, ``--weak-steps`` what the flagged steps of each sparse, dense and exact run were
-(held on a measured velocity, held from step 1, or a jump or rejection), ``--drives 1000-1003`` keeps those drives
-only (a half of the test set), ``--group`` prints the stored verdicts once more with the inputs grouped by kind
-(sparse, dense, exact, classical completers, networks; each with measured sources apart). ``--rejudge`` judges every
-completion under the evidence rule of this checkout rather than as stored: each companion (the sparse run of a
-drive's measured kind, with the settings of the runs it judges) is run again, one at a time, and
-:func:`dcslam.slam.drive.companion_verdict` judges the stored trajectory against it (a minute or two for a
+``--min-pairs``: each run judged against the stored run of its companion as run, not road-corrected, which needs the
+companion's road planes: ``--rejudge``); ``--json`` also writes the per-run rows, ``--flags`` prints every false
+flag and miss of the stored verdicts with its reasons, ``--weak-steps`` what the flagged steps of each sparse, dense
+and exact run were (held on a measured velocity, held from step 1, or a jump or rejection), ``--drives 1000-1003``
+keeps those drives only (a half of the test set), ``--group`` prints the stored verdicts once more with the inputs
+grouped by kind (sparse, dense, exact, classical completers, networks; each with measured sources apart).
+``--rejudge`` judges every completion under the evidence rule of this checkout rather than as stored: each companion
+(the sparse run of a drive's measured kind, with the settings of the runs it judges) is run again, one at a time,
+and :func:`dcslam.slam.drive.companion_verdict` judges the stored trajectory against it (a minute or two for a
 workspace's companions; the completions are not re-run). A rerun companion that does not reproduce the stored sparse
 run is named with its difference (MKL's summation order: a workspace made under ``MKL_CBWR=AUTO`` needs it set
 again).
