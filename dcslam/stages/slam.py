@@ -68,8 +68,8 @@ class SlamStageConfig(SlamSettings):
     evidence: str = option("auto", choices=EVIDENCE_USES, help=(
         "auto: beside a run on completed depth (dense, exact, a predicted or filtered layer), run SLAM on the "
         "measured LiDAR pixels behind it and flag the run when it ends further from that companion (its height and "
-        "tilt corrected by the road it saw) than the companion's own uncertainty allows; none: no companion (the summary says that no evidence bounds "
-        "the drift). A sparse input is its own evidence."))
+        "tilt corrected by the road it saw) than the companion's own uncertainty allows; none: no companion (the "
+        "summary says that no evidence bounds the drift). A sparse input is its own evidence."))
     record: bool = option(False, help=(
         "Also write a Rerun recording <out>/<drive>.rrd per drive: per frame the camera image, input depth, points, "
         "ICP sources, map and step verdict, and the trajectories; open it with `dcslam view`. Needs rerun-sdk "
