@@ -80,6 +80,17 @@ class DriveRun:
             health = merge(health, self.evidence)
         return health
 
+    def road_corrected(self) -> np.ndarray | None:
+        """The trajectory corrected by the road planes of the run's own frames
+        (:func:`dcslam.slam.road.road_corrected`; steps between frames without a road as estimated), or None when
+        its health rules fit no road (``max_road_drift_m`` 0). Shape: (N, 4, 4)."""
+        from dcslam.slam.health import HealthRules
+        from dcslam.slam.road import road_corrected
+
+        if (self.health_rules or HealthRules()).max_road_drift_m <= 0:
+            return None
+        return road_corrected(self.T_world_cam, [getattr(r, "road", None) for r in self.reports])
+
     def summary(self) -> dict:
         import torch
 
@@ -195,14 +206,14 @@ def companion_verdict(main: DriveRun, companion: DriveRun, kind: str) -> dict:
 
     from dcslam.slam.evidence import judge
     from dcslam.slam.health import HealthRules, summarise
-    from dcslam.slam.road import road_corrected
 
     rules = companion.health_rules or HealthRules()
-    T = companion.T_world_cam
-    corrected = rules.max_road_drift_m > 0
+    T = companion.road_corrected()
+    corrected = T is not None
     if corrected:
-        T = road_corrected(T, [getattr(r, "road", None) for r in companion.reports])
         rules = replace(rules, max_road_drift_m=0.0)
+    else:
+        T = companion.T_world_cam
     verdict = judge(main.T_world_cam, T, summarise(companion.reports, rules), kind, road_corrected=corrected)
     final, fixed = (float(np.linalg.norm(t[-1, :3, 3] - companion.T_gt[-1, :3, 3])) for t in (companion.T_world_cam, T))
     return {**verdict, "companion_final_error_m": round(final, 4), "companion_corrected_error_m": round(fixed, 4),

@@ -72,10 +72,11 @@ def judge(T_main: np.ndarray, T_companion: np.ndarray, companion_health: dict, c
     gaps = position_gaps(T_main, T_companion)
     sigma = float(companion_health.get("drift_sigma_m", 0.0))
     bound = rules.bound_m(sigma)
-    last = len(gaps) - 1
     gap = float(gaps[-1]) if len(gaps) else 0.0
-    within = np.flatnonzero(gaps <= bound)
-    frame = (int(within[-1]) + 1 if len(within) else 0) if gap > bound else max(last, 0)
+    frame = max(len(gaps) - 1, 0)                      # where it ends within the bound: the last frame
+    if gap > bound:                                    # beyond it: the frame after the last one within it
+        within = np.flatnonzero(gaps <= bound)
+        frame = int(within[-1]) + 1 if len(within) else 0
     largest = int(np.argmax(gaps)) if len(gaps) else 0
     name = f"the {companion} companion" + (" (road-corrected)" if road_corrected else "")
     record = {"companion": companion, "road_corrected": road_corrected, "gap_m": round(gap, 4), "gap_frame": frame,

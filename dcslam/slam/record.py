@@ -9,9 +9,10 @@ frame: green near, red at :data:`RESIDUAL_RED` voxels or more), ``world/map`` ev
 the last (decimated to :data:`MAP_POINTS`), ``steps/verdict`` (TextLog: the step's verdict and its reasons) and the
 scalars ``steps/pairs``, ``steps/sources``, ``steps/conditioning``, ``steps/gap_m`` and ``steps/verdict_level``
 (0 accepted, 1 degraded, 2 rejected). Static: ``world/trajectory/estimated``, ``world/trajectory/ground_truth`` and,
-when the stage ran one, ``world/trajectory/companion`` and, when the companion saw the road,
+when the stage ran one, ``world/trajectory/companion`` and, when its rules fit the road,
 ``world/trajectory/companion_road_corrected`` (the trajectory its evidence verdict judged the run against:
-:func:`dcslam.slam.road.road_corrected`) (LineStrips3D of the camera positions, metres), logged when the run is done.
+:meth:`dcslam.slam.drive.DriveRun.road_corrected`) (LineStrips3D of the camera positions, metres), logged when
+the run is done.
 
 Rerun (``rerun-sdk``, the ``viz`` extra, Python >= 3.11) is imported only here and only when a recording is asked
 for; the SLAM loop knows nothing of it (:func:`dcslam.slam.drive.run_drive` calls a per-step callback).
@@ -26,7 +27,6 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.errors import DcslamError
-from dcslam.slam.road import road_corrected
 
 #: The recording's file suffix, beside the drive's trajectory and summary.
 SUFFIX = ".rrd"
@@ -193,9 +193,9 @@ class SlamRecorder:
         strips = {"estimated": (run.T_world_cam, [40, 120, 255]), "ground_truth": (run.T_gt, [160, 160, 160])}
         if companion is not None:
             strips["companion"] = (companion.T_world_cam, [255, 150, 0])
-            planes = [getattr(r, "road", None) for r in companion.reports]
-            if any(p is not None for p in planes):    # what the evidence verdict judged the run against
-                strips["companion_road_corrected"] = (road_corrected(companion.T_world_cam, planes), [255, 210, 0])
+            corrected = companion.road_corrected()    # what the evidence verdict judged the run against
+            if corrected is not None:
+                strips["companion_road_corrected"] = (corrected, [255, 210, 0])
         for name, (T, color) in strips.items():
             rec.log(f"world/trajectory/{name}", rr.LineStrips3D([positions(T)], colors=[color]), static=True)
 
