@@ -5,15 +5,16 @@ the truth being whether it ends (final translation error) more than ``--truth`` 
 
 Prints, per input and beam count, runs / ending > truth / flagged of those / flagged of the others, for the stored
 verdicts (``stored``: the health in each JSON as written) and for the candidate rules (``--floors``, ``--sigmas``,
-``--min-pairs``: each run judged against the stored run of its companion as run, not road-corrected, which needs the
-companion's road planes: ``--rejudge``); ``--json`` also writes the per-run rows, ``--flags`` prints every false
-flag and miss of the stored verdicts with its reasons, ``--weak-steps`` what the flagged steps of each sparse, dense
-and exact run were (held on a measured velocity, held from step 1, or a jump or rejection), ``--drives 1000-1003``
-keeps those drives only (a half of the test set), ``--group`` prints the stored verdicts once more with the inputs
-grouped by kind (sparse, dense, exact, classical completers, networks; each with measured sources apart).
-``--rejudge`` judges every completion under the evidence rule of this checkout rather than as stored: each companion
-(the sparse run of a drive's measured kind, with the settings of the runs it judges) is run again, one at a time,
-and :func:`dcslam.slam.drive.companion_verdict` judges the stored trajectory against it (a minute or two for a
+``--min-pairs``, ``--drift-sigmas``: each run judged against the stored run of its companion as run; with
+``--rejudge`` against the companion run again and road-corrected, summarised under this checkout's health rules);
+``--json`` also writes the per-run rows, ``--flags`` prints every false flag and miss of the stored verdicts with
+its reasons, ``--weak-steps`` what the flagged steps of each sparse, dense and exact run were (held on a measured
+velocity, held from step 1, or a jump or rejection), ``--drives 1000-1003`` keeps those drives only (a half of the
+test set), ``--group`` prints the stored verdicts once more with the inputs grouped by kind (sparse, dense, exact,
+classical completers, networks; each with measured sources apart). ``--rejudge`` judges every completion under the
+evidence rule of this checkout rather than as stored, and the candidates with it: each companion (the sparse run of
+a drive's measured kind, with the settings of the runs it judges) is run again, one at a time, and
+:func:`dcslam.slam.drive.companion_verdict` judges the stored trajectory against it (a minute or two for a
 workspace's companions; the completions are not re-run). A rerun companion that does not reproduce the stored sparse
 run is named with its difference (MKL's summation order: a workspace made under ``MKL_CBWR=AUTO`` needs it set
 again).
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import itertools
 import json
 import re
 import sys
@@ -80,7 +82,8 @@ def companion_layer(layer: str, record: dict) -> str | None:
 def rejudge(health: dict, rules: HealthRules) -> dict:
     """The stored run verdict re-decided with ``rules.min_pairs`` at or below the one it was judged with: a step
     degraded only for its pair count becomes accepted when it has at least ``min_pairs`` pairs (its other checks
-    passed); the run-level rules of :func:`dcslam.slam.health.summarise` then apply as written."""
+    passed); the run-level rules of :func:`dcslam.slam.health.summarise` then apply as written, the road figure
+    and the drift bound (where it counted) as stored. ``health`` without its evidence (:func:`own_health`)."""
     verdicts = {}
     for step in health.get("flagged_steps", []):
         verdict = step["verdict"]
@@ -103,11 +106,15 @@ def rejudge(health: dict, rules: HealthRules) -> dict:
         longest = max(longest, run)
     if longest > rules.max_degraded_run:
         reasons.append(f"{longest} consecutive steps degraded")
-    # the drift bound as written (dcslam.slam.health.drift_bound); a summary from before it has the random walk's sigma
+    road = health.get("road")                              # the road figure as written
+    if road and rules.max_road_drift_m > 0 and float(road["drift_m"]) > rules.max_road_drift_m:
+        reasons.append(f"the road says the run {road['vertical']} {float(road['drift_m']):.2f} m")
+    # the drift bound as written (dcslam.slam.health.drift_bound), where it counted (a degenerate step); a summary
+    # from before it has the random walk's sigma
     drift = health.get("drift")
     bound = (float(drift["bound_m"]) * rules.drift_sigmas / float(drift["sigmas"]) if drift
              else rules.drift_sigmas * float(health.get("drift_sigma_m", 0.0)))
-    if rules.max_drift_m > 0 and bound > rules.max_drift_m:
+    if rules.max_drift_m > 0 and bound > rules.max_drift_m and (drift or {}).get("counted", True):
         reasons.append(f"accumulated uncertainty {bound:.2f} m ({rules.drift_sigmas:g} sigma)")
     return {**health, "accepted": steps - rejected - degraded, "degraded": degraded, "rejected": rejected,
             "suspect": bool(reasons), "reasons": reasons}
@@ -169,17 +176,18 @@ def verdicts(runs: dict, rules: HealthRules | None, evidence: EvidenceRules | No
     rows = []
     for (layer, drive), run in sorted(runs.items()):
         record = run["record"]
-        health = record["health"] if rules is None else rejudge(record["health"], rules)
         verdict = None
         kind = companion_layer(layer, record)
+        own = own_health(record["health"])
+        health = record["health"] if rules is None else rejudge(own, rules)
         if companions is not None and kind is not None:
             from types import SimpleNamespace
 
             from dcslam.slam.drive import companion_verdict
 
             companion = companions.run(kind, drive, record)
-            health = merge(own_health(health), companion_verdict(SimpleNamespace(T_world_cam=run["T"]), companion,
-                                                                 kind))
+            health = merge(own if rules is None else health,
+                           companion_verdict(SimpleNamespace(T_world_cam=run["T"]), companion, kind, evidence))
         elif evidence is not None and kind is not None:
             companion = runs.get((kind, drive))
             if companion is None:
@@ -307,27 +315,46 @@ def print_flags(rows: list[dict], truth: float) -> None:
               + (f" [overruled: {' | '.join(r['overruled'])}]" if r["overruled"] else ""))
 
 
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("workspace", type=Path)
+    p.add_argument("--truth", type=float, default=0.5, help="a run ending further than this (m) is bad")
+    p.add_argument("--floors", default="0.3", help="candidate floor_m values, comma-separated")
+    p.add_argument("--sigmas", default="3", help="candidate sigmas values, comma-separated")
+    p.add_argument("--min-pairs", default=str(HealthRules().min_pairs), help="candidate min_pairs values")
+    p.add_argument("--drift-sigmas", default=f"{HealthRules().drift_sigmas:g}",
+                   help="candidate drift_sigmas values (standard deviations of the drift bound)")
+    p.add_argument("--json", type=Path, help="write the per-run rows of every candidate here")
+    p.add_argument("--runs", action="store_true", help="print every run of the last candidate")
+    p.add_argument("--flags", action="store_true",
+                   help="print every false flag and miss of the stored verdicts, with its reasons")
+    p.add_argument("--drives", help="only these drives, by number: 1000-1003 or 1000,1002")
+    p.add_argument("--group", action="store_true",
+                   help="also print the stored verdicts with the inputs grouped by kind")
+    p.add_argument("--weak-steps", action="store_true",
+                   help="print what the flagged steps of every sparse, dense and exact run were")
+    p.add_argument("--rejudge", action="store_true",
+                   help="judge the completions under this checkout's evidence rule, the candidates' included, "
+                        "against their companions run again and road-corrected")
+    return p
+
+
+def candidates(args, runs: dict, companions: Companions | None) -> dict[str, list[dict]]:
+    """The rows of every candidate rule (``--min-pairs`` x ``--drift-sigmas`` x ``--sigmas`` x ``--floors``),
+    each table printed."""
+    results = {}
+    for pairs, drift, sigmas, floor in itertools.product(
+            [int(p) for p in args.min_pairs.split(",")], [float(d) for d in args.drift_sigmas.split(",")],
+            [float(s) for s in args.sigmas.split(",")], [float(f) for f in args.floors.split(",")]):
+        name = f"min_pairs {pairs}, drift bound {drift:g} sigma, evidence {sigmas:g} sigma, floor {floor:g} m"
+        results[name] = verdicts(runs, HealthRules(min_pairs=pairs, drift_sigmas=drift),
+                                 EvidenceRules(sigmas=sigmas, floor_m=floor), companions)
+        print_table(name, table(results[name], args.truth), args.truth)
+    return results
+
+
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("workspace", type=Path)
-    parser.add_argument("--truth", type=float, default=0.5, help="a run ending further than this (m) is bad")
-    parser.add_argument("--floors", default="0.3", help="candidate floor_m values, comma-separated")
-    parser.add_argument("--sigmas", default="3", help="candidate sigmas values, comma-separated")
-    parser.add_argument("--min-pairs", default=str(HealthRules().min_pairs), help="candidate min_pairs values")
-    parser.add_argument("--drift-sigmas", default=f"{HealthRules().drift_sigmas:g}",
-                        help="candidate drift_sigmas values (standard deviations of the drift bound)")
-    parser.add_argument("--json", type=Path, help="write the per-run rows of every candidate here")
-    parser.add_argument("--runs", action="store_true", help="print every run of the last candidate")
-    parser.add_argument("--flags", action="store_true",
-                        help="print every false flag and miss of the stored verdicts, with its reasons")
-    parser.add_argument("--drives", help="only these drives, by number: 1000-1003 or 1000,1002")
-    parser.add_argument("--group", action="store_true",
-                        help="also print the stored verdicts with the inputs grouped by kind")
-    parser.add_argument("--weak-steps", action="store_true",
-                        help="print what the flagged steps of every sparse, dense and exact run were")
-    parser.add_argument("--rejudge", action="store_true",
-                        help="judge the completions under this checkout's evidence rule (the companions run again)")
-    args = parser.parse_args(argv)
+    args = parser().parse_args(argv)
     runs = load_runs(args.workspace / "slam")
     if args.drives:
         keep = drive_numbers(args.drives)
@@ -335,17 +362,14 @@ def main(argv=None) -> int:
     if not runs:
         print(f"no SLAM outputs under {args.workspace / 'slam'}", file=sys.stderr)
         return 1
-    if args.rejudge:
-        companions = Companions(args.workspace, runs)
-        results = {"stored": verdicts(runs, None, None, companions)}
-        title = "rejudged verdicts (the steps' health as written, the evidence of this checkout's rule)"
-        for (kind, drive), difference in sorted(companions.differences.items()):
-            if difference > 1e-6:
-                print(f"{kind} {drive}: the companion run again differs from the stored run by up to "
-                      f"{difference:.3g} m", file=sys.stderr)
-    else:
-        results = {"stored": verdicts(runs, None, None)}
-        title = "stored verdicts (the health as written, with its evidence)"
+    companions = Companions(args.workspace, runs) if args.rejudge else None
+    results = {"stored": verdicts(runs, None, None, companions)}
+    title = ("rejudged verdicts (the steps' health as written, the evidence of this checkout's rule)" if args.rejudge
+             else "stored verdicts (the health as written, with its evidence)")
+    for (kind, drive), difference in sorted((companions.differences if companions else {}).items()):
+        if difference > 1e-6:
+            print(f"{kind} {drive}: the companion run again differs from the stored run by up to {difference:.3g} m",
+                  file=sys.stderr)
     print_table(title, table(results["stored"], args.truth), args.truth)
     if args.group:
         print_table(title.split(" (")[0] + ", inputs grouped by kind", table(grouped(results["stored"]), args.truth),
@@ -354,24 +378,14 @@ def main(argv=None) -> int:
         print_flags(results["stored"], args.truth)
     if args.weak_steps:
         print_weak_steps(runs, args.truth)
-    for pairs in (int(p) for p in args.min_pairs.split(",")):
-        for drift in (float(d) for d in args.drift_sigmas.split(",")):
-            for sigmas in (float(s) for s in args.sigmas.split(",")):
-                for floor in (float(f) for f in args.floors.split(",")):
-                    name = (f"min_pairs {pairs}, drift bound {drift:g} sigma, evidence {sigmas:g} sigma, "
-                            f"floor {floor:g} m")
-                    rows = verdicts(runs, HealthRules(min_pairs=pairs, drift_sigmas=drift),
-                                    EvidenceRules(sigmas=sigmas, floor_m=floor))
-                    results[name] = rows
-                    print_table(name, table(rows, args.truth), args.truth)
+    results.update(candidates(args, runs, companions))
     if args.runs:
-        for r in rows:
+        for r in list(results.values())[-1]:
             print(f"{r['layer']:28s} {r['drive'][-9:-5]} final {r['final_m']:6.3f} gap {r['gap_m'] or 0:6.3f} "
                   f"{'FLAG' if r['flagged'] else '    '} {r['evidence']} {'; '.join(r['reasons'])[:120]}")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())

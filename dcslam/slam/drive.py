@@ -193,10 +193,11 @@ def frame_preparer(slam, K, device: str, confidence: ConfidenceUse) -> Callable[
     return prepare
 
 
-def companion_verdict(main: DriveRun, companion: DriveRun, kind: str) -> dict:
+def companion_verdict(main: DriveRun, companion: DriveRun, kind: str, rules=None) -> dict:
     """The evidence verdict of ``main`` against ``companion``, a run with the same settings and frames on the
-    measured depth kind ``kind`` behind ``main``'s input (:func:`dcslam.slam.evidence.judge`), with the companion's
-    final error against the ground truth, as run and road-corrected, and its seconds.
+    measured depth kind ``kind`` behind ``main``'s input (:func:`dcslam.slam.evidence.judge` under ``rules``, an
+    :class:`~dcslam.slam.evidence.EvidenceRules`; None: the defaults), with the companion's final error against the
+    ground truth, as run and road-corrected, and its seconds.
 
     When its health rules fit the road (``max_road_drift_m`` above 0), the companion's trajectory is road-corrected
     (:func:`dcslam.slam.road.road_corrected`: its pitch, roll and height from the road planes of its own frames) and
@@ -204,17 +205,18 @@ def companion_verdict(main: DriveRun, companion: DriveRun, kind: str) -> dict:
     8 and 16 beams is vertical: docs/slam.md, "Independent evidence for completed depth")."""
     from dataclasses import replace
 
-    from dcslam.slam.evidence import judge
+    from dcslam.slam.evidence import EvidenceRules, judge
     from dcslam.slam.health import HealthRules, summarise
 
-    rules = companion.health_rules or HealthRules()
+    health_rules = companion.health_rules or HealthRules()
     T = companion.road_corrected()
     corrected = T is not None
     if corrected:
-        rules = replace(rules, max_road_drift_m=0.0)
+        health_rules = replace(health_rules, max_road_drift_m=0.0)
     else:
         T = companion.T_world_cam
-    verdict = judge(main.T_world_cam, T, summarise(companion.reports, rules), kind, road_corrected=corrected)
+    verdict = judge(main.T_world_cam, T, summarise(companion.reports, health_rules), kind,
+                    rules or EvidenceRules(), road_corrected=corrected)
     final, fixed = (float(np.linalg.norm(t[-1, :3, 3] - companion.T_gt[-1, :3, 3])) for t in (companion.T_world_cam, T))
     return {**verdict, "companion_final_error_m": round(final, 4), "companion_corrected_error_m": round(fixed, 4),
             "companion_seconds": round(companion.seconds, 3)}
