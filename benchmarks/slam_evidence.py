@@ -16,8 +16,8 @@ evidence rule of this checkout rather than as stored, and the candidates with it
 a drive's measured kind, with the settings of the runs it judges) is run again, one at a time, and
 :func:`dcslam.slam.drive.companion_verdict` judges the stored trajectory against it (a minute or two for a
 workspace's companions; the completions are not re-run). A rerun companion that does not reproduce the stored sparse
-run is named with its difference (MKL's summation order: a workspace made under ``MKL_CBWR=AUTO`` needs it set
-again).
+run is named with its difference and the script exits 1 (MKL's summation order: a workspace made under
+``MKL_CBWR=AUTO`` needs it set again).
 
     python benchmarks/slam_evidence.py /tmp/repro-ws-b --floors 0.2,0.3,0.4 --sigmas 3 --min-pairs 250,150
     python benchmarks/slam_evidence.py /tmp/calib-ws --flags --drives 1000-1003
@@ -366,10 +366,10 @@ def main(argv=None) -> int:
     results = {"stored": verdicts(runs, None, None, companions)}
     title = ("rejudged verdicts (the steps' health as written, the evidence of this checkout's rule)" if args.rejudge
              else "stored verdicts (the health as written, with its evidence)")
-    for (kind, drive), difference in sorted((companions.differences if companions else {}).items()):
-        if difference > 1e-6:
-            print(f"{kind} {drive}: the companion run again differs from the stored run by up to {difference:.3g} m",
-                  file=sys.stderr)
+    differ = {key: d for key, d in (companions.differences if companions else {}).items() if d > 1e-6}
+    for (kind, drive), difference in sorted(differ.items()):
+        print(f"{kind} {drive}: the companion run again differs from the stored run by up to {difference:.3g} m",
+              file=sys.stderr)
     print_table(title, table(results["stored"], args.truth), args.truth)
     if args.group:
         print_table(title.split(" (")[0] + ", inputs grouped by kind", table(grouped(results["stored"]), args.truth),
@@ -385,6 +385,10 @@ def main(argv=None) -> int:
                   f"{'FLAG' if r['flagged'] else '    '} {r['evidence']} {'; '.join(r['reasons'])[:120]}")
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
+    if differ:
+        print(f"{len(differ)} companion run(s) did not reproduce the stored ones: the rejudged verdicts are not the "
+              f"workspace's (set MKL_CBWR as when it was made)", file=sys.stderr)
+        return 1
     return 0
 
 if __name__ == "__main__":
