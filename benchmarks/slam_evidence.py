@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from dcslam.slam.evidence import EvidenceRules, judge, merge
-from dcslam.slam.health import HealthRules
+from dcslam.slam.health import WEAK, HealthRules
 
 PAIRS = re.compile(r"^(\d+) of \d+ points paired")
 
@@ -82,8 +82,9 @@ def companion_layer(layer: str, record: dict) -> str | None:
 def rejudge(health: dict, rules: HealthRules) -> dict:
     """The stored run verdict re-decided with ``rules.min_pairs`` at or below the one it was judged with: a step
     degraded only for its pair count becomes accepted when it has at least ``min_pairs`` pairs (its other checks
-    passed); the run-level rules of :func:`dcslam.slam.health.summarise` then apply as written, the road figure
-    and the drift bound (where it counted) as stored. ``health`` without its evidence (:func:`own_health`)."""
+    passed); a step only weak where it was held (:func:`held_only`) is not counted as degraded; the run-level rules
+    of :func:`dcslam.slam.health.summarise` then apply as written, the road figure, the drift bound (where it
+    counted) and the hold bound as stored. ``health`` without its evidence (:func:`own_health`)."""
     verdicts = {}
     for step in health.get("flagged_steps", []):
         verdict = step["verdict"]
@@ -91,10 +92,13 @@ def rejudge(health: dict, rules: HealthRules) -> dict:
             why = list(step["why"])
             left = [w for w in why if not (PAIRS.match(w) and int(PAIRS.match(w).group(1)) >= rules.min_pairs)]
             verdict = "degraded" if left else "accepted"
+            if left and held_only(step, left):
+                verdict = "held"                           # judged by the hold bound, not counted as degraded
         verdicts[step["frame"]] = verdict
     steps = health["accepted"] + health["degraded"] + health["rejected"]
     rejected = sum(v == "rejected" for v in verdicts.values())
     degraded = sum(v == "degraded" for v in verdicts.values())
+    held = sum(v == "held" for v in verdicts.values())
     reasons = []
     if rejected > rules.max_rejected:
         reasons.append(f"{rejected} of {steps} steps rejected")
@@ -116,8 +120,23 @@ def rejudge(health: dict, rules: HealthRules) -> dict:
              else rules.drift_sigmas * float(health.get("drift_sigma_m", 0.0)))
     if rules.max_drift_m > 0 and bound > rules.max_drift_m and (drift or {}).get("counted", True):
         reasons.append(f"accumulated uncertainty {bound:.2f} m ({rules.drift_sigmas:g} sigma)")
-    return {**health, "accepted": steps - rejected - degraded, "degraded": degraded, "rejected": rejected,
+    hold = health.get("hold")                              # the hold bound as written (none before it existed)
+    if hold and rules.max_drift_m > 0:
+        held_bound = float(hold["bound_m"]) * rules.drift_sigmas / float(hold["sigmas"])
+        if held_bound > rules.max_drift_m:
+            reasons.append(f"{hold['steps']} steps held at the constant-velocity prediction: {held_bound:.2f} m "
+                           f"({rules.drift_sigmas:g} sigma)")
+    return {**health, "accepted": steps - rejected - degraded - held, "degraded": degraded + held, "held": held,
+            "rejected": rejected,
             "suspect": bool(reasons), "reasons": reasons}
+
+
+def held_only(step: dict, why: list[str]) -> bool:
+    """Whether a stored degraded step was only weak where the odometry held it at the prediction, in directions the
+    hold bound models (:func:`dcslam.slam.health.held_only`, read from the step's ``held`` names: none of them a
+    rotation) — ``why``: its reasons left."""
+    held = step.get("held") or []
+    return bool(held) and not any(h.startswith("rotation") for h in held) and all(w.startswith(WEAK) for w in why)
 
 
 def own_health(health: dict) -> dict:

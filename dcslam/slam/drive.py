@@ -71,14 +71,21 @@ class DriveRun:
 
     def health(self) -> dict:
         """The run's health (:func:`dcslam.slam.health.summarise`), merged with its evidence verdict if it has one."""
-        from dcslam.slam.health import summarise
+        from dcslam.slam.health import HealthRules, summarise
 
-        health = summarise(self.reports, *([self.health_rules] if self.health_rules is not None else []))
+        health = summarise(self.reports, self.health_rules or HealthRules(), self.frame_interval_s())
         if self.evidence is not None:
             from dcslam.slam.evidence import merge
 
             health = merge(health, self.evidence)
         return health
+
+    def frame_interval_s(self) -> float | None:
+        """The median time between the run's frames (s), None when its timestamps do not say (fewer than two, or
+        not increasing)."""
+        t = np.asarray(self.timestamps, dtype=np.float64).reshape(-1)
+        steps = np.diff(t)
+        return float(np.median(steps)) if len(steps) and np.isfinite(steps).all() and (steps > 0).all() else None
 
     def road_corrected(self) -> np.ndarray | None:
         """The trajectory corrected by the road planes of the run's own frames
@@ -215,7 +222,7 @@ def companion_verdict(main: DriveRun, companion: DriveRun, kind: str, rules=None
         health_rules = replace(health_rules, max_road_drift_m=0.0)
     else:
         T = companion.T_world_cam
-    verdict = judge(main.T_world_cam, T, summarise(companion.reports, health_rules), kind,
+    verdict = judge(main.T_world_cam, T, summarise(companion.reports, health_rules, companion.frame_interval_s()), kind,
                     rules or EvidenceRules(), road_corrected=corrected)
     final, fixed = (float(np.linalg.norm(t[-1, :3, 3] - companion.T_gt[-1, :3, 3])) for t in (companion.T_world_cam, T))
     return {**verdict, "companion_final_error_m": round(final, 4), "companion_corrected_error_m": round(fixed, 4),

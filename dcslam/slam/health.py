@@ -77,6 +77,24 @@ class HealthRules:
         direction (a car changes its velocity by a few centimetres per frame at 10 Hz).
     first_prior_sigma_m: the same for the first ICP step, which has no velocity to predict from (a car moves
         0.5-1.5 m per frame).
+    hold_acceleration_mps2: standard deviations of the vehicle's acceleration along the camera's x (across), y
+        (vertical) and z (forward) axes, which a step held at the constant-velocity prediction
+        (:attr:`StepReport.held`) does not see: the k-th step of a hold that follows a measured velocity is off by
+        ``frame_interval_s`` squared times k times the acceleration along the held direction, so a hold of n steps
+        may add 1 + 2 + ... + n of them (:func:`hold_bound`). (0.2, 0.2, 1.0) m/s^2: a car accelerates and brakes
+        along its axis and barely changes its sideways or vertical velocity (the constant twist of the prediction
+        carries its turns); the real KITTI drive in tests/data changes its forward speed by a median 0.81 and at
+        most 1.77 m/s^2, its sideways speed by 0.04 (at most 0.39) and its vertical speed by 0.07 (at most 0.41)
+        m/s^2 (OXTS vf, vl, vu), within 2.5 of these on every axis.
+    hold_first_sigma_m: the same for a hold from the first step, before any step measured a velocity: each held
+        step misses the motion of a whole frame along the held direction, per camera axis (x, y, z): a car moves
+        0.5-1.5 m per frame forward and at most 0.016 m sideways and 0.007 m vertically (the real drive's vl, vu).
+    frame_interval_s: the time between frames when the run does not say (KITTI's 10 Hz).
+    degenerate_pairs: a translation direction is degenerate only when the pairs' information along it (the smallest
+        eigenvalue of the translation block of J^T W J: the number of unit normals' worth of pairs facing it) is
+        also below this, whatever its share: a dense frame's 2 % share is still tens of pairs. On seed 6262 (8
+        full-size drives at 64, 16 and 8 beams, dense and exact depth; 1,087 steps) every step that erred more than
+        0.3 m had at most 8.7, none of those above 10 erred that much (docs/slam.md).
     """
 
     min_pairs: int = 100
@@ -92,18 +110,30 @@ class HealthRules:
     degenerate_share: float = 0.02
     prior_sigma_m: float = 0.05
     first_prior_sigma_m: float = 0.5
+    hold_acceleration_mps2: tuple[float, float, float] = (0.2, 0.2, 1.0)
+    hold_first_sigma_m: tuple[float, float, float] = (0.02, 0.02, 0.5)
+    frame_interval_s: float = 0.1
+    degenerate_pairs: float = 20.0
+
+
+#: The start of the reason :func:`assess` gives a weakly constrained step.
+WEAK = "weakly constrained"
 
 
 def assess(accepted: bool, reason: str, inliers: int, sources: int, conditioning: float, gap_m: float,
-           gap_deg: float, has_velocity: bool, rules: HealthRules = HealthRules()) -> tuple[str, list[str]]:
-    """The verdict of one odometry step and the evidence behind it -> (verdict, reasons)."""
+           gap_deg: float, has_velocity: bool, rules: HealthRules = HealthRules(),
+           held=None) -> tuple[str, list[str]]:
+    """The verdict of one odometry step and the evidence behind it -> (verdict, reasons). ``held``: the directions
+    the step held at the prediction (``OdometryResult.held``, (K, 6), or None), named in its weak reason."""
     if not accepted:
         return "rejected", [reason or "rejected by the odometry"]
     reasons = []
     if inliers < rules.min_pairs:
         reasons.append(f"{inliers} of {sources} points paired (fewer than {rules.min_pairs} pairs)")
     if not math.isnan(conditioning) and conditioning < rules.min_conditioning:
-        reasons.append(f"weakly constrained (conditioning {conditioning:.1e})")
+        names = held_names(held)
+        reasons.append(f"{WEAK} (conditioning {conditioning:.1e})"
+                       + (f", held at the prediction ({', '.join(names)})" if names else ""))
     if has_velocity and (gap_m > rules.max_prediction_gap_m or gap_deg > rules.max_prediction_gap_deg):
         reasons.append(f"{gap_m:.2f} m / {gap_deg:.1f} deg from the constant-velocity prediction")
     return ("degraded" if reasons else "accepted"), reasons
@@ -118,6 +148,47 @@ def _numpy(tensor) -> np.ndarray:
     return tensor.detach().cpu().double().numpy() if hasattr(tensor, "detach") else np.asarray(tensor, np.float64)
 
 
+def _held(report) -> np.ndarray | None:
+    """The directions a step held at the prediction as twists (K, 6) (:attr:`StepReport.held`), None for none."""
+    held = getattr(report, "held", None)
+    if held is None:
+        return None
+    held = _numpy(held).reshape(-1, 6)
+    return held if len(held) and np.isfinite(held).all() else None
+
+
+def held_names(held) -> list[str]:
+    """Names of held directions (K, 6): the camera axis of a direction that is mostly a translation (at least half
+    of its unit length in the normalised coordinates, :meth:`~dcslam.slam.odometry.PointToPlane.held`), else the
+    axis of its rotation."""
+    if held is None:
+        return []
+    names = []
+    for v in _numpy(held).reshape(-1, 6):
+        t = v[:3]
+        name = (axis_name(t) if float(np.linalg.norm(t)) >= 0.5
+                else "rotation about " + axis_name(v[3:]).split(" (")[1].rstrip(")"))
+        if name not in names:
+            names.append(name)
+    return names
+
+
+def _modelled_hold(report) -> np.ndarray | None:
+    """The directions a step held (:func:`_held`) when the hold bound models them: every one mostly a translation
+    (:func:`_translational`), the step not rejected; else None (a step holding a mostly rotational direction is
+    judged as before holds were modelled: degraded, with the pairs' covariance)."""
+    held = _held(report) if report.verdict != "rejected" else None
+    return held if held is not None and _translational(held) else None
+
+
+def held_only(report) -> bool:
+    """Whether a degraded step's only weakness is what the odometry held at the prediction: it held directions the
+    hold bound models (:func:`_modelled_hold`) and every reason is its weak conditioning. Its pose there is the
+    prediction's and :func:`hold_bound` judges what that may cost; the run rules do not count it as degraded."""
+    return (report.verdict == "degraded" and _modelled_hold(report) is not None and bool(report.health)
+            and all(str(w).startswith(WEAK) for w in report.health))
+
+
 def axis_name(direction_cam) -> str:
     """The name of the camera axis closest to a direction (3,) in the camera frame, sign ignored."""
     return AXIS_NAMES[int(np.argmax(np.abs(np.asarray(direction_cam, dtype=np.float64))))]
@@ -129,8 +200,9 @@ def step_degeneracy(information) -> dict | None:
     eigenvalues are shares in [0, 1/3 for the smallest] whatever the number of pairs (a translation block's share is
     that of the pairs' normal weight along the direction; 0 along a corridor's axis).
 
-    Returns ``{"translation": share, "translation_direction": (3,) camera frame, "rotation": share,
-    "rotation_axis": (3,) camera frame}`` of the smallest eigenvalue of each block, or None without an information.
+    Returns ``{"translation": share, "translation_direction": (3,) camera frame, "translation_pairs": the
+    eigenvalue itself (unit normals' worth of pairs along that direction), "rotation": share, "rotation_axis": (3,)
+    camera frame}`` of the smallest eigenvalue of each block, or None without an information.
     """
     if information is None:
         return None
@@ -143,14 +215,18 @@ def step_degeneracy(information) -> dict | None:
         trace = float(np.trace(block))
         values, vectors = np.linalg.eigh(block / trace) if trace > 0 else (np.zeros(3), np.eye(3))
         out[key], out[axis_key] = float(values[0]), vectors[:, 0]
+        if key == "translation":
+            out["translation_pairs"] = float(values[0]) * max(trace, 0.0)
     return out
 
 
 def _step_covariance(report, rules: HealthRules) -> np.ndarray | None:
     """The step's (6, 6) twist covariance: its own, or (a report without one) its worst-direction standard
-    deviations ``sigma_m`` and ``sigma_deg`` in every direction; None when the step was not measured. Along each
-    degenerate translation direction (:attr:`HealthRules.degenerate_share`) the prediction's variance is added:
-    the pose there is the prediction's."""
+    deviations ``sigma_m`` and ``sigma_deg`` in every direction; None when the step was not measured. Along the
+    directions the odometry held (:attr:`StepReport.held`) the pose is the prediction's, not the pairs': the
+    covariance is conditioned on no error there (:func:`hold_bound` carries what holding may cost). Along each
+    other degenerate translation direction (:attr:`HealthRules.degenerate_share`) the prediction's variance is
+    added: the pairs barely moved the pose there from the prediction."""
     if getattr(report, "covariance", None) is not None:
         C = _numpy(report.covariance).copy()
         if not np.isfinite(C).all():
@@ -159,6 +235,13 @@ def _step_covariance(report, rules: HealthRules) -> np.ndarray | None:
         return None
     else:
         C = np.diag([report.sigma_m ** 2] * 3 + [math.radians(report.sigma_deg) ** 2] * 3)
+    held = _modelled_hold(report)
+    if held is not None:
+        CV = C @ held.T
+        inner = held @ CV
+        if np.linalg.cond(inner) < 1e12:
+            C = C - CV @ np.linalg.solve(inner, CV.T)
+        return C
     information = getattr(report, "information", None)
     if information is not None and np.isfinite(_numpy(information)).all():
         block = _numpy(information)[:3, :3]
@@ -166,9 +249,53 @@ def _step_covariance(report, rules: HealthRules) -> np.ndarray | None:
         values, vectors = np.linalg.eigh(block / trace) if trace > 0 else (np.zeros(3), np.eye(3))
         prior = rules.first_prior_sigma_m if report.index == 1 else rules.prior_sigma_m
         for value, v in zip(values, vectors.T):
-            if value < rules.degenerate_share:
+            if value < rules.degenerate_share and value * trace < rules.degenerate_pairs:
                 C[:3, :3] += prior ** 2 * np.outer(v, v)
     return C
+
+
+def _hold_covariances(reports, rules: HealthRules, interval_s: float) -> list[tuple]:
+    """(report, (6, 6) twist covariance, whether no velocity was measured before its hold) of every held step
+    (:attr:`StepReport.held`): the prediction's error along
+    the directions it held. The k-th step of a hold (consecutive held or rejected steps) that began after a measured
+    velocity is off by ``hold_acceleration_mps2 * interval_s ** 2 * k`` metres (the velocity held since the hold
+    began misses what the vehicle's acceleration changed); in a hold from the first step, before any step measured
+    a velocity, each step misses the whole motion of a frame (``first_prior_sigma_m``). Rejected steps add nothing
+    here (they are flagged on their own) but continue the hold, as do steps holding a direction the bound does not
+    model (:func:`_modelled_hold`)."""
+    out, k, measured, from_measured = [], 0, False, False
+    acceleration = np.asarray(rules.hold_acceleration_mps2, dtype=np.float64) * interval_s ** 2
+    first = np.asarray(rules.hold_first_sigma_m, dtype=np.float64)
+    for r in reports:
+        if r.index == 0:
+            continue
+        held = _modelled_hold(r)
+        if held is None and r.verdict != "rejected" and _held(r) is None:
+            k, measured = 0, True
+            continue
+        k += 1
+        if k == 1:
+            from_measured = measured
+        if held is not None:
+            translation = acceleration * k if from_measured else first
+            C = np.zeros((6, 6))
+            for v in held:
+                C += _along(v, translation) ** 2 * np.outer(v, v)
+            out.append((r, C, not from_measured))
+    return out
+
+
+def _along(v: np.ndarray, translation: np.ndarray) -> float:
+    """The standard deviation (metres) along a held direction ``v`` (a twist moving the sources one metre along it,
+    mostly a translation: :func:`_translational`) of a prediction error with independent standard deviations
+    ``translation`` (3,: metres along camera x, y, z): the translation part of the unit direction weighs the axes."""
+    return float(np.linalg.norm(v[:3] * translation))
+
+
+def _translational(held: np.ndarray) -> bool:
+    """Whether every held direction (K, 6) is mostly a translation (at least half of its unit length in the
+    normalised coordinates of :meth:`~dcslam.slam.odometry.PointToPlane.held`): what the hold bound models."""
+    return bool((np.linalg.norm(held[:, :3], axis=1) >= 0.5).all())
 
 
 def _directions(n: int = 400) -> np.ndarray:
@@ -219,26 +346,38 @@ def drift_bound(reports, rules: HealthRules | None = None) -> dict:
     A step i with twist covariance C (camera frame, :meth:`~dcslam.slam.odometry.PointToPlane.covariance`) moves a
     later frame k by ``R_i dt + (R_i dw) x (p_k - p_i)``: its translation, and its rotation about its own position
     times the road from there; along a direction the step leaves degenerate, the prediction's uncertainty
-    (:attr:`HealthRules.degenerate_share`). Rejected steps and steps without a covariance add nothing (they are
-    flagged on their own).
+    (:attr:`HealthRules.degenerate_share`); along a direction it held, nothing (:func:`hold_bound`). Rejected
+    steps and steps without a covariance add nothing (they are flagged on their own).
 
     Returns ``{"bound_m": b, "sigmas": rules.drift_sigmas, "direction_world": [3], "direction": a name of
     :data:`AXIS_NAMES`, "from_frame": None, "largest_frame": the step that adds most, "weakest_frame": the step
-    with the smallest translation share (:func:`step_degeneracy`), "weakest_share": that share,
-    "weakest_direction": its name}``; :func:`summarise` fills in ``from_frame`` (the first frame whose own bound
-    along that direction exceeds ``max_drift_m``) when the bound exceeds it.
+    with the smallest translation share (:func:`step_degeneracy`) of those it did not hold, "weakest_share": that
+    share, "weakest_direction": its name}``; :func:`summarise` fills in ``from_frame`` (the first frame whose own
+    bound along that direction exceeds ``max_drift_m``) when the bound exceeds it.
     """
     return _drift(reports, HealthRules() if rules is None else rules)[0]
 
 
-def _drift(reports, rules: HealthRules) -> tuple[dict, tuple | None]:
-    """:func:`drift_bound`, and what :func:`_first_frame_over` needs to follow the bound frame by frame (None when
-    no step was measured)."""
-    sigmas = rules.drift_sigmas
-    steps = [r for r in reports if r.index > 0 and r.verdict != "rejected"]
-    measured = [(r, C) for r, C in ((r, _step_covariance(r, rules)) for r in steps) if C is not None]
+def hold_bound(reports, rules: HealthRules | None = None, interval_s: float | None = None) -> dict:
+    """How far the steps held at the constant-velocity prediction may have put the run's last position, and in
+    which direction: ``rules.drift_sigmas`` times the correlated sum (as :func:`drift_bound`) of each held step's
+    prediction error along the directions it held (:func:`_hold_covariances`: the vehicle's acceleration over the
+    hold, ``interval_s`` seconds a frame (None: ``rules.frame_interval_s``), or a frame's whole motion before any
+    velocity was measured).
+
+    Returns ``{"bound_m": b, "sigmas": ..., "direction_world": [3] or None, "direction": a name or None,
+    "from_frame": None, "largest_frame": ..., "steps": held steps, "frames": their frames, "held": the held
+    directions' names, "acceleration_mps2": ..., "interval_s": ...}``; :func:`summarise` fills in ``from_frame``
+    when the bound exceeds ``max_drift_m``."""
+    return _hold(reports, HealthRules() if rules is None else rules, interval_s)[0]
+
+
+def _accumulate(reports, measured: list[tuple], sigmas: float) -> tuple[dict, tuple | None]:
+    """The correlated bound of :func:`drift_bound` over ``measured``, ``[(report, twist covariance (6, 6))]``:
+    ``({"bound_m", "sigmas", "direction_world", "direction", "from_frame": None, "largest_frame"}``, what
+    :func:`_first_frame_over` needs to follow it frame by frame, None when ``measured`` is empty)."""
     empty = {"bound_m": 0.0, "sigmas": sigmas, "direction_world": None, "direction": None, "from_frame": None,
-             "largest_frame": None, "weakest_frame": None, "weakest_share": None, "weakest_direction": None}
+             "largest_frame": None}
     if not measured:
         return empty, None
     positions = np.stack([_numpy(r.T_world_cam)[:3, 3] for r in reports])
@@ -253,20 +392,47 @@ def _drift(reports, rules: HealthRules) -> tuple[dict, tuple | None]:
     u = _worst_direction(P)
     std = _correlated_std(P, u[None])[:, 0]
     largest = int(np.argmax(std))
-    direction_cam = R[largest].T @ u
     result = {**empty, "bound_m": float(sigmas * std.sum()), "direction_world": [float(x) for x in u],
-              "direction": axis_name(direction_cam), "largest_frame": int(measured[largest][0].index)}
-    shares = [(r.index, d) for r, d in ((r, step_degeneracy(getattr(r, "information", None))) for r, _ in measured)
-              if d is not None]
-    if shares:
-        frame, d = min(shares, key=lambda fd: fd[1]["translation"])
-        result.update(weakest_frame=int(frame), weakest_share=round(d["translation"], 5),
-                      weakest_direction=axis_name(d["translation_direction"]))
+              "direction": axis_name(R[largest].T @ u), "largest_frame": int(measured[largest][0].index)}
     return result, (u, A, X, B, at, positions)
 
 
+def _drift(reports, rules: HealthRules) -> tuple[dict, tuple | None]:
+    """:func:`drift_bound`, and what :func:`_first_frame_over` needs to follow the bound frame by frame (None when
+    no step was measured)."""
+    steps = [r for r in reports if r.index > 0 and r.verdict != "rejected"]
+    measured = [(r, C) for r, C in ((r, _step_covariance(r, rules)) for r in steps) if C is not None]
+    result, curve = _accumulate(reports, measured, rules.drift_sigmas)
+    result.update(weakest_frame=None, weakest_share=None, weakest_pairs=None, weakest_direction=None,
+                  degenerate_frames=[])
+    shares = [(r.index, d) for r, d in ((r, step_degeneracy(getattr(r, "information", None))) for r, _ in measured
+                                        if _modelled_hold(r) is None) if d is not None]
+    if shares:
+        frame, d = min(shares, key=lambda fd: fd[1]["translation"])
+        result.update(weakest_frame=int(frame), weakest_share=round(d["translation"], 5),
+                      weakest_pairs=round(d["translation_pairs"], 2),
+                      weakest_direction=axis_name(d["translation_direction"]),
+                      degenerate_frames=[int(f) for f, d in shares if d["translation"] < rules.degenerate_share
+                                         and d["translation_pairs"] < rules.degenerate_pairs])
+    return result, curve
+
+
+def _hold(reports, rules: HealthRules, interval_s: float | None) -> tuple[dict, tuple | None]:
+    """:func:`hold_bound`, and its curve for :func:`_first_frame_over`."""
+    interval = rules.frame_interval_s if interval_s is None else float(interval_s)
+    held = _hold_covariances(reports, rules, interval)
+    result, curve = _accumulate(reports, [(r, C) for r, C, _ in held], rules.drift_sigmas)
+    names = []
+    for r, _, _ in held:
+        names += [n for n in held_names(r.held) if n not in names]
+    result.update(steps=len(held), frames=[int(r.index) for r, _, _ in held], held=names,
+                  unmeasured=sum(u for _, _, u in held), acceleration_mps2=list(rules.hold_acceleration_mps2),
+                  first_sigma_m=list(rules.hold_first_sigma_m), interval_s=round(interval, 6))
+    return result, curve
+
+
 def _first_frame_over(curve, sigmas: float, over_m: float, reports) -> int | None:
-    """The first frame whose own drift bound along the run's worst direction exceeds ``over_m``."""
+    """The first frame whose own bound (:func:`_accumulate`) along the run's worst direction exceeds ``over_m``."""
     u, A, X, B, at, positions = curve
     for k in range(len(positions)):
         mine = at <= k
@@ -304,43 +470,52 @@ def drift_sigma_m(reports) -> float:
     return math.sqrt(variance)
 
 
-def summarise(reports, rules: HealthRules = HealthRules()) -> dict:
+def summarise(reports, rules: HealthRules = HealthRules(), interval_s: float | None = None) -> dict:
     """Counts of verdicts over a run's step reports (objects with ``index``, ``verdict`` and ``health``; the first
     frame, which has nothing to align to, is not counted) and whether the trajectory is suspect, with why.
+    ``interval_s``: the time between frames (None: ``rules.frame_interval_s``), for :func:`hold_bound`.
 
-    Returns ``{"accepted": n, "degraded": n, "rejected": n, "suspect": bool, "reasons": [str],
-    "flagged_steps": [{"frame": i, "verdict": v, "why": [str]}], "drift_sigma_m": s (:func:`drift_sigma_m`),
-    "drift": :func:`drift_bound` with ``counted`` (whether it took part in the verdict), "road":
-    :func:`dcslam.slam.road.road_drift` of the reports' ``road`` planes (None when ``max_road_drift_m`` is 0)}``.
+    A degraded step whose only weakness is a direction the odometry held at the prediction (:func:`held_only`) is
+    not counted by the degraded-step rules: the hold bound judges what holding may cost.
+
+    Returns ``{"accepted": n, "degraded": n, "rejected": n, "held": n (of the degraded: held only), "suspect":
+    bool, "reasons": [str], "flagged_steps": [{"frame": i, "verdict": v, "why": [str], "held": [names]}],
+    "drift_sigma_m": s (:func:`drift_sigma_m`), "drift": :func:`drift_bound` with ``counted`` (whether it took part
+    in the verdict), "hold": :func:`hold_bound`, "road": :func:`dcslam.slam.road.road_drift` of the reports'
+    ``road`` planes (None when ``max_road_drift_m`` is 0)}``.
     """
     steps = [r for r in reports if r.index > 0]
     counts = {v: sum(r.verdict == v for r in steps) for v in VERDICTS}
+    held = {r.index for r in steps if held_only(r)}
+    weak = [r for r in steps if r.verdict == "degraded" and r.index not in held]
     reasons = []
     if counts["rejected"] > rules.max_rejected:
         reasons.append(f"{counts['rejected']} of {len(steps)} steps rejected (pose predicted, not measured)")
-    if steps and counts["degraded"] > rules.max_degraded_fraction * len(steps):
-        reasons.append(f"{counts['degraded']} of {len(steps)} steps degraded "
-                       f"(more than {rules.max_degraded_fraction:.0%})")
+    if steps and len(weak) > rules.max_degraded_fraction * len(steps):
+        reasons.append(f"{len(weak)} of {len(steps)} steps degraded "
+                       f"(more than {rules.max_degraded_fraction:.0%})" + (f"; {len(held)} more held" if held else ""))
     run = longest = 0
     for r in steps:
-        run = run + 1 if r.verdict == "degraded" else 0
+        run = run + 1 if r.verdict == "degraded" and r.index not in held else 0
         longest = max(longest, run)
     if longest > rules.max_degraded_run:
         reasons.append(f"{longest} consecutive steps degraded")
     road = _road(reports, rules, reasons)
     drift = _drift_verdict(reports, rules, reasons)
-    flagged = [{"frame": r.index, "verdict": r.verdict, "why": list(r.health)} for r in steps
-               if r.verdict != "accepted"]
-    return {**counts, "suspect": bool(reasons), "reasons": reasons, "flagged_steps": flagged,
-            "drift_sigma_m": round(drift_sigma_m(reports), 4), "drift": drift, "road": road}
+    hold = _hold_verdict(reports, rules, interval_s, reasons)
+    flagged = [{"frame": r.index, "verdict": r.verdict, "why": list(r.health), "held": held_names(_held(r))}
+               for r in steps if r.verdict != "accepted"]
+    return {**counts, "held": len(held), "suspect": bool(reasons), "reasons": reasons, "flagged_steps": flagged,
+            "drift_sigma_m": round(drift_sigma_m(reports), 4), "drift": drift, "hold": hold, "road": road}
 
 
 def _drift_verdict(reports, rules: HealthRules, reasons: list[str]) -> dict:
     """The drift bound of :func:`summarise`; counted (and, past ``max_drift_m``, a reason appended to ``reasons``)
-    only when some step left a translation direction degenerate, or no step's information says."""
+    only when some step that the odometry did not hold left a translation direction degenerate, or no step's
+    information says."""
     drift, curve = _drift(reports, rules)
-    share = drift["weakest_share"]
-    drift["counted"] = bool(rules.max_drift_m > 0 and (share is None or share < rules.degenerate_share))
+    informed = any(getattr(r, "information", None) is not None for r in reports if r.index > 0)
+    drift["counted"] = bool(rules.max_drift_m > 0 and (drift["degenerate_frames"] or not informed))
     if rules.max_drift_m > 0 and drift["bound_m"] > rules.max_drift_m:
         drift["from_frame"] = _first_frame_over(curve, rules.drift_sigmas, rules.max_drift_m, reports)
         if drift["counted"]:
@@ -350,6 +525,22 @@ def _drift_verdict(reports, rules: HealthRules, reasons: list[str]) -> dict:
                            f"{drift['largest_frame']})")
     drift["bound_m"] = round(drift["bound_m"], 4)
     return drift
+
+
+def _hold_verdict(reports, rules: HealthRules, interval_s: float | None, reasons: list[str]) -> dict:
+    """The hold bound of :func:`summarise`: past ``max_drift_m`` (above 0), a reason appended to ``reasons``."""
+    hold, curve = _hold(reports, rules, interval_s)
+    if rules.max_drift_m > 0 and hold["bound_m"] > rules.max_drift_m:
+        hold["from_frame"] = _first_frame_over(curve, rules.drift_sigmas, rules.max_drift_m, reports)
+        frames = hold["frames"]
+        why = ("the vehicle's acceleration over the hold" if not hold["unmeasured"] else
+               f"{hold['unmeasured']} of them before any velocity was measured")
+        reasons.append(f"{hold['steps']} steps held at the constant-velocity prediction (frames {frames[0]}-"
+                       f"{frames[-1]}): they may have put it {hold['bound_m']:.2f} m off ({rules.drift_sigmas:g} "
+                       f"sigma; {why}), more than {rules.max_drift_m:g} m: {hold['direction']} held, past "
+                       f"{rules.max_drift_m:g} m from frame {hold['from_frame']}")
+    hold["bound_m"] = round(hold["bound_m"], 4)
+    return hold
 
 
 def _road(reports, rules: HealthRules, reasons: list[str]) -> dict | None:

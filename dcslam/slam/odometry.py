@@ -31,7 +31,10 @@ class OdometryResult:
     """Shape: T_world_cam (4, 4). ``accepted`` false means the estimate was rejected (``reason`` says why) and
     ``T_world_cam`` is the initial guess. ``information`` (6, 6): J^T W J of the final pairs at the estimate, and
     ``covariance`` (6, 6): :meth:`PointToPlane.covariance`, both float64 over the twist (translation, rotation) in the
-    camera frame (None when the step never got that far): the degeneracy analysis of :mod:`dcslam.slam.health`."""
+    camera frame (None when the step never got that far): the degeneracy analysis of :mod:`dcslam.slam.health`.
+    ``held`` (K, 6): the directions of motion the step held at the prediction (``hold_below``), each the twist
+    (translation m, rotation rad; camera frame) that moves the sources by one metre along it, at the final pairs (None
+    when it held none)."""
 
     T_world_cam: torch.Tensor
     accepted: bool = True
@@ -46,6 +49,7 @@ class OdometryResult:
     sigma_deg: float = math.nan
     information: torch.Tensor | None = None
     covariance: torch.Tensor | None = None
+    held: torch.Tensor | None = None
 
 
 #: Iterations of each wide-gate ICP stage on dense depth (a value at more than :data:`DENSE_FRACTION` of the
@@ -194,23 +198,36 @@ class PointToPlane:
         jitter = 1e-12 * float(torch.diagonal(H).sum()) + 1e-300
         return s2 * torch.linalg.inv(H + jitter * torch.eye(6, dtype=H.dtype, device=H.device))
 
-    def _hold(self, lin: Linearization) -> torch.Tensor:
-        """H plus a stiff prior along the directions the pairs do not constrain (normalised eigenvalue below
-        ``hold_below``, as :meth:`ICPOdometry._conditioning` measures it), so the step leaves the pose at its
-        prediction there instead of sliding along a tunnel or an open road (Zhang et al., ICRA 2016: solution
-        remapping)."""
+    def _weak(self, lin: Linearization) -> tuple[torch.Tensor, torch.Tensor]:
+        """(unit eigenvectors (6, K) of the normalised system whose eigenvalue is below ``hold_below``, as
+        :meth:`ICPOdometry._conditioning` measures it, in the coordinates (translation, rotation times the mean
+        source range); the scaling D (6,))."""
         if self._D is None:         # the scaling depends on the sources alone: made once per problem
             D = torch.tensor([1, 1, 1, self.scale, self.scale, self.scale], dtype=torch.float64, device=lin.H.device)
             self._D = D, D[:, None] * D[None, :]
         D, DD = self._D
         Hn = lin.H.detach() / DD / max(lin.weight or lin.count, 1e-12)
         values, vectors = torch.linalg.eigh(Hn)
-        weak = values < self.hold_below
-        if not bool(weak.any()):
+        return vectors[:, values < self.hold_below], D
+
+    def _hold(self, lin: Linearization) -> torch.Tensor:
+        """H plus a stiff prior along the directions the pairs do not constrain (:meth:`_weak`), so the step leaves
+        the pose at its prediction there instead of sliding along a tunnel or an open road (Zhang et al., ICRA
+        2016: solution remapping)."""
+        weak, D = self._weak(lin)
+        if not weak.shape[1]:
             return lin.H
-        V = vectors[:, weak] * D[:, None]                # back to the unnormalised coordinates
+        V = weak * D[:, None]                            # back to the unnormalised coordinates
         stiffness = 1e3 * float(torch.diagonal(lin.H.detach()).sum())
         return lin.H + stiffness * (V @ V.T)
+
+    def held(self, lin: Linearization) -> torch.Tensor | None:
+        """The directions :meth:`_hold` holds at ``lin`` as twists (K, 6) float64 that move the sources by one metre
+        along each (a unit vector of the normalised coordinates divided by D), or None when it holds none."""
+        if self.hold_below <= 0 or lin.count < 6:
+            return None
+        weak, D = self._weak(lin)
+        return (weak / D[:, None]).T.contiguous() if weak.shape[1] else None
 
 
 class ICPOdometry:
@@ -310,7 +327,7 @@ class ICPOdometry:
             return OdometryResult(T_init, False, f"{lin.count} inliers", **base)
         base["conditioning"] = conditioning = self._conditioning(lin, source)
         cov = problem.covariance(T, lin, r)
-        base["information"], base["covariance"] = lin.H.detach().double(), cov
+        base["information"], base["covariance"], base["held"] = lin.H.detach().double(), cov, problem.held(lin)
         base["sigma_m"] = math.sqrt(max(float(torch.linalg.eigvalsh(cov[:3, :3])[-1]), 0.0))
         base["sigma_deg"] = math.degrees(math.sqrt(max(float(torch.linalg.eigvalsh(cov[3:, 3:])[-1]), 0.0)))
         if conditioning < self.min_conditioning:

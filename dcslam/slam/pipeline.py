@@ -61,7 +61,8 @@ class StepReport:
     deviation of position / rotation along its worst direction (``PointToPlane.covariance``; NaN when not measured);
     information / covariance: the step's (6, 6) ``OdometryResult.information`` and ``covariance`` (None when not
     measured); road: the frame's road plane (:func:`dcslam.slam.road.frame_road`; None when it saw no road or the
-    rules do not ask for it).
+    rules do not ask for it); held: ``OdometryResult.held``, the directions the step held at the prediction (None:
+    none).
     """
 
     index: int
@@ -84,6 +85,7 @@ class StepReport:
     information: torch.Tensor | None = None
     covariance: torch.Tensor | None = None
     road: RoadPlane | None = None
+    held: torch.Tensor | None = None
 
 
 class SLAM:
@@ -237,12 +239,12 @@ class SLAM:
         gap_m, gap_deg = _distance(T_init, result.T_world_cam)
         verdict, why = ("accepted", []) if index == 0 or not self.odometry.assess_steps else assess(
             result.accepted, result.reason, result.inliers, result.sources, result.conditioning, gap_m, gap_deg,
-            has_velocity=index >= 2, rules=self.health)
+            has_velocity=index >= 2, rules=self.health, held=result.held)
         report = StepReport(index, result.T_world_cam, result.accepted, result.reason, result.iterations,
                             result.inliers, result.rmse, len(self.mapper.map), time.perf_counter() - start,
                             verdict, tuple(why), result.sources, result.conditioning, gap_m, gap_deg,
                             result.sigma_m, result.sigma_deg, result.information, result.covariance,
-                            self._road(frame))
+                            self._road(frame), result.held)
         self.reports.append(report)
         return report
 

@@ -5,6 +5,7 @@ run through `dcslam slam`. The runs flagged only for degraded steps, or only for
 running SLAM under health rules that make that one flag fire on this drive.
 """
 import json
+import math
 
 import pytest
 from typer.testing import CliRunner
@@ -20,8 +21,9 @@ DRIVE = "2011_09_26_drive_1000_sync"
 #: the road figure fires.
 ONLY_DEGRADED = health.HealthRules(min_pairs=10 ** 9, max_drift_m=0.0, max_road_drift_m=0.0)
 #: Rules under which only the drift bound fires: any accumulated uncertainty exceeds it, and it counts because every
-#: step's weakest direction is taken as degenerate (a share is at most 1/3).
-ONLY_DRIFT = health.HealthRules(max_drift_m=1e-9, degenerate_share=1.0, max_road_drift_m=0.0)
+#: step's weakest direction is taken as degenerate (a share is at most 1/3, and any count of pairs is below inf).
+ONLY_DRIFT = health.HealthRules(max_drift_m=1e-9, degenerate_share=1.0, degenerate_pairs=math.inf,
+                                max_road_drift_m=0.0)
 
 
 def _invoke(*args):

@@ -150,3 +150,125 @@ def test_an_8_beam_drive_between_two_walls_is_flagged_along_the_road():
     assert s["drift"]["direction"] == "along the road (camera z)" and s["drift"]["from_frame"] is not None
     reason = [r for r in s["reasons"] if r.startswith("accumulated uncertainty")]
     assert reason and "along the road (camera z) left unconstrained, past 0.5 m from frame" in reason[0]
+
+
+# --- steps held at the constant-velocity prediction (StepReport.held): the hold bound ------------------------------
+
+#: A held direction: one metre along the camera's z (the direction of travel), and one across the road (x).
+ALONG, ACROSS = [0, 0, 1.0, 0, 0, 0], [1.0, 0, 0, 0, 0, 0]
+WEAK_WHY = ("weakly constrained (conditioning 1.0e-03), held at the prediction (along the road (camera z))",)
+
+
+def _held_report(index, z, held, why=WEAK_WHY, covariance=None):
+    """A degraded step at (0, 0, z) that held ``held`` (rows of 6) at the prediction (no other weakness unless ``why``
+    says so); its covariance 1 mm in every direction unless given."""
+    T = torch.eye(4, dtype=torch.float64)
+    T[2, 3] = z
+    C = np.diag([1e-6] * 3 + [1e-10] * 3) if covariance is None else covariance
+    return StepReport(index, T, True, "", 0, 500, 0.0, 0, 0.0, "degraded", why,
+                      covariance=torch.as_tensor(C, dtype=torch.float64),
+                      held=torch.as_tensor(held, dtype=torch.float64).reshape(-1, 6))
+
+
+def _measured(index, z):
+    return _report(index, z, np.diag([1e-6] * 3 + [1e-10] * 3))
+
+
+def _hold_run(steps: int, held=ALONG, measured: int = 1):
+    """Frame 0, ``measured`` measured steps, then ``steps`` held ones, 1 m per frame."""
+    reports = [_report(0, 0.0)] + [_measured(i, float(i)) for i in range(1, measured + 1)]
+    return reports + [_held_report(i, float(i), [held]) for i in range(measured + 1, measured + 1 + steps)]
+
+
+def test_a_hold_after_a_measured_velocity_grows_with_the_vehicles_acceleration():
+    """The k-th held step misses k frames of the acceleration along the held direction: a_z dt^2 k, so 7 steps held
+    along the road add (1 + ... + 7) x 1 m/s^2 x 0.01 s^2 and 2.5 sigma of that (0.70 m) is past 0.5 m, while 5
+    (0.375 m) are not; the held steps are not counted as degraded (5 in a row would otherwise flag the run)."""
+    seven, five = summarise(_hold_run(7)), summarise(_hold_run(5))
+    assert seven["hold"]["bound_m"] == pytest.approx(2.5 * 0.01 * 28, rel=1e-6)
+    assert five["hold"]["bound_m"] == pytest.approx(2.5 * 0.01 * 15, rel=1e-6)
+    assert not five["suspect"] and five["held"] == 5 and five["degraded"] == 5 and five["reasons"] == []
+    assert seven["suspect"] and len(seven["reasons"]) == 1
+    reason = seven["reasons"][0]
+    assert reason.startswith("7 steps held at the constant-velocity prediction (frames 2-8)")
+    assert "along the road (camera z) held" in reason and "the vehicle's acceleration" in reason
+    assert seven["hold"]["held"] == ["along the road (camera z)"] and seven["hold"]["frames"] == list(range(2, 9))
+    assert seven["flagged_steps"][0]["held"] == ["along the road (camera z)"]
+    assert json.loads(json.dumps(seven))["hold"] == seven["hold"]
+
+
+def test_a_car_barely_changes_its_sideways_velocity():
+    """Across the road the acceleration is a fifth of the forward one (0.2 m/s^2): 7 steps held there stay far
+    inside 0.5 m."""
+    s = summarise(_hold_run(7, ACROSS))
+    assert s["hold"]["bound_m"] == pytest.approx(2.5 * 0.2 * 0.01 * 28, rel=1e-6) and not s["suspect"]
+    assert s["hold"]["direction"] == "across the road (camera x)"
+
+
+def test_a_hold_before_any_velocity_misses_whole_frames_of_motion():
+    """Held from the first step, the prediction is no motion: each step misses a frame's motion along the road
+    (0.5 m standard deviation), so even one is past 0.5 m at 2.5 sigma, and the reason says why."""
+    s = summarise(_hold_run(1, measured=0))
+    assert s["hold"]["bound_m"] == pytest.approx(2.5 * 0.5) and s["hold"]["unmeasured"] == 1 and s["suspect"]
+    assert "1 of them before any velocity was measured" in s["reasons"][0]
+    assert s["hold"]["from_frame"] == 1
+
+
+def test_the_frame_interval_scales_the_hold():
+    """At 30 Hz the same 7 held steps last a third of the time: dt^2 is a ninth."""
+    s = summarise(_hold_run(7), interval_s=1 / 30)
+    assert s["hold"]["bound_m"] == pytest.approx(2.5 * 28 / 900, abs=1e-4) and not s["suspect"]
+    assert s["hold"]["interval_s"] == pytest.approx(1 / 30, rel=1e-5)
+
+
+def test_a_measured_step_ends_the_hold_and_a_rejected_one_continues_it():
+    broken = _hold_run(4) + [_measured(6, 6.0)] + [_held_report(i, float(i), [ALONG]) for i in (7, 8, 9)]
+    assert summarise(broken)["hold"]["bound_m"] == pytest.approx(2.5 * 0.01 * (10 + 6), rel=1e-6)
+    rejected = _report(6, 6.0, verdict="rejected")
+    continued = _hold_run(4) + [rejected] + [_held_report(i, float(i), [ALONG]) for i in (7, 8, 9)]
+    assert summarise(continued)["hold"]["bound_m"] == pytest.approx(2.5 * 0.01 * (10 + 6 + 7 + 8), rel=1e-6)
+
+
+def test_a_held_step_with_another_weakness_is_still_degraded():
+    few = ("90 of 900 points paired (fewer than 100 pairs)",) + WEAK_WHY
+    reports = _hold_run(1, measured=20) + [_held_report(22, 22.0, [ALONG], few)]
+    s = summarise(reports)
+    assert s["held"] == 1 and s["degraded"] == 2 and not s["suspect"]
+    assert summarise(reports + [_held_report(23, 23.0, [ALONG], few)])["reasons"] == ["2 consecutive steps degraded"]
+
+
+def test_a_mostly_rotational_hold_is_judged_as_a_degraded_step():
+    """The bound models a vehicle's translation: a step that held a direction that is mostly a rotation (a yaw at
+    10 m: the unit direction's translation part 0.4, under half) counts as degraded, as before holds were modelled."""
+    yaw = [0.4, 0, 0, 0, 0.0917, 0]                    # (v_t, v_w) with |v_t|^2 + (10 |v_w|)^2 = 1
+    reports = _hold_run(2, [yaw], measured=20)
+    s = summarise(reports)
+    assert s["held"] == 0 and s["hold"]["steps"] == 0 and s["reasons"] == ["2 consecutive steps degraded"]
+    assert s["flagged_steps"][0]["held"] == ["rotation about camera y"]
+
+
+def test_a_held_direction_adds_nothing_to_the_drift_bound():
+    """The pairs' covariance of a held step says metres along the direction it held (the pairs do not constrain it);
+    the pose there is the prediction's, so the drift bound conditions it away and the hold bound carries it."""
+    C = np.diag([1e-6, 1e-6, 4.0, 1e-10, 1e-10, 1e-10])       # 2 m along the road: what J^T J's inverse says there
+    loose = [_report(0, 0.0), _measured(1, 1.0)] + [_report(i, float(i), C) for i in (2, 3, 4)]
+    held = [_report(0, 0.0), _measured(1, 1.0)] + [_held_report(i, float(i), [ALONG], covariance=C) for i in (2, 3, 4)]
+    assert drift_bound(loose)["bound_m"] > 10
+    assert drift_bound(held)["bound_m"] < 0.02
+
+
+def test_a_degenerate_direction_needs_few_pairs_as_well_as_a_small_share():
+    """A share of 1.5 % of a dense frame's 5,000 pairs is 75 pairs' worth of normals facing the direction: measured,
+    no prior added and the bound not counted; of 200 pairs, 3 pairs' worth: degenerate."""
+    def information(pairs):
+        H = np.zeros((6, 6))
+        H[0, 0], H[1, 1], H[2, 2] = 0.5 * pairs, 0.485 * pairs, 0.015 * pairs
+        H[3:, 3:] = np.eye(3) * pairs
+        return H
+    C = np.diag([1e-6] * 3 + [1e-10] * 3)
+    dense = [_report(0, 0.0)] + [_report(i, float(i), C, information(5000)) for i in (1, 2)]
+    sparse = [_report(0, 0.0)] + [_report(i, float(i), C, information(200)) for i in (1, 2)]
+    assert step_degeneracy(information(5000))["translation_pairs"] == pytest.approx(75)
+    d, s = summarise(dense)["drift"], summarise(sparse)["drift"]
+    assert d["degenerate_frames"] == [] and not d["counted"] and d["bound_m"] < 0.01
+    assert s["degenerate_frames"] == [1, 2] and s["counted"] and s["bound_m"] == pytest.approx(2.5 * 0.55, rel=1e-2)

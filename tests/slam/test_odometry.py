@@ -8,7 +8,7 @@ import torch
 
 from dcslam.geometry.se3 import pose_error, se3_exp
 from dcslam.slam.association import NearestNeighbourAssociation, ProjectiveAssociation, view_from_frame
-from dcslam.slam.frame import prepare_frame
+from dcslam.slam.frame import prepare_frame, valid_points
 from dcslam.errors import DcslamError
 from dcslam.slam.odometry import DENSE_COARSE_ITERATIONS, GroundTruthOdometry, ICPOdometry, coarse_iterations_for
 from dcslam.slam.scene import StreetScene, kitti_K, street_trajectory
@@ -139,6 +139,16 @@ def test_unconstrained_directions_are_held_at_the_prediction():
     T = held.T_world_cam
     assert abs(float(T[2, 3])) < 1e-3                                     # depth corrected
     assert torch.allclose(T[:2, 3], start[:2, 3], atol=1e-3)              # slide kept at the prediction
+    # the step says what it held: the two slides and the spin about the plane's normal, as unit twists
+    from dcslam.slam.health import held_names
+
+    assert held.held is not None and held.held.shape == (3, 6) and held.held.dtype == torch.float64
+    assert sorted(held_names(held.held)) == ["across the road (camera x)", "rotation about camera z",
+                                             "vertical (camera y)"]
+    scale = float(valid_points(plane)[1].norm(dim=1).mean())
+    D = torch.tensor([1, 1, 1, scale, scale, scale], dtype=torch.float64)
+    assert torch.allclose((held.held * D).norm(dim=1), torch.ones(3, dtype=torch.float64))
+    assert ICPOdometry(min_conditioning=-math.inf, coarse_to_fine=(1.0,)).estimate(plane, target, start).held is None
 
 
 def _box_pairs(n: int, residual: float):
