@@ -82,17 +82,18 @@ def companion_layer(layer: str, record: dict) -> str | None:
 def rejudge(health: dict, rules: HealthRules) -> dict:
     """The stored run verdict re-decided with ``rules.min_pairs`` at or below the one it was judged with: a step
     degraded only for its pair count becomes accepted when it has at least ``min_pairs`` pairs (its other checks
-    passed); a step only weak where it was held (:func:`held_only`) is not counted as degraded; the run-level rules
-    of :func:`dcslam.slam.health.summarise` then apply as written, the road figure, the drift bound (where it
+    passed); a step only weak where it was held (:func:`modelled_frames`) is not counted as degraded; the run-level
+    rules of :func:`dcslam.slam.health.summarise` then apply as written, the road figure, the drift bound (where it
     counted) and the hold bound as stored. ``health`` without its evidence (:func:`own_health`)."""
     verdicts = {}
+    modelled = modelled_frames(health)
     for step in health.get("flagged_steps", []):
         verdict = step["verdict"]
         if verdict == "degraded":
             why = list(step["why"])
             left = [w for w in why if not (PAIRS.match(w) and int(PAIRS.match(w).group(1)) >= rules.min_pairs)]
             verdict = "degraded" if left else "accepted"
-            if left and held_only(step, left):
+            if left and step["frame"] in modelled and all(w.startswith(WEAK) for w in left):
                 verdict = "held"                           # judged by the hold bound, not counted as degraded
         verdicts[step["frame"]] = verdict
     steps = health["accepted"] + health["degraded"] + health["rejected"]
@@ -131,12 +132,25 @@ def rejudge(health: dict, rules: HealthRules) -> dict:
             "suspect": bool(reasons), "reasons": reasons}
 
 
-def held_only(step: dict, why: list[str]) -> bool:
-    """Whether a stored degraded step was only weak where the odometry held it at the prediction, in directions the
-    hold bound models (:func:`dcslam.slam.health.held_only`, read from the step's ``held`` names: none of them a
-    rotation) — ``why``: its reasons left."""
-    held = step.get("held") or []
-    return bool(held) and not any(h.startswith("rotation") for h in held) and all(w.startswith(WEAK) for w in why)
+def modelled_frames(health: dict) -> set[int]:
+    """The frames of a stored run whose holds the hold bound models (:func:`dcslam.slam.health.modelled_holds`, read
+    from the flagged steps: held, none of the held directions a rotation, in a hold that began after a step that
+    held nothing and was not rejected; a step missing from the flagged ones was accepted)."""
+    flagged = {s["frame"]: s for s in health.get("flagged_steps", [])}
+    steps = health["accepted"] + health["degraded"] + health["rejected"]
+    out, k, measured, from_measured = set(), 0, False, False
+    for frame in range(1, steps + 1):
+        step = flagged.get(frame, {"verdict": "accepted"})
+        held = step.get("held") or [] if step["verdict"] != "rejected" else []
+        if not held and step["verdict"] != "rejected":
+            k, measured = 0, True
+            continue
+        k += 1
+        if k == 1:
+            from_measured = measured
+        if held and from_measured and not any(h.startswith("rotation") for h in held):
+            out.add(frame)
+    return out
 
 
 def own_health(health: dict) -> dict:

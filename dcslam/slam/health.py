@@ -86,9 +86,9 @@ class HealthRules:
         carries its turns); the real KITTI drive in tests/data changes its forward speed by a median 0.81 and at
         most 1.77 m/s^2, its sideways speed by 0.04 (at most 0.39) and its vertical speed by 0.07 (at most 0.41)
         m/s^2 (OXTS vf, vl, vu), within 2.5 of these on every axis.
-    hold_first_sigma_m: the same for a hold from the first step, before any step measured a velocity: each held
-        step misses the motion of a whole frame along the held direction, per camera axis (x, y, z): a car moves
-        0.5-1.5 m per frame forward and at most 0.016 m sideways and 0.007 m vertically (the real drive's vl, vu).
+        A hold from the first step, before any step measured a velocity, is not modelled: its prediction (no
+        motion) misses the vehicle's whole motion, and such steps erred in every direction their pairs coupled to
+        the held one (half-size drive 7175 at 64 beams: 0.64-1.28 m a step), so they count as degraded.
     frame_interval_s: the time between frames when the run does not say (KITTI's 10 Hz).
     degenerate_pairs: a translation direction is degenerate only when the pairs' information along it (the smallest
         eigenvalue of the translation block of J^T W J: the number of unit normals' worth of pairs facing it) is
@@ -111,7 +111,6 @@ class HealthRules:
     prior_sigma_m: float = 0.05
     first_prior_sigma_m: float = 0.5
     hold_acceleration_mps2: tuple[float, float, float] = (0.2, 0.2, 1.0)
-    hold_first_sigma_m: tuple[float, float, float] = (0.02, 0.02, 0.5)
     frame_interval_s: float = 0.1
     degenerate_pairs: float = 20.0
 
@@ -173,19 +172,33 @@ def held_names(held) -> list[str]:
     return names
 
 
-def _modelled_hold(report) -> np.ndarray | None:
-    """The directions a step held (:func:`_held`) when the hold bound models them: every one mostly a translation
-    (:func:`_translational`), the step not rejected; else None (a step holding a mostly rotational direction is
-    judged as before holds were modelled: degraded, with the pairs' covariance)."""
-    held = _held(report) if report.verdict != "rejected" else None
-    return held if held is not None and _translational(held) else None
+def modelled_holds(reports) -> dict[int, tuple[np.ndarray, int]]:
+    """{frame: (its held directions (K, 6), k: its place in the hold, 1 for the first step)} of the steps the hold
+    bound models: held (:attr:`StepReport.held`), not rejected, every held direction mostly a translation
+    (:func:`_translational`), in a hold (consecutive held or rejected steps) that began after a step measured a
+    velocity (any step since the first that held nothing and was not rejected). The other held steps are judged as
+    before holds were modelled: degraded, with the pairs' covariance."""
+    out, k, measured, from_measured = {}, 0, False, False
+    for r in reports:
+        if r.index == 0:
+            continue
+        held = _held(r) if r.verdict != "rejected" else None
+        if held is None and r.verdict != "rejected":
+            k, measured = 0, True
+            continue
+        k += 1
+        if k == 1:
+            from_measured = measured
+        if held is not None and from_measured and _translational(held):
+            out[r.index] = (held, k)
+    return out
 
 
-def held_only(report) -> bool:
-    """Whether a degraded step's only weakness is what the odometry held at the prediction: it held directions the
-    hold bound models (:func:`_modelled_hold`) and every reason is its weak conditioning. Its pose there is the
-    prediction's and :func:`hold_bound` judges what that may cost; the run rules do not count it as degraded."""
-    return (report.verdict == "degraded" and _modelled_hold(report) is not None and bool(report.health)
+def held_only(report, holds: dict) -> bool:
+    """Whether a degraded step's only weakness is a hold the bound models (``holds``: :func:`modelled_holds` of its
+    run) and every reason is its weak conditioning. Its pose there is the prediction's and :func:`hold_bound` judges
+    what that may cost; the run rules do not count it as degraded."""
+    return (report.verdict == "degraded" and report.index in holds and bool(report.health)
             and all(str(w).startswith(WEAK) for w in report.health))
 
 
@@ -220,11 +233,12 @@ def step_degeneracy(information) -> dict | None:
     return out
 
 
-def _step_covariance(report, rules: HealthRules) -> np.ndarray | None:
+def _step_covariance(report, rules: HealthRules, holds: dict) -> np.ndarray | None:
     """The step's (6, 6) twist covariance: its own, or (a report without one) its worst-direction standard
     deviations ``sigma_m`` and ``sigma_deg`` in every direction; None when the step was not measured. Along the
-    directions the odometry held (:attr:`StepReport.held`) the pose is the prediction's, not the pairs': the
-    covariance is conditioned on no error there (:func:`hold_bound` carries what holding may cost). Along each
+    directions the odometry held, where the hold bound models them (``holds``: :func:`modelled_holds`), the pose is
+    the prediction's, not the pairs': the covariance is conditioned on no error there (:func:`hold_bound` carries
+    what holding may cost). Along each
     other degenerate translation direction (:attr:`HealthRules.degenerate_share`) the prediction's variance is
     added: the pairs barely moved the pose there from the prediction."""
     if getattr(report, "covariance", None) is not None:
@@ -235,8 +249,8 @@ def _step_covariance(report, rules: HealthRules) -> np.ndarray | None:
         return None
     else:
         C = np.diag([report.sigma_m ** 2] * 3 + [math.radians(report.sigma_deg) ** 2] * 3)
-    held = _modelled_hold(report)
-    if held is not None:
+    if report.index in holds:
+        held = holds[report.index][0]
         CV = C @ held.T
         inner = held @ CV
         if np.linalg.cond(inner) < 1e12:
@@ -254,34 +268,20 @@ def _step_covariance(report, rules: HealthRules) -> np.ndarray | None:
     return C
 
 
-def _hold_covariances(reports, rules: HealthRules, interval_s: float) -> list[tuple]:
-    """(report, (6, 6) twist covariance, whether no velocity was measured before its hold) of every held step
-    (:attr:`StepReport.held`): the prediction's error along
-    the directions it held. The k-th step of a hold (consecutive held or rejected steps) that began after a measured
-    velocity is off by ``hold_acceleration_mps2 * interval_s ** 2 * k`` metres (the velocity held since the hold
-    began misses what the vehicle's acceleration changed); in a hold from the first step, before any step measured
-    a velocity, each step misses the whole motion of a frame (``first_prior_sigma_m``). Rejected steps add nothing
-    here (they are flagged on their own) but continue the hold, as do steps holding a direction the bound does not
-    model (:func:`_modelled_hold`)."""
-    out, k, measured, from_measured = [], 0, False, False
+def _hold_covariances(reports, rules: HealthRules, interval_s: float, holds: dict) -> list[tuple]:
+    """(report, (6, 6) twist covariance) of every held step the bound models (``holds``: :func:`modelled_holds`):
+    the prediction's error along the directions it held. The k-th step of a hold is off by
+    ``hold_acceleration_mps2 * interval_s ** 2 * k`` metres per camera axis: the velocity held since the hold began
+    misses what the vehicle's acceleration changed."""
     acceleration = np.asarray(rules.hold_acceleration_mps2, dtype=np.float64) * interval_s ** 2
-    first = np.asarray(rules.hold_first_sigma_m, dtype=np.float64)
+    out = []
     for r in reports:
-        if r.index == 0:
-            continue
-        held = _modelled_hold(r)
-        if held is None and r.verdict != "rejected" and _held(r) is None:
-            k, measured = 0, True
-            continue
-        k += 1
-        if k == 1:
-            from_measured = measured
-        if held is not None:
-            translation = acceleration * k if from_measured else first
+        if r.index in holds:
+            held, k = holds[r.index]
             C = np.zeros((6, 6))
             for v in held:
-                C += _along(v, translation) ** 2 * np.outer(v, v)
-            out.append((r, C, not from_measured))
+                C += _along(v, acceleration * k) ** 2 * np.outer(v, v)
+            out.append((r, C))
     return out
 
 
@@ -360,10 +360,9 @@ def drift_bound(reports, rules: HealthRules | None = None) -> dict:
 
 def hold_bound(reports, rules: HealthRules | None = None, interval_s: float | None = None) -> dict:
     """How far the steps held at the constant-velocity prediction may have put the run's last position, and in
-    which direction: ``rules.drift_sigmas`` times the correlated sum (as :func:`drift_bound`) of each held step's
-    prediction error along the directions it held (:func:`_hold_covariances`: the vehicle's acceleration over the
-    hold, ``interval_s`` seconds a frame (None: ``rules.frame_interval_s``), or a frame's whole motion before any
-    velocity was measured).
+    which direction: ``rules.drift_sigmas`` times the correlated sum (as :func:`drift_bound`) of the prediction
+    error along the directions each modelled held step held (:func:`modelled_holds`, :func:`_hold_covariances`: the
+    vehicle's acceleration over the hold, ``interval_s`` seconds a frame; None: ``rules.frame_interval_s``).
 
     Returns ``{"bound_m": b, "sigmas": ..., "direction_world": [3] or None, "direction": a name or None,
     "from_frame": None, "largest_frame": ..., "steps": held steps, "frames": their frames, "held": the held
@@ -400,13 +399,14 @@ def _accumulate(reports, measured: list[tuple], sigmas: float) -> tuple[dict, tu
 def _drift(reports, rules: HealthRules) -> tuple[dict, tuple | None]:
     """:func:`drift_bound`, and what :func:`_first_frame_over` needs to follow the bound frame by frame (None when
     no step was measured)."""
+    holds = modelled_holds(reports)
     steps = [r for r in reports if r.index > 0 and r.verdict != "rejected"]
-    measured = [(r, C) for r, C in ((r, _step_covariance(r, rules)) for r in steps) if C is not None]
+    measured = [(r, C) for r, C in ((r, _step_covariance(r, rules, holds)) for r in steps) if C is not None]
     result, curve = _accumulate(reports, measured, rules.drift_sigmas)
     result.update(weakest_frame=None, weakest_share=None, weakest_pairs=None, weakest_direction=None,
                   degenerate_frames=[])
     shares = [(r.index, d) for r, d in ((r, step_degeneracy(getattr(r, "information", None))) for r, _ in measured
-                                        if _modelled_hold(r) is None) if d is not None]
+                                        if r.index not in holds) if d is not None]
     if shares:
         frame, d = min(shares, key=lambda fd: fd[1]["translation"])
         result.update(weakest_frame=int(frame), weakest_share=round(d["translation"], 5),
@@ -420,14 +420,13 @@ def _drift(reports, rules: HealthRules) -> tuple[dict, tuple | None]:
 def _hold(reports, rules: HealthRules, interval_s: float | None) -> tuple[dict, tuple | None]:
     """:func:`hold_bound`, and its curve for :func:`_first_frame_over`."""
     interval = rules.frame_interval_s if interval_s is None else float(interval_s)
-    held = _hold_covariances(reports, rules, interval)
-    result, curve = _accumulate(reports, [(r, C) for r, C, _ in held], rules.drift_sigmas)
+    held = _hold_covariances(reports, rules, interval, modelled_holds(reports))
+    result, curve = _accumulate(reports, held, rules.drift_sigmas)
     names = []
-    for r, _, _ in held:
+    for r, _ in held:
         names += [n for n in held_names(r.held) if n not in names]
-    result.update(steps=len(held), frames=[int(r.index) for r, _, _ in held], held=names,
-                  unmeasured=sum(u for _, _, u in held), acceleration_mps2=list(rules.hold_acceleration_mps2),
-                  first_sigma_m=list(rules.hold_first_sigma_m), interval_s=round(interval, 6))
+    result.update(steps=len(held), frames=[int(r.index) for r, _ in held], held=names,
+                  acceleration_mps2=list(rules.hold_acceleration_mps2), interval_s=round(interval, 6))
     return result, curve
 
 
@@ -475,7 +474,7 @@ def summarise(reports, rules: HealthRules = HealthRules(), interval_s: float | N
     frame, which has nothing to align to, is not counted) and whether the trajectory is suspect, with why.
     ``interval_s``: the time between frames (None: ``rules.frame_interval_s``), for :func:`hold_bound`.
 
-    A degraded step whose only weakness is a direction the odometry held at the prediction (:func:`held_only`) is
+    A degraded step whose only weakness is a hold the bound models (:func:`held_only`: after a measured velocity) is
     not counted by the degraded-step rules: the hold bound judges what holding may cost.
 
     Returns ``{"accepted": n, "degraded": n, "rejected": n, "held": n (of the degraded: held only), "suspect":
@@ -486,7 +485,8 @@ def summarise(reports, rules: HealthRules = HealthRules(), interval_s: float | N
     """
     steps = [r for r in reports if r.index > 0]
     counts = {v: sum(r.verdict == v for r in steps) for v in VERDICTS}
-    held = {r.index for r in steps if held_only(r)}
+    holds = modelled_holds(reports)
+    held = {r.index for r in steps if held_only(r, holds)}
     weak = [r for r in steps if r.verdict == "degraded" and r.index not in held]
     reasons = []
     if counts["rejected"] > rules.max_rejected:
@@ -533,12 +533,10 @@ def _hold_verdict(reports, rules: HealthRules, interval_s: float | None, reasons
     if rules.max_drift_m > 0 and hold["bound_m"] > rules.max_drift_m:
         hold["from_frame"] = _first_frame_over(curve, rules.drift_sigmas, rules.max_drift_m, reports)
         frames = hold["frames"]
-        why = ("the vehicle's acceleration over the hold" if not hold["unmeasured"] else
-               f"{hold['unmeasured']} of them before any velocity was measured")
         reasons.append(f"{hold['steps']} steps held at the constant-velocity prediction (frames {frames[0]}-"
                        f"{frames[-1]}): they may have put it {hold['bound_m']:.2f} m off ({rules.drift_sigmas:g} "
-                       f"sigma; {why}), more than {rules.max_drift_m:g} m: {hold['direction']} held, past "
-                       f"{rules.max_drift_m:g} m from frame {hold['from_frame']}")
+                       f"sigma of the vehicle's acceleration over the hold), more than {rules.max_drift_m:g} m: "
+                       f"{hold['direction']} held, past {rules.max_drift_m:g} m from frame {hold['from_frame']}")
     hold["bound_m"] = round(hold["bound_m"], 4)
     return hold
 

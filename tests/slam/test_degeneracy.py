@@ -205,13 +205,15 @@ def test_a_car_barely_changes_its_sideways_velocity():
     assert s["hold"]["direction"] == "across the road (camera x)"
 
 
-def test_a_hold_before_any_velocity_misses_whole_frames_of_motion():
-    """Held from the first step, the prediction is no motion: each step misses a frame's motion along the road
-    (0.5 m standard deviation), so even one is past 0.5 m at 2.5 sigma, and the reason says why."""
-    s = summarise(_hold_run(1, measured=0))
-    assert s["hold"]["bound_m"] == pytest.approx(2.5 * 0.5) and s["hold"]["unmeasured"] == 1 and s["suspect"]
-    assert "1 of them before any velocity was measured" in s["reasons"][0]
-    assert s["hold"]["from_frame"] == 1
+def test_a_hold_before_any_velocity_counts_as_degraded():
+    """Held from the first step, the prediction is no motion and misses the vehicle's whole motion: those steps are
+    not modelled by the hold bound but counted as degraded, as before (two of them in a row flag the run); once a
+    step has measured a velocity, a later hold is the bound's."""
+    s = summarise(_hold_run(2, measured=0))
+    assert s["hold"]["steps"] == 0 and s["held"] == 0 and s["reasons"] == ["2 of 2 steps degraded (more than 10%)",
+                                                                           "2 consecutive steps degraded"]
+    late = _hold_run(2, measured=0) + [_measured(3, 3.0)] + [_held_report(i, float(i), [ALONG]) for i in (4, 5)]
+    assert summarise(late)["hold"]["frames"] == [4, 5] and summarise(late)["held"] == 2
 
 
 def test_the_frame_interval_scales_the_hold():
