@@ -9,8 +9,8 @@ process at the defaults, and each judged, with its companion where it has one, u
 - ``this rule``: both, the defaults of :class:`dcslam.slam.health.HealthRules`.
 
 Prints, per rule, the runs that end more than ``--truth`` metres off and how many are flagged, and the others and
-how many are flagged, over all the drives and over each half (``--halves``), then the per-input table and every
-false flag and miss of this rule. The SLAM runs take what ``dcslam slam`` takes (about 10 minutes for 88 runs of 30
+how many are flagged, over all the drives and over each half (``--halves``), then the per-input table of the
+previous rule and this one side by side, and every false flag and miss of this rule. The SLAM runs take what ``dcslam slam`` takes (about 10 minutes for 88 runs of 30
 full-size frames on one core); the trajectories are those of ``dcslam slam --evidence auto``, whose stored verdicts
 ``slam_evidence.py`` reads.
 
@@ -29,7 +29,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from slam_evidence import drive_numbers, layer_input, print_table, table  # noqa: E402
+from slam_evidence import drive_numbers, layer_input, table  # noqa: E402
 
 from dcslam.slam.drive import DriveRun, companion_verdict  # noqa: E402
 from dcslam.slam.evidence import merge  # noqa: E402
@@ -110,6 +110,15 @@ def counts(rows: list[dict], truth: float) -> str:
             f"of {len(good)} flagged")
 
 
+def print_side_by_side(previous: list[tuple], now: list[tuple], truth: float) -> None:
+    """Per input and beam count (``slam_evidence.table``'s rows): runs, ending beyond ``truth``, flagged of those and
+    of the others under the previous rule and this one."""
+    print(f"\n| input | beams | runs | > {truth:g} m | flagged of those: previous -> this rule | flagged of the others: "
+          f"previous -> this rule |\n| --- | --- | --- | --- | --- | --- |")
+    for (name, beams, runs, bad, hit, false), (*_, hit_now, false_now) in zip(previous, now):
+        print(f"| {name} | {beams} | {runs} | {bad} | {hit} -> {hit_now} | {false} -> {false_now} of {runs - bad} |")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("workspace", type=Path)
@@ -132,7 +141,7 @@ def main(argv=None) -> int:
             mine = [r for r in rows if r["drive"].removesuffix("_sync")[-4:] in keep]
             parts.append(f"{half}: {counts(mine, args.truth)}")
         print(f"{name:10s} | " + " | ".join(parts))
-    print_table("this rule", table(results["this rule"], args.truth), args.truth)
+    print_side_by_side(table(results["previous"], args.truth), table(results["this rule"], args.truth), args.truth)
     for r in results["this rule"]:
         if (r["final_m"] > args.truth) != r["flagged"]:
             what = "MISS " if r["final_m"] > args.truth else "FALSE"
