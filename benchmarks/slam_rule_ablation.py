@@ -10,8 +10,8 @@ process at the defaults, and each judged, with its companion where it has one, u
 
 Prints, per rule, the runs that end more than ``--truth`` metres off and how many are flagged, and the others and
 how many are flagged, over all the drives and over each half (``--halves``), then the per-input table of the
-previous rule and this one side by side, and every false flag and miss of this rule. The SLAM runs take what ``dcslam slam`` takes (about 10 minutes for 88 runs of 30
-full-size frames on one core); the trajectories are those of ``dcslam slam --evidence auto``, whose stored verdicts
+previous rule and this one side by side, and every false flag and miss of this rule. The SLAM runs take what
+``dcslam slam`` takes (about 10 minutes for 88 runs of 30 full-size frames on one core); the trajectories are those of ``dcslam slam --evidence auto``, whose stored verdicts
 ``slam_evidence.py`` reads.
 
     OMP_NUM_THREADS=1 python benchmarks/slam_rule_ablation.py /tmp/calib-ws --halves 1000-1003,1004-1007
@@ -113,8 +113,8 @@ def counts(rows: list[dict], truth: float) -> str:
 def print_side_by_side(previous: list[tuple], now: list[tuple], truth: float) -> None:
     """Per input and beam count (``slam_evidence.table``'s rows): runs, ending beyond ``truth``, flagged of those and
     of the others under the previous rule and this one."""
-    print(f"\n| input | beams | runs | > {truth:g} m | flagged of those: previous -> this rule | flagged of the others: "
-          f"previous -> this rule |\n| --- | --- | --- | --- | --- | --- |")
+    print(f"\n| input | beams | runs | > {truth:g} m | flagged of those: previous -> this rule "
+          f"| flagged of the others: previous -> this rule |\n| --- | --- | --- | --- | --- | --- |")
     for (name, beams, runs, bad, hit, false), (*_, hit_now, false_now) in zip(previous, now):
         print(f"| {name} | {beams} | {runs} | {bad} | {hit} -> {hit_now} | {false} -> {false_now} of {runs - bad} |")
 
