@@ -11,8 +11,8 @@ process at the defaults, and each judged, with its companion where it has one, u
 Prints, per rule, the runs that end more than ``--truth`` metres off and how many are flagged, and the others and
 how many are flagged, over all the drives and over each half (``--halves``), then the per-input table of the
 previous rule and this one side by side, and every false flag and miss of this rule. The SLAM runs take what
-``dcslam slam`` takes (about 10 minutes for 88 runs of 30 full-size frames on one core); the trajectories are those of ``dcslam slam --evidence auto``, whose stored verdicts
-``slam_evidence.py`` reads.
+``dcslam slam`` takes (about 10 minutes for 88 runs of 30 full-size frames on one core); the trajectories are
+those of ``dcslam slam --evidence auto``, whose stored verdicts ``slam_evidence.py`` reads.
 
     OMP_NUM_THREADS=1 python benchmarks/slam_rule_ablation.py /tmp/calib-ws --halves 1000-1003,1004-1007
 """
