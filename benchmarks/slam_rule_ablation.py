@@ -2,10 +2,11 @@
 inputs: sparse at each beam count, dense, exact and every prediction layer, on the test drives) run again in this
 process at the defaults, and each judged, with its companion where it has one, under four rules:
 
-- ``previous``: held steps counted as degraded and a direction degenerate by its share alone (the rule before the
-  hold bound: the runs' ``held`` directions dropped and ``degenerate_pairs`` infinite);
-- ``holds only``: the hold bound (:func:`dcslam.slam.health.hold_bound`), degeneracy by share alone;
-- ``pairs only``: degeneracy by share and pairs, held steps counted as degraded;
+- ``previous``: held steps counted as degraded, rejected steps as rejected, and a direction degenerate by its share
+  alone (the rule before the hold bound: ``hold_bound`` off, ``degenerate_pairs`` infinite);
+- ``holds only``: the hold bound (:func:`dcslam.slam.health.hold_bound`) on held and rejected steps, degeneracy by
+  share alone;
+- ``pairs only``: degeneracy by share and pairs, held and rejected steps counted;
 - ``this rule``: both, the defaults of :class:`dcslam.slam.health.HealthRules`.
 
 Prints, per rule, the runs that end more than ``--truth`` metres off and how many are flagged, and the others and
@@ -35,11 +36,11 @@ from dcslam.slam.drive import DriveRun, companion_verdict  # noqa: E402
 from dcslam.slam.evidence import merge  # noqa: E402
 from dcslam.slam.health import HealthRules, summarise  # noqa: E402
 
-#: name -> (health rules, whether the runs keep the directions their steps held)
-RULES = {"previous": (HealthRules(degenerate_pairs=math.inf), False),
-         "holds only": (HealthRules(degenerate_pairs=math.inf), True),
-         "pairs only": (HealthRules(), False),
-         "this rule": (HealthRules(), True)}
+#: name -> health rules
+RULES = {"previous": HealthRules(degenerate_pairs=math.inf, hold_bound=False),
+         "holds only": HealthRules(degenerate_pairs=math.inf),
+         "pairs only": HealthRules(hold_bound=False),
+         "this rule": HealthRules()}
 
 
 def inputs(ws: Path) -> list[str]:
@@ -80,21 +81,16 @@ def run_all(ws: Path, frames: int) -> dict[tuple[str, str], DriveRun]:
     return runs
 
 
-def _as_judged(run: DriveRun, rules: HealthRules, keep_held: bool) -> DriveRun:
-    reports = run.reports if keep_held else [replace(r, held=None) for r in run.reports]
-    return replace(run, reports=reports, health_rules=rules)
-
-
-def judge(runs: dict, rules: HealthRules, keep_held: bool) -> list[dict]:
+def judge(runs: dict, rules: HealthRules) -> list[dict]:
     """One row per run (``slam_evidence.table``'s keys): its health under ``rules``, merged with its companion's
-    verdict where it has one."""
+    verdict (the companion judged under ``rules`` too) where it has one."""
     rows = []
     for (layer, drive), run in sorted(runs.items()):
-        main = _as_judged(run, rules, keep_held)
+        main = replace(run, health_rules=rules)
         health = summarise(main.reports, rules, main.frame_interval_s())
         kind = companion_kind(layer)
         if kind is not None:
-            companion = _as_judged(runs[(kind, drive)], rules, keep_held)
+            companion = replace(runs[(kind, drive)], health_rules=rules)
             health = merge(health, companion_verdict(main, companion, kind))
         final = float(np.linalg.norm(run.T_world_cam[-1, :3, 3] - run.T_gt[-1, :3, 3]))
         source, beams = layer_input(layer)
@@ -131,7 +127,7 @@ def main(argv=None) -> int:
         print(f"{args.workspace}: no drives/splits.json (run slam_calibration.py first)", file=sys.stderr)
         return 1
     runs = run_all(args.workspace, args.frames)
-    results = {name: judge(runs, rules, keep) for name, (rules, keep) in RULES.items()}
+    results = {name: judge(runs, rules) for name, rules in RULES.items()}
     halves = args.halves.split(",") if args.halves else []
     print(f"{args.workspace}: {len(runs)} runs, {args.frames} frames; bad = ending more than {args.truth:g} m off")
     for name, rows in results.items():
