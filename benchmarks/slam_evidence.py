@@ -84,7 +84,8 @@ def rejudge(health: dict, rules: HealthRules) -> dict:
     degraded only for its pair count becomes accepted when it has at least ``min_pairs`` pairs (its other checks
     passed); a step only weak where it was held, or rejected, after a measured velocity (:func:`modelled_frames`) is
     not counted as degraded or rejected; the run-level rules of :func:`dcslam.slam.health.summarise` then apply as
-    written, the road figure, the drift bound (where it counted) and the hold bound as stored. ``health`` without its evidence (:func:`own_health`)."""
+    written, the road figure, the drift bound (where it counted) and the hold bound as stored. ``health`` without
+    its evidence (:func:`own_health`)."""
     verdicts = {}
     modelled = modelled_frames(health)
     for step in health.get("flagged_steps", []):
