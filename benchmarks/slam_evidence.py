@@ -82,10 +82,9 @@ def companion_layer(layer: str, record: dict) -> str | None:
 def rejudge(health: dict, rules: HealthRules) -> dict:
     """The stored run verdict re-decided with ``rules.min_pairs`` at or below the one it was judged with: a step
     degraded only for its pair count becomes accepted when it has at least ``min_pairs`` pairs (its other checks
-    passed); a step only weak where it was held, or rejected, after a measured velocity (:func:`modelled_frames`) is
-    not counted as degraded or rejected; the run-level rules of :func:`dcslam.slam.health.summarise` then apply as
-    written, the road figure, the drift bound (where it counted) and the hold bound as stored. ``health`` without
-    its evidence (:func:`own_health`)."""
+    passed); a step only weak where it was held (:func:`modelled_frames`) is not counted as degraded; the run-level
+    rules of :func:`dcslam.slam.health.summarise` then apply as written, the road figure, the drift bound (where it
+    counted) and the hold bound as stored. ``health`` without its evidence (:func:`own_health`)."""
     verdicts = {}
     modelled = modelled_frames(health)
     for step in health.get("flagged_steps", []):
@@ -98,8 +97,7 @@ def rejudge(health: dict, rules: HealthRules) -> dict:
                 verdict = "held"                           # judged by the hold bound, not counted as degraded
         verdicts[step["frame"]] = verdict
     steps = health["accepted"] + health["degraded"] + health["rejected"]
-    rejected = sum(v == "rejected" and f not in modelled for f, v in verdicts.items())
-    rejected_held = sum(v == "rejected" and f in modelled for f, v in verdicts.items())
+    rejected = sum(v == "rejected" for v in verdicts.values())
     degraded = sum(v == "degraded" for v in verdicts.values())
     held = sum(v == "held" for v in verdicts.values())
     reasons = []
@@ -129,29 +127,28 @@ def rejudge(health: dict, rules: HealthRules) -> dict:
         if held_bound > rules.max_drift_m:
             reasons.append(f"{hold['steps']} steps held at the constant-velocity prediction: {held_bound:.2f} m "
                            f"({rules.drift_sigmas:g} sigma)")
-    return {**health, "accepted": steps - rejected - rejected_held - degraded - held, "degraded": degraded + held,
-            "held": held, "rejected": rejected + rejected_held,
+    return {**health, "accepted": steps - rejected - degraded - held, "degraded": degraded + held, "held": held,
+            "rejected": rejected,
             "suspect": bool(reasons), "reasons": reasons}
 
 
 def modelled_frames(health: dict) -> set[int]:
     """The frames of a stored run whose holds the hold bound models (:func:`dcslam.slam.health.modelled_holds`, read
-    from the flagged steps: held with none of the held directions a rotation, or rejected, in a hold that began after
-    a step that held nothing and was not rejected; a step missing from the flagged ones was accepted)."""
+    from the flagged steps: held, none of the held directions a rotation, in a hold that began after a step that
+    held nothing and was not rejected; a step missing from the flagged ones was accepted)."""
     flagged = {s["frame"]: s for s in health.get("flagged_steps", [])}
     steps = health["accepted"] + health["degraded"] + health["rejected"]
     out, k, measured, from_measured = set(), 0, False, False
     for frame in range(1, steps + 1):
         step = flagged.get(frame, {"verdict": "accepted"})
-        rejected = step["verdict"] == "rejected"
-        held = [] if rejected else step.get("held") or []
-        if not held and not rejected:
+        held = step.get("held") or [] if step["verdict"] != "rejected" else []
+        if not held and step["verdict"] != "rejected":
             k, measured = 0, True
             continue
         k += 1
         if k == 1:
             from_measured = measured
-        if from_measured and (rejected or not any(h.startswith("rotation") for h in held)):
+        if held and from_measured and not any(h.startswith("rotation") for h in held):
             out.add(frame)
     return out
 

@@ -2,11 +2,10 @@
 inputs: sparse at each beam count, dense, exact and every prediction layer, on the test drives) run again in this
 process at the defaults, and each judged, with its companion where it has one, under four rules:
 
-- ``previous``: held steps counted as degraded, rejected steps as rejected, and a direction degenerate by its share
-  alone (the rule before the hold bound: ``hold_bound`` off, ``degenerate_pairs`` infinite);
-- ``holds only``: the hold bound (:func:`dcslam.slam.health.hold_bound`) on held and rejected steps, degeneracy by
-  share alone;
-- ``pairs only``: degeneracy by share and pairs, held and rejected steps counted;
+- ``previous``: held steps counted as degraded and a direction degenerate by its share alone (the rule before the
+  hold bound: ``hold_bound`` off, ``degenerate_pairs`` infinite);
+- ``holds only``: the hold bound (:func:`dcslam.slam.health.hold_bound`), degeneracy by share alone;
+- ``pairs only``: degeneracy by share and pairs, held steps counted as degraded;
 - ``this rule``: both, the defaults of :class:`dcslam.slam.health.HealthRules`.
 
 Prints, per rule, the runs that end more than ``--truth`` metres off and how many are flagged, and the others and

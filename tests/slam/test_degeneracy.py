@@ -224,31 +224,11 @@ def test_the_frame_interval_scales_the_hold():
 
 
 def test_a_measured_step_ends_the_hold_and_a_rejected_one_continues_it():
-    """A measured step starts the count again; a rejected step (the prediction in every direction) is the hold's
-    fifth step, and its translation along the road adds 5 x 0.01 m as a held step's would."""
     broken = _hold_run(4) + [_measured(6, 6.0)] + [_held_report(i, float(i), [ALONG]) for i in (7, 8, 9)]
     assert summarise(broken)["hold"]["bound_m"] == pytest.approx(2.5 * 0.01 * (10 + 6), rel=1e-6)
     rejected = _report(6, 6.0, verdict="rejected")
     continued = _hold_run(4) + [rejected] + [_held_report(i, float(i), [ALONG]) for i in (7, 8, 9)]
-    s = summarise(continued)
-    assert s["hold"]["bound_m"] == pytest.approx(2.5 * 0.01 * (10 + 5 + 6 + 7 + 8), rel=1e-6)
-    assert s["hold"]["rejected"] == 1 and s["hold"]["steps"] == 8 and "every direction (rejected)" in s["hold"]["held"]
-    assert s["reasons"][0].startswith("7 steps held and 1 rejected at the constant-velocity prediction")
-
-
-def test_a_rejected_step_before_any_velocity_counts_after_one_the_hold_bound_judges_it():
-    """A step rejected after a measured velocity kept the prediction, which misses only what the vehicle's
-    acceleration changed: two of them cost 2.5 x 0.01 x (1 + 2) m along the road, and the run is not suspect. The
-    same two from the first step on (the prediction no motion) make it suspect, as any rejected step did before."""
-    late = _hold_run(0, measured=20) + [_report(i, float(i), verdict="rejected") for i in (21, 22)]
-    s = summarise(late)
-    assert not s["suspect"] and s["rejected"] == 2 and s["hold"]["rejected"] == 2
-    assert s["hold"]["bound_m"] == pytest.approx(2.5 * 0.01 * 3, rel=1e-6)
-    early = [_report(0, 0.0)] + [_report(i, float(i), verdict="rejected") for i in (1, 2)] + \
-        [_measured(i, float(i)) for i in range(3, 23)]
-    s = summarise(early)
-    assert s["suspect"] and s["reasons"][0].startswith("2 of 22 steps rejected before a velocity was measured")
-    assert s["hold"]["steps"] == 0
+    assert summarise(continued)["hold"]["bound_m"] == pytest.approx(2.5 * 0.01 * (10 + 6 + 7 + 8), rel=1e-6)
 
 
 def test_a_held_step_with_another_weakness_is_still_degraded():
@@ -294,3 +274,10 @@ def test_a_degenerate_direction_needs_few_pairs_as_well_as_a_small_share():
     d, s = summarise(dense)["drift"], summarise(sparse)["drift"]
     assert d["degenerate_frames"] == [] and not d["counted"] and d["bound_m"] < 0.01
     assert s["degenerate_frames"] == [1, 2] and s["counted"] and s["bound_m"] == pytest.approx(2.5 * 0.55, rel=1e-2)
+
+
+def test_without_the_hold_bound_held_steps_count_as_degraded():
+    """``hold_bound`` off is the rule before it: the 5 held steps the bound clears are 5 degraded ones in a row."""
+    s = summarise(_hold_run(5), HealthRules(hold_bound=False))
+    assert s["suspect"] and "5 consecutive steps degraded" in s["reasons"] and s["held"] == 0
+    assert s["hold"]["steps"] == 0 and s["hold"]["bound_m"] == 0.0
