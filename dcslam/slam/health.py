@@ -517,6 +517,16 @@ def summarise(reports, rules: HealthRules = HealthRules(), interval_s: float | N
             "drift_sigma_m": round(drift_sigma_m(reports), 4), "drift": drift, "hold": hold, "road": road}
 
 
+def _past(bound: dict, curve, rules: HealthRules, reports) -> bool:
+    """Whether a bound (:func:`_accumulate`'s) exceeds ``max_drift_m`` (above 0); if so its ``from_frame`` is filled
+    in (:func:`_first_frame_over`). Its ``bound_m`` is rounded for the summary either way."""
+    past = rules.max_drift_m > 0 and bound["bound_m"] > rules.max_drift_m
+    if past:
+        bound["from_frame"] = _first_frame_over(curve, rules.drift_sigmas, rules.max_drift_m, reports)
+    bound["bound_m"] = round(bound["bound_m"], 4)
+    return past
+
+
 def _drift_verdict(reports, rules: HealthRules, reasons: list[str]) -> dict:
     """The drift bound of :func:`summarise`; counted (and, past ``max_drift_m``, a reason appended to ``reasons``)
     only when some step that the odometry did not hold left a translation direction degenerate, or no step's
@@ -524,28 +534,23 @@ def _drift_verdict(reports, rules: HealthRules, reasons: list[str]) -> dict:
     drift, curve = _drift(reports, rules)
     informed = any(getattr(r, "information", None) is not None for r in reports if r.index > 0)
     drift["counted"] = bool(rules.max_drift_m > 0 and (drift["degenerate_frames"] or not informed))
-    if rules.max_drift_m > 0 and drift["bound_m"] > rules.max_drift_m:
-        drift["from_frame"] = _first_frame_over(curve, rules.drift_sigmas, rules.max_drift_m, reports)
-        if drift["counted"]:
-            reasons.append(f"accumulated uncertainty {drift['bound_m']:.2f} m ({rules.drift_sigmas:g} sigma, steps "
-                           f"correlated) exceeds {rules.max_drift_m:g} m: {drift['direction']} left unconstrained, "
-                           f"past {rules.max_drift_m:g} m from frame {drift['from_frame']} (most from step "
-                           f"{drift['largest_frame']})")
-    drift["bound_m"] = round(drift["bound_m"], 4)
+    if _past(drift, curve, rules, reports) and drift["counted"]:
+        reasons.append(f"accumulated uncertainty {drift['bound_m']:.2f} m ({rules.drift_sigmas:g} sigma, steps "
+                       f"correlated) exceeds {rules.max_drift_m:g} m: {drift['direction']} left unconstrained, "
+                       f"past {rules.max_drift_m:g} m from frame {drift['from_frame']} (most from step "
+                       f"{drift['largest_frame']})")
     return drift
 
 
 def _hold_verdict(reports, rules: HealthRules, interval_s: float | None, reasons: list[str]) -> dict:
     """The hold bound of :func:`summarise`: past ``max_drift_m`` (above 0), a reason appended to ``reasons``."""
     hold, curve = _hold(reports, rules, interval_s)
-    if rules.max_drift_m > 0 and hold["bound_m"] > rules.max_drift_m:
-        hold["from_frame"] = _first_frame_over(curve, rules.drift_sigmas, rules.max_drift_m, reports)
+    if _past(hold, curve, rules, reports):
         frames = hold["frames"]
         reasons.append(f"{hold['steps']} steps held at the constant-velocity prediction (frames {frames[0]}-"
                        f"{frames[-1]}): they may have put it {hold['bound_m']:.2f} m off ({rules.drift_sigmas:g} "
                        f"sigma of the vehicle's acceleration over the hold), more than {rules.max_drift_m:g} m: "
                        f"{hold['direction']} held, past {rules.max_drift_m:g} m from frame {hold['from_frame']}")
-    hold["bound_m"] = round(hold["bound_m"], 4)
     return hold
 
 
