@@ -32,7 +32,7 @@ NATIVE_DIR_ENV = "DCSLAM_NATIVE_DIR"
 SOURCE = Path(__file__).with_name("kernels.c")
 #: -ffp-contract=off: no product is fused into a sum unless the source says so (torch's own kernels are the rule)
 FLAGS = ("-O3", "-std=c11", "-ffp-contract=off", "-fno-math-errno", "-fPIC", "-shared")
-VERSION = 1
+VERSION = 2
 
 _lock = threading.Lock()
 _loaded: dict[str, object] = {}
@@ -155,7 +155,7 @@ def _signatures() -> dict[str, tuple[list, object]]:
             "merge": ([i64, i64, p, i64] + [p] * 17, None),
             "rows_times": ([p, p, i64, p, i32], None),
             "pairs": ([p, p, p, i64, p, p, p, p, real, real, real, real, i64, i64, p, p, real, real, i32, i32,
-                       p, p, p, p, p], i64),
+                       p, p, p, p, p, i32, p], i64),
         }.items()})
     return out
 
@@ -392,11 +392,14 @@ def rows_times(points, M):
 
 
 def point_to_plane_pairs(source, normals, usable, T, prepared, max_distance: float, cos_max_angle: float,
-                         min_rows: int):
+                         min_rows: int, jacobian: bool = False):
     """The native :meth:`dcslam.slam.odometry.PointToPlane.residuals` with projective association ``prepared``
     (``ProjectiveAssociation._Prepared``) -> (residuals (M,), source index (M,), target points (M, 3), target
-    normals (M, 3)), or None where it does not apply (no library or product mode; a gradient; fewer than
-    ``min_rows`` sources or pairs, which the torch code multiplies by another kernel than torch.mm: it runs)."""
+    normals (M, 3), Jacobian (M, 6) float64 or None), or None where it does not apply (no library or product mode;
+    a gradient; fewer than ``min_rows`` sources or pairs, which the torch code multiplies by another kernel than
+    torch.mm: it runs). ``jacobian``: also :meth:`~dcslam.slam.odometry.PointToPlane.linearize`'s Jacobian of the
+    pairs, ``cat(n @ R, cross(source, n @ R)).double()``, where M is at least ``min_rows`` (None otherwise: below
+    that the torch code's product takes another kernel)."""
     import torch
 
     table, index = prepared.table, prepared.index
@@ -416,6 +419,7 @@ def point_to_plane_pairs(source, normals, usable, T, prepared, max_distance: flo
     r, src = torch.empty(F, dtype=dtype), torch.empty(F, dtype=torch.int64)
     q, n = torch.empty(F, 3, dtype=dtype), torch.empty(F, 3, dtype=dtype)
     paired = ctypes.c_int64(0)
+    J = torch.empty(F, 6, dtype=torch.float64) if jacobian else None
     real = _in_dtype(dtype)
     kernel = _kernel("pairs", dtype)
     count = kernel(source.data_ptr(), normals.data_ptr(), None if usable is None else usable.data_ptr(), F,
@@ -423,7 +427,7 @@ def point_to_plane_pairs(source, normals, usable, T, prepared, max_distance: flo
                    real(prepared.cx), real(prepared.cy), prepared.height, prepared.width, index.data_ptr(),
                    table.data_ptr(), real(max_distance ** 2), real(cos_max_angle), mode,
                    int(dtype == torch.float64 or prepared.few_pixels), r.data_ptr(), src.data_ptr(), q.data_ptr(),
-                   n.data_ptr(), ctypes.byref(paired))
+                   n.data_ptr(), ctypes.byref(paired), int(cross_fused(dtype)), None if J is None else J.data_ptr())
     if paired.value < min_rows:
         return None              # the torch code rotates so few normals with another kernel: its bits, not ours
-    return r[:count], src[:count], q[:count], n[:count]
+    return r[:count], src[:count], q[:count], n[:count], None if J is None or count < min_rows else J[:count]

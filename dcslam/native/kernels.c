@@ -446,12 +446,15 @@ void dcslam_rows_times_f64(const double *points, const double *M, int64_t N, dou
  * entries; index: (height * width,) the rendered map's point per pixel (-1: none); table: (Q, 6) point, normal;
  * max_d2, cos_max: the gates; mode: rows_times' summation (above); exact_f32: v * width + u in the float type (else
  * in double). Out: r (M,), src (M,) ascending, q, n (M, 3); returns M, and the count before the gates in *paired
- * (the torch code rotates the paired normals with a product whose kernel depends on that count). */
+ * (the torch code rotates the paired normals with a product whose kernel depends on that count). J (M, 6) double or
+ * NULL: PointToPlane.linearize's Jacobian rows, cat(n @ R, cross(source, n @ R)) in T then widened, the product by
+ * rows_times' summation and the cross product as torch.cross (cross_fma: fused, as cross_fused finds). */
 #define PAIRS(NAME, T, FMA, ATTR)                                                                                 \
     ATTR static int64_t NAME(const T *source, const T *normals, const uint8_t *usable, int64_t F, const T *R,    \
                              const T *t, const T *RrT, const T *tr, T fx, T fy, T cx, T cy, int64_t height,     \
                              int64_t width, const int64_t *index, const T *table, T max_d2, T cos_max, int mode,  \
-                             int exact_f32, T *r, int64_t *src, T *q, T *n, int64_t *paired) {                  \
+                             int exact_f32, T *r, int64_t *src, T *q, T *n, int64_t *paired, int cross_fma,    \
+                             double *J) {                                                                         \
         int64_t M = 0, P = 0;                                                                                    \
         const T W1 = (T)(width - 1), H1 = (T)(height - 1), Wf = (T)width, tiny = (T)1e-9;                        \
         for (int64_t i = 0; i < F; i++) {                                                                        \
@@ -485,6 +488,17 @@ void dcslam_rows_times_f64(const double *points, const double *M, int64_t N, dou
             src[M] = i;                                                                                          \
             q[3 * M] = row[0]; q[3 * M + 1] = row[1]; q[3 * M + 2] = row[2];                                     \
             n[3 * M] = row[3]; n[3 * M + 1] = row[4]; n[3 * M + 2] = row[5];                                     \
+            if (J) {                                                                                             \
+                /* (n @ R)_j = DOT3(n, column j of R); then cross(source, that) */                              \
+                const T a0 = DOT3(T, FMA, mode, row[3], row[4], row[5], R[0], R[3], R[6]);                       \
+                const T a1 = DOT3(T, FMA, mode, row[3], row[4], row[5], R[1], R[4], R[7]);                       \
+                const T a2 = DOT3(T, FMA, mode, row[3], row[4], row[5], R[2], R[5], R[8]);                       \
+                const T c0 = cross_fma ? FMA(s1, a2, -(s2 * a1)) : (T)(s1 * a2) - (T)(s2 * a1);                  \
+                const T c1 = cross_fma ? FMA(s2, a0, -(s0 * a2)) : (T)(s2 * a0) - (T)(s0 * a2);                  \
+                const T c2 = cross_fma ? FMA(s0, a1, -(s1 * a0)) : (T)(s0 * a1) - (T)(s1 * a0);                  \
+                double *row6 = J + 6 * M;                                                                        \
+                row6[0] = a0; row6[1] = a1; row6[2] = a2; row6[3] = c0; row6[4] = c1; row6[5] = c2;              \
+            }                                                                                                    \
             M++;                                                                                                 \
         }                                                                                                        \
         *paired = P;                                                                                             \
@@ -499,9 +513,10 @@ PAIRS(pairs_f64_sw, double, fma, )
 
 #define PAIRS_ARGS(T) const T *source, const T *normals, const uint8_t *usable, int64_t F, const T *R, const T *t,  \
     const T *RrT, const T *tr, T fx, T fy, T cx, T cy, int64_t height, int64_t width, const int64_t *index,       \
-    const T *table, T max_d2, T cos_max, int mode, int exact_f32, T *r, int64_t *src, T *q, T *n, int64_t *paired
+    const T *table, T max_d2, T cos_max, int mode, int exact_f32, T *r, int64_t *src, T *q, T *n, int64_t *paired, \
+    int cross_fma, double *J
 #define PAIRS_CALL source, normals, usable, F, R, t, RrT, tr, fx, fy, cx, cy, height, width, index, table, max_d2,  \
-    cos_max, mode, exact_f32, r, src, q, n, paired
+    cos_max, mode, exact_f32, r, src, q, n, paired, cross_fma, J
 
 int64_t dcslam_pairs_f32(PAIRS_ARGS(float)) {
     return (mode && has_fma()) ? pairs_f32_hw(PAIRS_CALL) : pairs_f32_sw(PAIRS_CALL);
@@ -636,4 +651,4 @@ void dcslam_take_pairs(int64_t *pix, int64_t *hit, int64_t count) {
 }
 
 /* The version of this file's interface: the loader refuses a library of another. */
-int dcslam_native_version(void) { return 1; }
+int dcslam_native_version(void) { return 2; }

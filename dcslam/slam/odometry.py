@@ -121,10 +121,15 @@ class PointToPlane:
 
     def residuals(self, T: torch.Tensor):
         """(residuals (M,), inlier source index (M,), target points (M, 3), target normals (M, 3)) at pose T."""
+        return self._pairs(T)[:4]
+
+    def _pairs(self, T: torch.Tensor, jacobian: bool = False):
+        """:meth:`residuals` and, where the native pass made it (``jacobian``), :meth:`linearize`'s Jacobian (M, 6)
+        float64 of those pairs, else None."""
         if type(self.associate) is ProjectiveAssociation._Prepared:
             # the same pairs and residuals in one pass over the sources (dcslam.native), where it applies
             native = point_to_plane_pairs(self.source, self.source_normals, self._usable, T, self.associate,
-                                          self.max_distance, self.cos_max_angle, FAST_ROWS)
+                                          self.max_distance, self.cos_max_angle, FAST_ROWS, jacobian)
             if native is not None:
                 return native
         p = transform_points(T, self.source)
@@ -137,7 +142,7 @@ class PointToPlane:
             ok &= self._usable.index_select(0, src)
         keep = torch.nonzero(ok).squeeze(1)         # one nonzero and index_select: cheaper than four masks
         n = n.index_select(0, keep)
-        return (diff.index_select(0, keep) * n).sum(1), src.index_select(0, keep), q.index_select(0, keep), n
+        return (diff.index_select(0, keep) * n).sum(1), src.index_select(0, keep), q.index_select(0, keep), n, None
 
     def _pair_weights(self, src: torch.Tensor) -> torch.Tensor | None:
         """Weights of the paired source points (float64), or None when every point counts fully."""
@@ -161,10 +166,11 @@ class PointToPlane:
         return self._mean_rho(r.double(), self._pair_weights(self.pairs[0])), r.numel()
 
     def linearize(self, T: torch.Tensor) -> Linearization:
-        r, src, q, n = self.residuals(T)
+        r, src, q, n, J = self._pairs(T, jacobian=True)
         self.pairs = (src, q, n)
-        m = rows_times(n, T[:3, :3])                # R^T n: the normal in the camera frame
-        J = torch.cat([m, torch.cross(self.source.index_select(0, src), m, dim=1)], 1).double()
+        if J is None:                               # (the native pass makes the same rows, bit for bit)
+            m = rows_times(n, T[:3, :3])            # R^T n: the normal in the camera frame
+            J = torch.cat([m, torch.cross(self.source.index_select(0, src), m, dim=1)], 1).double()
         rd = r.double()
         pw = self._pair_weights(src)
         if pw is None and type(self.kernel) is Quadratic:

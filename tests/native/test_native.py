@@ -240,6 +240,14 @@ def test_point_to_plane_pairs_are_the_torch_codes(monkeypatch, dtype, weights, g
         assert ours[0].numel() > 0
         for a, b in zip(ours, theirs):
             assert a.dtype == b.dtype and torch.equal(a, b)
+        # the normal equations from the native pass's Jacobian rows: the torch code's, bit for bit
+        made = native.point_to_plane_pairs(problem.source, problem.source_normals, problem._usable, pose,
+                                           problem.associate, gate, problem.cos_max_angle, FAST_ROWS, True)
+        assert made[4] is not None and made[4].shape == (ours[0].numel(), 6)
+        mine, yours = problem.linearize(pose), _torch_path(monkeypatch, problem.linearize, pose)
+        assert mine.count == yours.count and mine.weight == yours.weight
+        for a, b in ((mine.H, yours.H), (mine.g, yours.g), (mine.cost, yours.cost)):
+            assert a.dtype == b.dtype == torch.float64 and torch.equal(a, b)
 
 
 def test_point_to_plane_pairs_leave_gradients_to_torch():
