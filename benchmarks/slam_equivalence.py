@@ -9,7 +9,7 @@ frames past the window show whether the CPU per frame stays flat.
 Usage: ``python benchmarks/slam_equivalence.py --save base.npz`` on the reference code, then
 ``python benchmarks/slam_equivalence.py --compare base.npz`` after a change: it prints, per drive, the largest
 difference of the trajectories' translations (metres) and rotations (matrix entries), the map sizes that differ,
-and the CPU per frame before / after. The CPU figures of both runs depend on the machine's load: read the ratio,
+the CPU per frame and the ATE against the true poses before / after. The CPU figures of both runs depend on the machine's load: read the ratio,
 and repeat when it is noisy. Exit status 1 when a trajectory differs by more than ``--tolerance`` (1e-6 m).
 """
 from __future__ import annotations
@@ -25,7 +25,8 @@ FRAMES = 30
 
 
 def _drives(frames: int):
-    """(name, depth (N, 1, H, W) float32, K (3, 3), settings) of each drive."""
+    """(name, depth (N, 1, H, W) float32, K (3, 3), settings, true poses (N, 4, 4) relative to the first) of each
+    drive."""
     import torch
 
     from dcslam.slam.config import SlamSettings
@@ -37,24 +38,26 @@ def _drives(frames: int):
     T = street_trajectory(frames, step=0.8)
     mask = lidar_mask(H, W, row_step=4, col_step=2)
     sparse = torch.stack([scene.render(T[i], K, H, W, mask=mask) for i in range(frames)]).float()[:, None]
-    out.append(("sparse", sparse, K, SlamSettings()))
+    truth = torch.linalg.solve(T[0].double(), T.double())
+    out.append(("sparse", sparse, K, SlamSettings(), truth))
     H, W = 128, 416
     K = kitti_K(H, W)
     dense = torch.stack([scene.render(T[i], K, H, W) for i in range(frames)]).float()[:, None]
-    out.append(("dense", dense, K, SlamSettings()))
-    out.append(("dense-icpslam-window", dense, K, SlamSettings(mapper="icpslam", local_map_frames=6)))
+    out.append(("dense", dense, K, SlamSettings(), truth))
+    out.append(("dense-icpslam-window", dense, K, SlamSettings(mapper="icpslam", local_map_frames=6), truth))
     return out
 
 
 def run(frames: int) -> dict:
-    """Every drive's trajectory (N, 4, 4) float64, map sizes (N,) and CPU seconds per frame (N,)."""
+    """Every drive's trajectory (N, 4, 4) float64, true poses (N, 4, 4), map sizes (N,) and CPU seconds per frame
+    (N,)."""
     import torch
 
     from dcslam.slam.config import build_slam
 
     torch.set_num_threads(1)
     result = {}
-    for name, depth, K, settings in _drives(frames):
+    for name, depth, K, settings, truth in _drives(frames):
         slam = build_slam(settings)
         cpu, sizes = [], []
         for i in range(depth.shape[0]):
@@ -63,6 +66,7 @@ def run(frames: int) -> dict:
             cpu.append(time.process_time() - t0)
             sizes.append(len(slam.mapper.map))
         result[f"{name}/poses"] = slam.trajectory().detach().double().numpy()
+        result[f"{name}/truth"] = truth.numpy()
         result[f"{name}/map_points"] = np.array(sizes)
         result[f"{name}/cpu_s"] = np.array(cpu)
     return result
@@ -72,7 +76,13 @@ def _names(result: dict) -> list[str]:
     return sorted({key.split("/")[0] for key in result})
 
 
+def ate(poses: np.ndarray, truth: np.ndarray) -> float:
+    """RMSE of the position errors (metres), no alignment: both start at the same pose."""
+    return float(np.sqrt((np.linalg.norm(poses[:, :3, 3] - truth[:, :3, 3], axis=1) ** 2).mean()))
+
+
 def compare(base: dict, new: dict, tolerance: float) -> bool:
+    """Prints each drive's differences; True when every trajectory is within ``tolerance`` metres of the base."""
     ok = True
     for name in _names(base):
         A, B = base[f"{name}/poses"], new[f"{name}/poses"]
@@ -83,7 +93,8 @@ def compare(base: dict, new: dict, tolerance: float) -> bool:
         print(f"{name:<22} max |dt| {dt:.2e} m  max |dR| {dr:.2e}  map sizes differ at {sizes.size} frames  "
               f"CPU/frame {np.median(cb) * 1e3:7.1f} -> {np.median(cn) * 1e3:7.1f} ms "
               f"(x{np.median(cb) / np.median(cn):.2f}"
-              f"; last 5 frames {np.median(cb[-5:]) * 1e3:.1f} -> {np.median(cn[-5:]) * 1e3:.1f} ms)")
+              f"; last 5 frames {np.median(cb[-5:]) * 1e3:.1f} -> {np.median(cn[-5:]) * 1e3:.1f} ms)"
+              f"  ATE {ate(A, new[f'{name}/truth']):.4f} -> {ate(B, new[f'{name}/truth']):.4f} m")
         ok &= dt <= tolerance
     return ok
 
