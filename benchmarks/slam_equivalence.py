@@ -8,9 +8,10 @@ frames past the window show whether the CPU per frame stays flat.
 
 Usage: ``python benchmarks/slam_equivalence.py --save base.npz`` on the reference code, then
 ``python benchmarks/slam_equivalence.py --compare base.npz`` after a change: it prints, per drive, the largest
-difference of the trajectories' translations (metres) and rotations (matrix entries), the map sizes that differ,
-the CPU per frame and the ATE against the true poses before / after. The CPU figures of both runs depend on the machine's load: read the ratio,
-and repeat when it is noisy. Exit status 1 when a trajectory differs by more than ``--tolerance`` (1e-6 m).
+difference of the trajectories' translations (metres) and rotations (matrix entries), the map sizes that differ, the
+CPU per frame and the ATE against the true poses before / after. The CPU figures of both runs depend on the
+machine's load: read the ratio, and repeat when it is noisy. Exit status 1 when a trajectory differs by more than
+``--tolerance`` (1e-6 m).
 """
 from __future__ import annotations
 
