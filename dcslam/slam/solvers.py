@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import torch
 
-from dcslam.geometry.se3 import _SMALL, se3_exp
+from dcslam.geometry.se3 import se3_exp
 
 
 @dataclass
@@ -43,39 +43,7 @@ class SolveResult:
 
 
 def _retract(T: torch.Tensor, delta: torch.Tensor) -> torch.Tensor:
-    """``T exp(delta)``. One CPU pose outside autograd (every step of a SLAM run): in float64 Python arithmetic,
-    rounded once to T's dtype, as a dozen tensor calls of one element each cost 20 times the sums."""
-    if (T.shape == (4, 4) and delta.shape == (6,) and T.device.type == "cpu" and delta.device.type == "cpu"
-            and not (torch.is_grad_enabled() and (T.requires_grad or delta.requires_grad))):
-        return torch.tensor(_times_exp(T.tolist(), delta.tolist()), dtype=T.dtype)
     return T @ se3_exp(delta.to(T.dtype))
-
-
-def _times_exp(T: list, xi: list) -> list:
-    """T (4 x 4 rows) times se3_exp(xi) (:func:`dcslam.geometry.se3.se3_exp`'s formulas, its Taylor series below
-    the same angle), in float64: 4 x 4 rows."""
-    v0, v1, v2, x, y, z = xi
-    theta2 = x * x + y * y + z * z
-    if theta2 < _SMALL:
-        A = 1 - theta2 / 6 + theta2 ** 2 / 120
-        B = 0.5 - theta2 / 24 + theta2 ** 2 / 720
-        C = 1.0 / 6 - theta2 / 120 + theta2 ** 2 / 5040
-    else:
-        t = math.sqrt(theta2)
-        sin = math.sin(t)
-        A, B, C = sin / t, (1 - math.cos(t)) / theta2, (t - sin) / (theta2 * t)
-    W = ((0.0, -z, y), (z, 0.0, -x), (-y, x, 0.0))
-    w = (x, y, z)
-    WW = [[w[i] * w[j] - (theta2 if i == j else 0.0) for j in range(3)] for i in range(3)]   # w w^T - |w|^2 I
-    R = [[(i == j) + A * W[i][j] + B * WW[i][j] for j in range(3)] for i in range(3)]
-    V = [[(i == j) + B * W[i][j] + C * WW[i][j] for j in range(3)] for i in range(3)]
-    tr = [V[i][0] * v0 + V[i][1] * v1 + V[i][2] * v2 for i in range(3)]
-    out = []
-    for row in T:
-        a, b, c, d = row
-        out.append([a * R[0][j] + b * R[1][j] + c * R[2][j] for j in range(3)]
-                   + [a * tr[0] + b * tr[1] + c * tr[2] + d])
-    return out
 
 
 def _solve(H: torch.Tensor, rhs: torch.Tensor) -> torch.Tensor:
@@ -85,16 +53,13 @@ def _solve(H: torch.Tensor, rhs: torch.Tensor) -> torch.Tensor:
 
 
 class GaussNewton:
-    """Undamped Gauss-Newton: ``delta = -H^-1 g``; stops when the step is below ``tolerance``, or when a step undoes
-    the one before it (their sum under ``bounce`` times the step: two sets of pairs, each pulling the pose to the
-    other's, so the iterations would go to and fro until the last; the solve ends half-way between the two poses).
-    """
+    """Undamped Gauss-Newton: ``delta = -H^-1 g``; stops when the step is below ``tolerance``."""
 
-    def __init__(self, tolerance: float = 1e-5, bounce: float = 0.1):
-        self.tolerance, self.bounce = tolerance, bounce
+    def __init__(self, tolerance: float = 1e-5):
+        self.tolerance = tolerance
 
     def solve(self, problem, T: torch.Tensor, iterations: int) -> SolveResult:
-        lin = previous = None
+        lin = None
         for k in range(iterations):
             lin = problem.linearize(T)
             if lin.count < 6:
@@ -103,9 +68,7 @@ class GaussNewton:
             step = float(delta.detach().abs().max())    # NaN or inf where delta is not finite: one test for both
             if not math.isfinite(step):
                 return SolveResult(T, k, lin)
-            if previous is not None and float((delta.detach() + previous).abs().max()) < self.bounce * step:
-                return SolveResult(_retract(T, delta / 2), k + 1, lin)
-            T, previous = _retract(T, delta), delta.detach()
+            T = _retract(T, delta)
             if step < self.tolerance:
                 return SolveResult(T, k + 1, lin)
         return SolveResult(T, iterations, lin)
