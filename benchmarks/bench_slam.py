@@ -22,8 +22,9 @@ each drive's), ATE (RMSE of the position errors, no alignment: every run starts 
 Drives: ``--drives DIR`` (prepared drive files, the KITTI root beside them for the Velodyne scans), else
 ``$DCSLAM_WORKSPACE/drives``, else 2 drives of ``--frames`` frames generated into a temporary folder (seed 2027).
 Read the CPU figures as ratios when other processes share the cores; the script prints the load average before and
-after. ``--long-memory`` adds the long analytic-street memory runs (:func:`memory`). Usage:
-``python benchmarks/bench_slam.py [--drives DIR] [--frames 30] [--max-drives 2]``.
+after. ``--repeat N`` runs every row N times, round by round, and counts each run's fastest repeat (:func:`fastest`).
+``--long-memory`` adds the long analytic-street memory runs (:func:`memory`). Usage:
+``python benchmarks/bench_slam.py [--drives DIR] [--frames 30] [--max-drives 2] [--repeat 3]``.
 """
 from __future__ import annotations
 
@@ -156,6 +157,20 @@ def _tasks(args, paths: list[Path], layers: dict, kiss: bool) -> list[tuple[str,
     return tasks
 
 
+def fastest(repeats: list[dict], what: str) -> dict:
+    """One run's figures from its repeats: those of the repeat that took the least CPU time (the one the machine's
+    other work disturbed least: every repeat does the same work), with ``cpu_s_repeats``, every repeat's CPU seconds,
+    and the largest peak RSS. A line on stderr when the repeats' ATE differ by more than a micrometre (dcslam and
+    KISS-ICP are deterministic; Open3D's threads sum in varying order, a few nanometres apart)."""
+    best = min(repeats, key=lambda r: r["cpu_s"])
+    ates = [r["ate_m"] for r in repeats]
+    if max(ates) - min(ates) > 1e-6:
+        print(f"  {what}: the repeats' ATE differ ({', '.join(format(a, '.6f') for a in ates)})",
+              file=sys.stderr, flush=True)
+    return {**best, "cpu_s_repeats": [r["cpu_s"] for r in repeats],
+            "peak_rss_mb": max(r["peak_rss_mb"] for r in repeats)}
+
+
 def _each(runs: list[dict], key: str, spec: str) -> str:
     """The drives' values of ``key`` (``fps``: frames per CPU-second) formatted by ``spec``, comma separated."""
     return ", ".join(format(r["frames"] / r["cpu_s"] if key == "fps" else r[key], spec) for r in runs)
@@ -172,14 +187,17 @@ def side_by_side(args) -> None:
     kiss = kiss_icp_available() and (kitti_root / "raw").is_dir()
     print(f"side by side: {len(paths)} drives x {args.frames} frames at full size ({', '.join(p.stem for p in paths)})"
           f"; dcslam defaults {SlamSettings().to_dict()}; one thread per run, each in its own process, "
-          f"{args.jobs} at a time; load average {load_before[0]:.1f} before", flush=True)
+          f"{args.jobs} at a time"
+          + (f", every run {args.repeat} times round by round, its fastest counted" if args.repeat > 1 else "")
+          + f"; load average {load_before[0]:.1f} before", flush=True)
     if not kiss:
         print("  KISS-ICP: skipped (" + ("not installed; pip install -e .[bench]" if not kiss_icp_available()
                                         else f"{kitti_root / 'raw'} holds no Velodyne scans") + ")", flush=True)
     tasks = _tasks(args, paths, layers, kiss)
-    with ThreadPoolExecutor(args.jobs) as pool:       # each thread waits on its child process
-        done = list(pool.map(lambda t: _run_child(args, CHILD.get(t[0], t[0].lower().replace("-", "")), t[2], t[3],
-                                                  kitti_root), tasks))
+    with ThreadPoolExecutor(args.jobs) as pool:       # each thread waits on its child process; round by round
+        runs = list(pool.map(lambda t: _run_child(args, CHILD.get(t[0], t[0].lower().replace("-", "")), t[2], t[3],
+                                                  kitti_root), tasks * args.repeat))
+    done = [fastest(runs[i::len(tasks)], f"{t[0]} on {t[1]} of {t[2].stem}") for i, t in enumerate(tasks)]
     results: dict[tuple[str, str], list[dict]] = {}
     for (system, depth, drive, _), run in zip(tasks, done):
         results.setdefault((system, depth), []).append({**run, "drive": drive.stem})
@@ -288,6 +306,9 @@ def main() -> None:
     parser.add_argument("--open3d-completed-drives", type=int, default=1,
                         help="Open3D runs on the completions over this many of the drives (the first)")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), help="runs at a time")
+    parser.add_argument("--repeat", type=int, default=1,
+                        help="runs of every row on every drive, round by round; the fastest counts (read the CPU "
+                             "figures of noisy machines from 3 or more)")
     parser.add_argument("--json", type=Path, help="also write every run's figures to this JSON file")
     parser.add_argument("--long-memory", action="store_true",
                         help="also the long analytic-street memory runs (minutes: --long-frames frames at full size)")

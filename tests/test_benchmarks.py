@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import importlib.util
 from pathlib import Path
 
 import pytest
@@ -76,3 +77,20 @@ def test_the_check_finds_a_removed_name(tmp_path):
     assert sibling_missing("slam_drives", "no_such_function") == "slam_drives.no_such_function"
     tree = ast.parse("def f():\n    from dcslam.slam.drive import run_drive\n")
     assert imported_names(tree) == [("dcslam.slam.drive", "run_drive", 2)]  # inside a function too
+
+
+def test_bench_slam_counts_the_fastest_repeat_and_says_when_repeats_disagree(capsys):
+    """``bench_slam.py --repeat``: a run's figures are its fastest repeat's, with every repeat's CPU seconds and the
+    largest peak memory; repeats whose ATE differ are reported."""
+    spec = importlib.util.spec_from_file_location("bench_slam", BENCHMARKS / "bench_slam.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    repeats = [{"cpu_s": 2.0, "ate_m": 0.1, "peak_rss_mb": 300.0, "frames": 30},
+               {"cpu_s": 1.5, "ate_m": 0.1, "peak_rss_mb": 310.0, "frames": 30},
+               {"cpu_s": 1.8, "ate_m": 0.1, "peak_rss_mb": 305.0, "frames": 30}]
+    best = bench.fastest(repeats, "dcslam on sparse of drive 1000")
+    assert best["cpu_s"] == 1.5 and best["cpu_s_repeats"] == [2.0, 1.5, 1.8] and best["peak_rss_mb"] == 310.0
+    assert capsys.readouterr().err == ""
+    bench.fastest([{**repeats[0], "ate_m": 0.2}, repeats[1]], "KISS-ICP on velodyne 360 of drive 1001")
+    assert "KISS-ICP on velodyne 360 of drive 1001: the repeats' ATE differ (0.200000, 0.100000)" in \
+        capsys.readouterr().err
