@@ -157,7 +157,7 @@ def own_health(health: dict) -> dict:
     """A stored run's health without its evidence verdict (the reasons its own steps gave, those a companion that
     agreed overruled included): what :func:`dcslam.slam.evidence.merge` started from."""
     evidence = health.get("evidence") or {}
-    reasons = list(health.get("overruled") or [r for r in health["reasons"] if r != evidence.get("reason")])
+    reasons = list(health.get("overruled", [])) + [r for r in health["reasons"] if r != evidence.get("reason")]
     own = {k: v for k, v in health.items() if k not in ("evidence", "overruled")}
     return {**own, "reasons": reasons, "suspect": bool(reasons)}
 

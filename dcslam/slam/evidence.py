@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dcslam.slam.health import road_reason
+
 #: Verdicts of :func:`judge` and :func:`unavailable`.
 EVIDENCE_VERDICTS = ("agrees", "departs", "unbounded", "unavailable", "own", "off")
 
@@ -108,14 +110,21 @@ def merge(health: dict, evidence: dict) -> dict:
     """``health`` (:func:`dcslam.slam.health.summarise`) with the evidence verdict folded in: ``evidence`` added,
     ``suspect`` set and its reason appended when the evidence makes the run suspect.
 
-    A companion that agrees outweighs the run's own weak-step reasons (degraded steps, its drift bound: on completed
-    depth they misjudge in both directions) when no step was rejected; those reasons move to ``overruled``."""
+    A companion that agrees outweighs the run's own weak-step reasons (degraded steps, held steps, its drift bound: on
+    completed depth they misjudge in both directions) when no step was rejected; those reasons move to
+    ``overruled``. The road figure's reason stays (:func:`dcslam.slam.health.road_reason`): it measures the run's own
+    vertical error from its depth, which the companion's agreement within its 0.5 m floor does not rule out."""
     merged = {**health, "reasons": list(health.get("reasons", [])), "evidence": evidence}
     if evidence.get("suspect"):
         merged["suspect"] = True
         merged["reasons"].append(evidence["reason"])
     elif evidence.get("verdict") == "agrees" and merged.get("suspect") and not health.get("rejected", 0):
-        merged["overruled"], merged["reasons"], merged["suspect"] = merged["reasons"], [], False
+        road = road_reason(merged["reasons"])
+        merged["overruled"] = [r for r in merged["reasons"] if r != road]
+        merged["reasons"] = [road] if road else []
+        merged["suspect"] = bool(road)
+        if not merged["overruled"]:
+            del merged["overruled"]
     return merged
 
 

@@ -554,6 +554,16 @@ def _hold_verdict(reports, rules: HealthRules, interval_s: float | None, reasons
     return hold
 
 
+#: How the reason of the road figure (:func:`_road`) begins: the one reason of a summary that measures the run's own
+#: error instead of describing its steps (:func:`road_reason`).
+ROAD_REASON = "the road says the run"
+
+
+def road_reason(reasons) -> str | None:
+    """The reason among ``reasons`` (a summary's) that the road figure gave, or None."""
+    return next((r for r in reasons if r.startswith(ROAD_REASON)), None)
+
+
 def _road(reports, rules: HealthRules, reasons: list[str]) -> dict | None:
     """The road figure of :func:`summarise` (None when ``max_road_drift_m`` is 0 or there are no reports), a
     reason appended to ``reasons`` when it exceeds ``max_road_drift_m``."""
@@ -566,7 +576,7 @@ def _road(reports, rules: HealthRules, reasons: list[str]) -> dict | None:
     if road["from_frame"] is not None:
         road["from_frame"] = int(reports[road["from_frame"]].index)
     if road["drift_m"] > rules.max_road_drift_m:
-        reasons.append(f"the road says the run {road['vertical']} {road['drift_m']:.2f} m (vertical, camera y), "
+        reasons.append(f"{ROAD_REASON} {road['vertical']} {road['drift_m']:.2f} m (vertical, camera y), "
                        f"past {rules.max_road_drift_m:g} m from frame {road['from_frame']} (road seen in "
                        f"{road['frames_seen']} of {len(reports)} frames)")
     return road

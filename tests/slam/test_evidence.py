@@ -81,3 +81,23 @@ def test_an_agreeing_companion_outweighs_weak_steps_but_not_rejected_ones():
     assert not health["suspect"] and health["reasons"] == [] and health["overruled"] == weak["reasons"]
     refused = {**weak, "rejected": 1, "reasons": ["1 of 29 steps rejected (pose predicted, not measured)"]}
     assert merge(refused, agrees)["suspect"] and "overruled" not in merge(refused, agrees)
+
+
+
+def test_an_agreeing_companion_does_not_overrule_the_road():
+    """The road figure measures the run's own vertical error from its depth: a companion that agrees within its floor
+    overrules the weak-step reasons beside it, not the road's (a sinking run's own summary)."""
+    from dcslam.slam.health import road_reason, summarise
+    from tests.fixtures.road import seen, sinking, step_reports
+
+    truth, estimated = sinking()
+    own = summarise(step_reports(estimated, [seen(T) for T in truth]))
+    road = road_reason(own["reasons"])
+    assert own["suspect"] and road.startswith("the road says the run sank 0.63 m")
+    agrees = judge(_trajectory([0, 1]), _trajectory([0, 1.1]), GOOD, "sparse")
+    weak = "2 consecutive steps degraded"
+    health = merge({**own, "reasons": [weak, road]}, agrees)
+    assert health["suspect"] and health["reasons"] == [road] and health["overruled"] == [weak]
+    alone = merge(own, agrees)
+    assert alone["suspect"] and alone["reasons"] == [road] and "overruled" not in alone
+    assert road_reason([weak]) is None
