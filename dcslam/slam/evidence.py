@@ -120,11 +120,10 @@ def merge(health: dict, evidence: dict) -> dict:
         merged["reasons"].append(evidence["reason"])
     elif evidence.get("verdict") == "agrees" and merged.get("suspect") and not health.get("rejected", 0):
         road = road_reason(merged["reasons"])
-        merged["overruled"] = [r for r in merged["reasons"] if r != road]
-        merged["reasons"] = [road] if road else []
-        merged["suspect"] = bool(road)
-        if not merged["overruled"]:
-            del merged["overruled"]
+        overruled = [r for r in merged["reasons"] if r != road]
+        merged["reasons"], merged["suspect"] = ([road] if road else []), bool(road)
+        if overruled:
+            merged["overruled"] = overruled
     return merged
 
 

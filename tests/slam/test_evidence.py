@@ -83,7 +83,6 @@ def test_an_agreeing_companion_outweighs_weak_steps_but_not_rejected_ones():
     assert merge(refused, agrees)["suspect"] and "overruled" not in merge(refused, agrees)
 
 
-
 def test_an_agreeing_companion_does_not_overrule_the_road():
     """The road figure measures the run's own vertical error from its depth: a companion that agrees within its floor
     overrules the weak-step reasons beside it, not the road's (a sinking run's own summary)."""
