@@ -331,6 +331,8 @@ def main() -> None:
     parser.add_argument("--child-source", help=argparse.SUPPRESS)
     parser.add_argument("--child-kitti", type=Path, help=argparse.SUPPRESS)
     args, _ = parser.parse_known_args()
+    if args.repeat < 1:
+        parser.error(f"--repeat must be at least 1, got {args.repeat}")
     if args.child:
         print(json.dumps(_child(args.child, args.child_drive, args.child_source, args.frames, args.child_kitti)))
         return
