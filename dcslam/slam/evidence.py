@@ -23,8 +23,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dcslam.slam.health import road_reason
-
 #: Verdicts of :func:`judge` and :func:`unavailable`.
 EVIDENCE_VERDICTS = ("agrees", "departs", "unbounded", "unavailable", "own", "off")
 
@@ -114,6 +112,8 @@ def merge(health: dict, evidence: dict) -> dict:
     completed depth they misjudge in both directions) when no step was rejected; those reasons move to
     ``overruled``. The road figure's reason stays (:func:`dcslam.slam.health.road_reason`): it measures the run's own
     vertical error from its depth, which the companion's agreement within its 0.5 m floor does not rule out."""
+    from dcslam.slam.health import road_reason   # not at import: evidence is on the path of ``dcslam --help``
+
     merged = {**health, "reasons": list(health.get("reasons", [])), "evidence": evidence}
     if evidence.get("suspect"):
         merged["suspect"] = True
