@@ -39,6 +39,8 @@ def _parameter(cls, field) -> inspect.Parameter:
     if optional or is_list:
         annotation = Optional[annotation]
     flags = meta.get("flags", (f"--{field.name.replace('_', '-')}",))
+    if base is bool and field.default is True and "flags" not in meta:   # on by default: it needs an off switch
+        flags = (f"{flags[0]}/--no-{flags[0][2:]}",)
     extra = {k: meta[k] for k in ("min", "max", "show_default", "metavar") if k in meta}
     if "choices" not in meta and "metavar" not in meta and base is not bool:  # FLOAT, not Typer's <float range>
         extra["metavar"] = "PATH" if base is Path else base.__name__.upper()

@@ -148,3 +148,18 @@ def test_confidence_of_a_layer_without_one(cli, workspace, tmp_path):
     assert result.exit_code == 1 and "--min-confidence needs --confidence weights or mask" in result.output
     assert cli("slam", "--depth", "dense", "--confidence", "often", "-w", workspace).exit_code == 2
     assert cli("slam", "--depth", "dense", "--min-confidence", "1.5", "-w", workspace).exit_code == 2
+
+
+def test_the_global_map_can_be_switched_off(cli, workspace, tmp_path):
+    """``--keep-global-map`` is on by default and ``--no-keep-global-map`` turns it off: with a one-frame local map
+    the map file then holds the last frame's points only, and the summary records the setting."""
+    sizes = {}
+    for flag in ("--keep-global-map", "--no-keep-global-map"):
+        out = tmp_path / flag
+        result = cli("slam", "--depth", "dense", "--odometry", "gt", "--local-map-frames", "1", flag, "-w", workspace,
+                     "--out", out)
+        assert result.exit_code == 0, result.output
+        record = json.loads((out / "street_0001.json").read_text())
+        assert record["settings"]["keep_global_map"] is (flag == "--keep-global-map")
+        sizes[flag] = len(read_ply(out / "street_0001.ply")[0])
+    assert 0 < sizes["--no-keep-global-map"] < sizes["--keep-global-map"]
