@@ -104,8 +104,14 @@ pages: setup
 	$(DCSLAM) score page RESULTS.md
 	$(DCSLAM) score page README.md
 
+# bench: every benchmarks/bench_*.py, with KISS-ICP (the bench extra, bench_slam.py's reference) installed first.
+# BENCH_ARGS go to every script (each takes the options it knows). By default bench_slam.py runs one child at a
+# time and every row three times, counting the fastest: repeats of one run spread ~1.4x even on a quiet machine
+# (docs/benchmarks.md); BENCH_ARGS= gives one quicker, noisier pass.
+BENCH_ARGS ?= --repeat 3 --jobs 1
 bench: setup
-	$(PY) benchmarks/run_all.py
+	$(PY) -c 'import kiss_icp' 2>/dev/null || $(PY) -m uv pip install -q --python $(PY) -e '.[test,bench]'
+	$(PY) benchmarks/run_all.py $(BENCH_ARGS)
 
 clean:
 	rm -rf $(VENV) workspace .pytest_cache

@@ -140,7 +140,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer repeats, no 1e6-point chamfer")
     parser.add_argument("--device", default="auto")
-    args = parser.parse_args()
+    args, _ = parser.parse_known_args()   # make bench hands every script the same options
     device = torch.device("cuda" if args.device == "auto" and torch.cuda.is_available() else
                           ("cpu" if args.device == "auto" else args.device))
     repeat = 2 if args.quick else 5

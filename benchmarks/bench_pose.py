@@ -85,7 +85,7 @@ def main() -> None:
     parser.add_argument("--limit-gb", type=float, default=6.0, help="address-space limit of each step's process")
     parser.add_argument("--only", default="", help="run only the configurations whose name contains this")
     parser.add_argument("--step", nargs=2, help=argparse.SUPPRESS)  # internal: DRIVE CONFIG-NAME
-    args = parser.parse_args()
+    args, _ = parser.parse_known_args()   # make bench hands every script the same options
     if args.step:
         limit = int(args.limit_gb * 2 ** 30)
         resource.setrlimit(resource.RLIMIT_AS, (limit, limit))

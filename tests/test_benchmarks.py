@@ -94,3 +94,27 @@ def test_bench_slam_counts_the_fastest_repeat_and_says_when_repeats_disagree(cap
     bench.fastest([{**repeats[0], "ate_m": 0.2}, repeats[1]], "KISS-ICP on velodyne 360 of drive 1001")
     assert "KISS-ICP on velodyne 360 of drive 1001: the repeats' ATE differ (0.200000, 0.100000)" in \
         capsys.readouterr().err
+
+
+@pytest.mark.parametrize("script", sorted(BENCHMARKS.glob("bench_*.py")), ids=lambda p: p.stem)
+def test_every_bench_script_takes_the_options_make_bench_hands_to_all(script):
+    """``run_all.py`` (``make bench BENCH_ARGS=...``) passes the same options to every ``bench_*.py``: each must parse
+    the options it knows and leave the others (``parse_known_args``), or one script's option stops another."""
+    calls = [node.func.attr for node in ast.walk(ast.parse(script.read_text()))
+             if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+             and node.func.attr in ("parse_args", "parse_known_args")]
+    assert calls and set(calls) == {"parse_known_args"}, f"{script.name} parses with {calls}"
+
+
+def test_bench_slam_gives_the_sparse_ratio_drive_by_drive_beside_kiss_icps_error():
+    """The ratio over all drives can rest on a drive KISS-ICP loses (it then iterates to its cap): each drive's
+    ratio is printed with KISS-ICP's ATE there."""
+    spec = importlib.util.spec_from_file_location("bench_slam", BENCHMARKS / "bench_slam.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    results = {("dcslam", "sparse"): [{"frames": 30, "cpu_s": 1.0, "drive": "d0"},
+                                      {"frames": 30, "cpu_s": 2.0, "drive": "d1"}],
+               ("KISS-ICP", "velodyne 360"): [{"frames": 30, "cpu_s": 2.0, "ate_m": 1.2, "drive": "d0"},
+                                             {"frames": 30, "cpu_s": 10.0, "ate_m": 13.5, "drive": "d1"}]}
+    assert bench.sparse_ratios(results, "dcslam") == \
+        "4.00 over all drives; 2.00 on d0 (KISS-ICP ATE 1.200 m), 5.00 on d1 (KISS-ICP ATE 13.500 m)"
