@@ -2,14 +2,14 @@
 memory of every SLAM run, on the same generated drives, in one run.
 
 Rows: dcslam with its default settings (``dcslam.run_slam``: the frames streamed from the drive file with the
-prefetch thread, as ``dcslam slam`` runs them) on the LiDAR's sparse 64-beam depth, on the annotated dense depth and
-on two completions of the sparse depth (IP-Basic fast and planefit, written by ``dcslam.complete_drive`` before the
-runs); the same on one thread (``dcslam, one thread``: no prefetch thread, as the workers of ``dcslam reproduce
---jobs N`` run when they fill the cores, and as KISS-ICP's and Open3D's rows run); Open3D's point-to-plane ICP frame
-to frame on the same depths; KISS-ICP 1.3.0 on the 360 degree Velodyne scans (the ``bench`` extra; a line says so
-when it is missing). ``--open3d-completed`` chooses which completions Open3D also runs on (default IP-Basic only),
-and ``--open3d-completed-drives`` over how many drives (default the first: Open3D takes 3-5 CPU-seconds a frame
-there).
+prefetch thread, glibc's mmap and trim thresholds fixed, as ``dcslam slam`` runs them) on the LiDAR's sparse 64-beam
+depth, on the annotated dense depth and on two completions of the sparse depth (IP-Basic fast and planefit, written
+by ``dcslam.complete_drive`` before the runs); the same on one thread (``dcslam, one thread``: no prefetch thread,
+as the workers of ``dcslam reproduce --jobs N`` run when they fill the cores, and as KISS-ICP's and Open3D's rows
+run); Open3D's point-to-plane ICP frame to frame on the same depths; KISS-ICP 1.3.0 on the 360 degree Velodyne scans
+(the ``bench`` extra; a line says so when it is missing). ``--open3d-completed`` chooses which completions Open3D
+also runs on (default IP-Basic only), and ``--open3d-completed-drives`` over how many drives (default the first:
+Open3D takes 3-5 CPU-seconds a frame there).
 
 Each run is a child process of its own with one torch / OpenMP thread (KISS-ICP's registration on one thread too),
 so that its peak memory (``VmHWM``, the imports included) is its own; the runs go drive by drive, dcslam and its
@@ -112,6 +112,9 @@ def _child(system: str, drive: Path, source: str, frames: int, kitti_root: Path)
     depth = Path(source) if source.endswith(".h5") else source
     if system in ("dcslam", "dcslam1"):
         import dcslam
+        from dcslam.allocator import fix_mmap_threshold
+
+        fix_mmap_threshold()        # glibc's thresholds as `dcslam slam` and its workers fix them
 
         def run(n: int):
             wall, cpu = time.perf_counter(), time.process_time()

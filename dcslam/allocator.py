@@ -6,6 +6,9 @@ float image is 1.8 MB; point and normal arrays of the same order) then come from
 sizes fragment it, and the peak RSS of a long run grows although nothing of dcslam's does. With the threshold fixed
 (``mallopt(M_MMAP_THRESHOLD)``, which also stops glibc's own adjustment of it) the peak stays flat; 4 MB is the
 default here, a little slower per frame than glibc's own (the measurements: docs/slam.md, "Memory on long drives").
+Fixing it stops the adjustment of the trim threshold too, which then stays at 128 kB: every frame glibc gives the
+top of the heap back to the system and faults it in again on the next (a tenth of a sparse frame's CPU, more with
+the prefetch thread, whose TLBs each release flushes), so the trim threshold is fixed beside it, at 32 MB.
 """
 from __future__ import annotations
 
@@ -17,8 +20,13 @@ import sys
 M_MMAP_THRESHOLD = -3
 #: Allocations of at least this many bytes get their own mmap in SLAM processes (see the module docstring).
 SLAM_MMAP_THRESHOLD = 4 * 2 ** 20
-#: glibc's own environment variable for the same setting; when it is set, the user's choice stands.
+#: ``mallopt`` parameter number of M_TRIM_THRESHOLD (glibc's malloc.h).
+M_TRIM_THRESHOLD = -1
+#: Free memory at the top of the heap kept for the next frame, not given back, in SLAM processes.
+SLAM_TRIM_THRESHOLD = 32 * 2 ** 20
+#: glibc's own environment variables for the same settings; when one is set, the user's choices stand.
 ENV = "MALLOC_MMAP_THRESHOLD_"
+TRIM_ENV = "MALLOC_TRIM_THRESHOLD_"
 
 
 def _libc():
@@ -57,13 +65,16 @@ def trim() -> bool:
     return True
 
 
-def fix_mmap_threshold(nbytes: int = SLAM_MMAP_THRESHOLD) -> bool:
-    """Serve every allocation of ``nbytes`` or more by its own mmap from now on, in this process. Returns whether it
-    was set: not for ``nbytes`` <= 0, when ``MALLOC_MMAP_THRESHOLD_`` is in the environment (glibc has applied it
-    already), or off glibc / Linux."""
+def fix_mmap_threshold(nbytes: int = SLAM_MMAP_THRESHOLD, trim_bytes: int = SLAM_TRIM_THRESHOLD) -> bool:
+    """Serve every allocation of ``nbytes`` or more by its own mmap from now on, in this process, and keep up to
+    ``trim_bytes`` free at the top of the heap (0: glibc's 128 kB). Returns whether the mmap threshold was set: not
+    for ``nbytes`` <= 0, when ``MALLOC_MMAP_THRESHOLD_`` or ``MALLOC_TRIM_THRESHOLD_`` is in the environment (glibc
+    has applied the user's choice already, and either one stops its own adjustments), or off glibc / Linux."""
     libc = _libc()
-    if nbytes <= 0 or ENV in os.environ or libc is None or not hasattr(libc, "mallopt"):
+    if nbytes <= 0 or ENV in os.environ or TRIM_ENV in os.environ or libc is None or not hasattr(libc, "mallopt"):
         return False
     mallopt = libc.mallopt
     mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
+    if trim_bytes > 0 and mallopt(M_TRIM_THRESHOLD, int(trim_bytes)) != 1:
+        return False
     return mallopt(M_MMAP_THRESHOLD, int(nbytes)) == 1

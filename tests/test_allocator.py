@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from dcslam.allocator import ENV, SLAM_MMAP_THRESHOLD, fix_mmap_threshold
+from dcslam.allocator import ENV, SLAM_MMAP_THRESHOLD, SLAM_TRIM_THRESHOLD, TRIM_ENV, fix_mmap_threshold
 
 
 def _glibc_with_mallinfo2() -> bool:
@@ -32,11 +32,11 @@ print(fixed, heap_mb()[2] - before >= 6)
 libc.free(block)
 """
 
-def _probe(mode: str, env: dict | None = None) -> str:
+def _probe(mode: str, env: dict | None = None, code: str = PROBE) -> str:
     import os
 
-    environ = {k: v for k, v in os.environ.items() if k != ENV} | (env or {})
-    out = subprocess.run([sys.executable, "-c", PROBE, mode], capture_output=True, text=True, env=environ, check=True)
+    environ = {k: v for k, v in os.environ.items() if k not in (ENV, TRIM_ENV)} | (env or {})
+    out = subprocess.run([sys.executable, "-c", code, mode], capture_output=True, text=True, env=environ, check=True)
     return out.stdout.strip()
 
 
@@ -53,6 +53,34 @@ def test_a_fixed_threshold_keeps_serving_large_blocks_by_mmap_after_glibc_would_
 def test_the_environment_variable_wins():
     # glibc applied MALLOC_MMAP_THRESHOLD_ itself (here 16 MB, so the 6 MB block is from the heap); dcslam leaves it
     assert _probe("fix", {ENV: str(16 << 20)}) == "False False"
+
+
+# A 3 MB block (under the 4 MB threshold: from the heap, at its top) allocated and freed: does the heap keep the
+# memory (the arena as large as with the block in it) or give it back to the system?
+TRIM_PROBE = """
+import ctypes, sys
+from dcslam.allocator import fix_mmap_threshold, heap_mb
+libc = ctypes.CDLL("libc.so.6")
+libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
+libc.free.argtypes = [ctypes.c_void_p]
+fixed = fix_mmap_threshold(trim_bytes=0 if sys.argv[1] == "no-trim" else 32 << 20)
+block = libc.malloc(3 << 20)
+held = heap_mb()[0]
+libc.free(block)
+print(fixed, heap_mb()[0] > held - 1)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or not _glibc_with_mallinfo2(),
+                    reason="needs glibc >= 2.33 (mallinfo2)")
+def test_the_top_of_the_heap_is_kept_for_the_next_frame():
+    assert 3 << 20 < SLAM_TRIM_THRESHOLD
+    assert _probe("no-trim", code=TRIM_PROBE) == "True False"   # glibc's 128 kB: the freed top goes back at once
+    assert _probe("trim", code=TRIM_PROBE) == "True True"       # kept, for the next frame's blocks
+    # a trim threshold in the environment is the user's choice: dcslam then sets neither (with both glibc's own, the
+    # block is on the heap and the freed top goes back)
+    assert _probe("trim", {TRIM_ENV: str(1 << 20)}, code=TRIM_PROBE).startswith("False ")
+    assert _probe("trim", {TRIM_ENV: str(1 << 20), ENV: str(4 << 20)}, code=TRIM_PROBE) == "False False"
 
 
 def test_nothing_is_set_for_a_threshold_of_zero():
