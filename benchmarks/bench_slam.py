@@ -112,9 +112,9 @@ def _child(system: str, drive: Path, source: str, frames: int, kitti_root: Path)
     depth = Path(source) if source.endswith(".h5") else source
     if system in ("dcslam", "dcslam1"):
         import dcslam
-        from dcslam.allocator import fix_mmap_threshold
+        from dcslam.allocator import fix_allocator
 
-        fix_mmap_threshold()        # glibc's thresholds as `dcslam slam` and its workers fix them
+        fix_allocator()        # glibc's thresholds as `dcslam slam` and its workers fix them
 
         def run(n: int):
             wall, cpu = time.perf_counter(), time.process_time()
@@ -264,12 +264,12 @@ def memory(args) -> None:
 
 def memory_child(args) -> None:
     """One long drive in this process: RSS now and the peak so far (ru_maxrss) at frames 200, 400, ... ."""
-    from dcslam.allocator import fix_mmap_threshold
+    from dcslam.allocator import fix_allocator
     from dcslam.slam.config import SlamSettings, build_slam
     from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
 
     kind, n = args.memory_child, args.long_frames
-    fixed = fix_mmap_threshold(round(args.mmap_threshold_mb * 2 ** 20))   # as `dcslam slam` does
+    fixed = fix_allocator(round(args.mmap_threshold_mb * 2 ** 20))   # as `dcslam slam` does
     H, W = 375, 1242
     if kind == "dense":                                    # every pixel ray-cast: reduced size to stay affordable
         H, W = round(H * args.dense_scale), round(W * args.dense_scale)

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from dcslam.allocator import ENV, SLAM_MMAP_THRESHOLD, SLAM_TRIM_THRESHOLD, TRIM_ENV, fix_mmap_threshold
+from dcslam.allocator import ARENA_ENV, ENV, SLAM_MMAP_THRESHOLD, SLAM_TRIM_THRESHOLD, TRIM_ENV, fix_allocator
 
 
 def _glibc_with_mallinfo2() -> bool:
@@ -20,11 +20,11 @@ def _glibc_with_mallinfo2() -> bool:
 # and prints whether that block was mmapped too (heap_mb's third figure: MB in mmapped blocks).
 PROBE = """
 import ctypes, sys
-from dcslam.allocator import fix_mmap_threshold, heap_mb
+from dcslam.allocator import fix_allocator, heap_mb
 libc = ctypes.CDLL("libc.so.6")
 libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
 libc.free.argtypes = [ctypes.c_void_p]
-fixed = fix_mmap_threshold() if sys.argv[1] == "fix" else False
+fixed = fix_allocator() if sys.argv[1] == "fix" else False
 libc.free(libc.malloc(8 << 20))
 before = heap_mb()[2]
 block = libc.malloc(6 << 20)
@@ -35,7 +35,7 @@ libc.free(block)
 def _probe(mode: str, env: dict | None = None, code: str = PROBE) -> str:
     import os
 
-    environ = {k: v for k, v in os.environ.items() if k not in (ENV, TRIM_ENV)} | (env or {})
+    environ = {k: v for k, v in os.environ.items() if k not in (ENV, TRIM_ENV, ARENA_ENV)} | (env or {})
     out = subprocess.run([sys.executable, "-c", code, mode], capture_output=True, text=True, env=environ, check=True)
     return out.stdout.strip()
 
@@ -59,11 +59,11 @@ def test_the_environment_variable_wins():
 # memory (the arena as large as with the block in it) or give it back to the system?
 TRIM_PROBE = """
 import ctypes, sys
-from dcslam.allocator import fix_mmap_threshold, heap_mb
+from dcslam.allocator import fix_allocator, heap_mb
 libc = ctypes.CDLL("libc.so.6")
 libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
 libc.free.argtypes = [ctypes.c_void_p]
-fixed = fix_mmap_threshold(trim_bytes=0 if sys.argv[1] == "no-trim" else 32 << 20)
+fixed = fix_allocator(trim_bytes=0 if sys.argv[1] == "no-trim" else 32 << 20)
 block = libc.malloc(3 << 20)
 held = heap_mb()[0]
 libc.free(block)
@@ -84,7 +84,7 @@ def test_the_top_of_the_heap_is_kept_for_the_next_frame():
 
 
 def test_nothing_is_set_for_a_threshold_of_zero():
-    assert fix_mmap_threshold(0) is False and fix_mmap_threshold(-1) is False
+    assert fix_allocator(0) is False and fix_allocator(-1) is False
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux") or not _glibc_with_mallinfo2(),
@@ -106,3 +106,28 @@ print(grown >= 64, 0 <= used <= held, trim())
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.split() == ["True", "True", "True"]
+
+
+# Which arena serves a thread's first allocation: the main one (its block lies in the main heap, which mallinfo2's
+# ``arena`` figure grows by) or one of its own? With one arena for the process, a thread shares the main one.
+ARENA_PROBE = """
+import ctypes, sys, threading
+from dcslam.allocator import fix_allocator
+libc = ctypes.CDLL("libc.so.6")
+libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
+libc.malloc_usable_size.restype, libc.malloc_usable_size.argtypes = ctypes.c_size_t, [ctypes.c_void_p]
+fix_allocator(arenas=1 if sys.argv[1] == "one" else 0)
+main = libc.malloc(64)
+seen = []
+threading.Thread(target=lambda: seen.append(libc.malloc(64))).start()
+# a block of a thread arena lies in that arena's own mapping, far (>= 1 MB aligned heaps) from the main heap
+print(abs(seen[0] - main) < (64 << 20))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or not _glibc_with_mallinfo2(),
+                    reason="needs glibc >= 2.33 (mallinfo2)")
+def test_threads_share_the_one_arena():
+    assert _probe("one", code=ARENA_PROBE) == "True"
+    assert _probe("glibc", code=ARENA_PROBE) == "False"
+    assert _probe("one", {ARENA_ENV: "8"}, code=ARENA_PROBE) == "False"   # the user's choice stands

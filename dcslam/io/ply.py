@@ -19,41 +19,52 @@ _PLY_TYPES = {"float": "f4", "float32": "f4", "double": "f8", "float64": "f8", "
               "uint": "u4", "uint32": "u4", "int": "i4", "int32": "i4"}
 
 
+#: Vertices converted and written at a time: the file is written in pieces, so that writing a map costs memory in
+#: proportion to this, not to the map (a drive's whole map is written at the end of its run).
+WRITE_CHUNK = 1 << 16
+
+
 def write_ply(path: Path | str, points: np.ndarray, normals: np.ndarray | None = None,
               colors: np.ndarray | None = None, force: bool = False) -> Path:
     """Write a point cloud atomically. Shape: points (P, 3), normals (P, 3) or None, colors (P, 3) in [0, 1]
-    (floats) or uint8, or None."""
+    (floats, clipped) or uint8, or None."""
     points = np.asarray(points, dtype=np.float32)
     if points.ndim != 2 or points.shape[1] != 3:
         raise DcslamError(f"points has shape {points.shape}, expected (P, 3)")
     if not np.all(np.isfinite(points)):
         raise DcslamError(f"{path}: refusing to write non-finite points")
     fields = [("x", "f4"), ("y", "f4"), ("z", "f4")]
-    columns = {"x": points[:, 0], "y": points[:, 1], "z": points[:, 2]}
     if normals is not None:
         normals = np.asarray(normals, dtype=np.float32)
         if normals.shape != points.shape:
             raise DcslamError(f"normals has shape {normals.shape}, expected {points.shape}")
         fields += [("nx", "f4"), ("ny", "f4"), ("nz", "f4")]
-        columns.update(nx=normals[:, 0], ny=normals[:, 1], nz=normals[:, 2])
     if colors is not None:
         colors = np.asarray(colors)
         if colors.shape != points.shape:
             raise DcslamError(f"colors has shape {colors.shape}, expected {points.shape}")
-        if colors.dtype != np.uint8:
-            colors = np.clip(np.round(colors.astype(np.float64) * 255), 0, 255).astype(np.uint8)
         fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
-        columns.update(red=colors[:, 0], green=colors[:, 1], blue=colors[:, 2])
-    data = np.empty(len(points), dtype=np.dtype([(name, "<" + t) for name, t in fields]))
-    for name, _ in fields:
-        data[name] = columns[name]
+    layout = np.dtype([(name, "<" + t) for name, t in fields])
     names = {"f4": "float", "u1": "uchar"}
     header = ["ply", "format binary_little_endian 1.0", "comment written by dcslam", f"element vertex {len(points)}"]
     header += [f"property {names[t]} {name}" for name, t in fields] + ["end_header"]
     with atomic_output(path, force=force) as tmp:
         with open(tmp, "wb") as f:
             f.write(("\n".join(header) + "\n").encode("ascii"))
-            f.write(data.tobytes())
+            for start in range(0, len(points), WRITE_CHUNK):
+                part = slice(start, start + WRITE_CHUNK)
+                data = np.empty(len(points[part]), dtype=layout)
+                for k, axis in enumerate("xyz"):
+                    data[axis] = points[part, k]
+                    if normals is not None:
+                        data["n" + axis] = normals[part, k]
+                if colors is not None:
+                    rgb = colors[part]
+                    if rgb.dtype != np.uint8:
+                        rgb = np.clip(np.round(rgb.astype(np.float64) * 255), 0, 255).astype(np.uint8)
+                    for k, channel in enumerate(("red", "green", "blue")):
+                        data[channel] = rgb[:, k]
+                f.write(memoryview(data).cast("B"))
     return Path(path)
 
 

@@ -9,11 +9,9 @@ the archive is cleared, closed or collected (``tempfile.TemporaryFile``).
 """
 from __future__ import annotations
 
-import math
 import tempfile
 from dataclasses import fields
 
-import numpy as np
 import torch
 
 from dcslam.errors import DcslamError
@@ -52,31 +50,38 @@ class MapArchive:
         layout = []
         for f in fields(pm):
             column = getattr(pm, f.name).detach()
-            self._file.write(column.cpu().contiguous().numpy().tobytes())
+            self._file.write(memoryview(column.cpu().contiguous().numpy()).cast("B"))
             layout.append((f.name, column.dtype, tuple(column.shape[1:])))
         self.nbytes = self._file.tell()
         self._kind = type(pm)
         self._parts.append((offset, len(pm), tuple(layout)))
         self._points += len(pm)
 
-    def read(self):
-        """Every archived point, detached, on the CPU, in append order -> the appended class (:class:`PointMap`)
-        or None when empty."""
+    def read(self, then=None):
+        """Every archived point, detached, on the CPU, in append order, followed by the points of ``then`` (a map of
+        the appended class, any device) when given -> the appended class (:class:`PointMap`) or None when empty.
+        Each field is allocated once at its final size and read into in place: reading back a long drive's map
+        costs the map's memory, not twice or thrice it."""
         if not self._parts:
             return None
-        columns: dict[str, list[torch.Tensor]] = {name: [] for name, _, _ in self._parts[0][2]}
-        for offset, n, layout in self._parts:
+        layout = self._parts[0][2]
+        if any(part[2] != layout for part in self._parts):
+            raise DcslamError(f"map archive {self._file.name}: parts of different dtypes or shapes")
+        extra = 0 if then is None else len(then)
+        columns = {name: torch.empty((self._points + extra, *tail), dtype=dtype) for name, dtype, tail in layout}
+        row = 0
+        for offset, n, _ in self._parts:
             self._file.seek(offset)
-            for name, dtype, tail in layout:
-                shape = (n, *tail)
-                kind = torch.empty(0, dtype=dtype).numpy().dtype
-                nbytes = math.prod(shape) * kind.itemsize
-                raw = self._file.read(nbytes)
-                if len(raw) != nbytes:
+            for name, _, _ in layout:
+                target = memoryview(columns[name][row:row + n].numpy()).cast("B")
+                if self._file.readinto(target) != len(target):
                     raise DcslamError(f"map archive {self._file.name}: truncated (the temporary file was changed "
                                       "outside dcslam); run the SLAM again")
-                columns[name].append(torch.from_numpy(np.frombuffer(raw, dtype=kind).reshape(shape).copy()))
-        return self._kind(**{name: torch.cat(parts) for name, parts in columns.items()})
+            row += n
+        if extra:
+            for name in columns:
+                columns[name][row:].copy_(getattr(then, name).detach())
+        return self._kind(**columns)
 
     def clear(self) -> None:
         """Forget every point and delete the file."""

@@ -370,7 +370,7 @@ class MapperBase:
         """The archived points and the local map (detached, on the CPU); the map itself without a window."""
         if self.map is None or len(self.archived) == 0:
             return self.map
-        return self.archived.read().cat(self.map.detach().to("cpu"))
+        return self.archived.read(then=self.map)
 
     def model(self, T_world_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> ModelView | None:
         """The map rendered into a camera (what frame-to-model odometry aligns to); None while the map is empty."""

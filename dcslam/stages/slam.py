@@ -150,7 +150,7 @@ def run(ws: Workspace, config: SlamStageConfig, *, force: bool = False) -> list[
 def _run_drives(config: SlamStageConfig, layer, paths: list[Path], out_dir: Path,
                 force: bool) -> list[SlamDriveResult]:
     """SLAM over the drive files ``paths`` with depth from ``layer``, into ``out_dir`` (its lock held)."""
-    from dcslam.allocator import fix_mmap_threshold
+    from dcslam.allocator import fix_allocator
 
     jobs = []
     for path in paths:
@@ -162,9 +162,10 @@ def _run_drives(config: SlamStageConfig, layer, paths: list[Path], out_dir: Path
                               f"drop --min-confidence")
         jobs.append((path, source, measured_sources(config, source, path)))
     results = []
-    # a fixed mmap threshold keeps a long run's peak memory flat (glibc's own one lets the heap fragment: +16 % peak
-    # from frame 200 to 1,000); MALLOC_MMAP_THRESHOLD_ in the environment overrides it (dcslam.allocator)
-    fix_mmap_threshold()
+    # glibc's thresholds fixed and one malloc arena keep a long run's peak memory flat (glibc's own settings let the
+    # heap fragment: +16 % peak from frame 200 to 1,000) and stop it faulting the heap's top in again every frame;
+    # glibc's MALLOC_* variables in the environment override them (dcslam.allocator)
+    fix_allocator()
     from dcslam import interrupt
     from dcslam.io.lineage import made_from
 
@@ -411,7 +412,7 @@ def write_outputs(run: DriveRun, out_dir: Path, force: bool = False, made_from: 
         write_tum(files.stage(paths["trajectory"]), timestamps, run.T_world_cam, force=True)
         write_kitti_poses(files.stage(paths["kitti_poses"]), run.T_world_cam, force=True)
         pm = run.map
-        write_ply(files.stage(paths["map"]), pm.points.numpy(), pm.normals.numpy(), pm.colors.clamp(0, 1).numpy(),
+        write_ply(files.stage(paths["map"]), pm.points.numpy(), pm.normals.numpy(), pm.colors.numpy(),   # clipped there
                   force=True)
         write_json_atomic(files.stage(paths["summary"]), record, force=True)
     return paths

@@ -23,6 +23,26 @@ def test_round_trip(tmp_path):
     np.testing.assert_array_equal(c, np.round(colors * 255).astype(np.uint8))
 
 
+@pytest.mark.parametrize("n", [0, 1, 7, 8, 9, 50])
+def test_written_in_pieces_as_in_one(tmp_path, monkeypatch, n):
+    """The file is written WRITE_CHUNK vertices at a time: a cloud of any length (the last piece short, or none at
+    all) gives the bytes a one-piece write gives, colours outside [0, 1] clipped and uint8 colours as they are."""
+    import dcslam.io.ply as ply
+
+    points, normals, colors = _cloud(n, seed=n)
+    colors = colors * 1.4 - 0.2                                     # some below 0, some above 1
+    for rgb in (colors, (colors.clip(0, 1) * 255).astype(np.uint8), None):
+        monkeypatch.setattr(ply, "WRITE_CHUNK", 1 << 16)
+        whole = write_ply(tmp_path / "whole.ply", points, normals, rgb, force=True).read_bytes()
+        monkeypatch.setattr(ply, "WRITE_CHUNK", 8)
+        assert write_ply(tmp_path / "pieces.ply", points, normals, rgb, force=True).read_bytes() == whole
+        p, _, c = read_ply(tmp_path / "pieces.ply")
+        assert len(p) == n
+        if rgb is not None and n:
+            expected = rgb if rgb.dtype == np.uint8 else np.clip(np.round(rgb * 255), 0, 255).astype(np.uint8)
+            np.testing.assert_array_equal(c, expected)
+
+
 def test_points_only_round_trip(tmp_path):
     points, _, _ = _cloud(7)
     p, n, c = read_ply(write_ply(tmp_path / "p.ply", points))

@@ -32,6 +32,30 @@ def test_parts_read_back_exactly_in_append_order(dtype):
         assert torch.equal(getattr(out, f.name), expected), f.name
 
 
+def test_the_local_map_is_read_in_after_the_archive():
+    """``read(then=local)``: the archived points, then the local map's (detached, on the CPU), as concatenating
+    them would give, in one allocation per field."""
+    parts = [_points(n, torch.float32, seed) for seed, n in enumerate((3, 9))]
+    local = _points(4, torch.float32, 7)
+    local = local.with_(points=local.points.clone().requires_grad_())
+    archive = MapArchive()
+    for part in parts:
+        archive.append(part)
+    out = archive.read(then=local)
+    assert not out.points.requires_grad
+    for f in fields(PointMap):
+        expected = torch.cat([getattr(p, f.name).detach() for p in (*parts, local)])
+        assert torch.equal(getattr(out, f.name), expected), f.name
+
+
+def test_parts_of_different_dtypes_are_refused():
+    archive = MapArchive()
+    archive.append(_points(3, torch.float32, 0))
+    archive.append(_points(3, torch.float64, 1))
+    with pytest.raises(DcslamError, match="different dtypes"):
+        archive.read()
+
+
 def test_empty_and_cleared_archives_read_none():
     archive = MapArchive()
     assert archive.read() is None and len(archive) == 0
