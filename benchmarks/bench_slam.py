@@ -46,7 +46,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from slam_drives import score  # noqa: E402
 from slam_references import kiss_icp_available, run_kiss_icp, run_open3d  # noqa: E402
 
-from dcslam.allocator import SLAM_MMAP_THRESHOLD, heap_mb, trim  # noqa: E402
+from dcslam.allocator import SLAM_ARENAS, SLAM_MMAP_THRESHOLD, heap_mb, trim  # noqa: E402
 from dcslam.workers import SHARED_CORES  # noqa: E402
 
 COMPLETERS = {"ip-basic": "ip-basic-fast", "planefit": "planefit"}   # row name -> registered completer
@@ -269,7 +269,8 @@ def memory_child(args) -> None:
     from dcslam.slam.scene import StreetScene, kitti_K, lidar_mask, street_trajectory
 
     kind, n = args.memory_child, args.long_frames
-    fixed = fix_allocator(round(args.mmap_threshold_mb * 2 ** 20))   # as `dcslam slam` does
+    nbytes = round(args.mmap_threshold_mb * 2 ** 20)
+    fixed = fix_allocator(nbytes, arenas=SLAM_ARENAS if nbytes > 0 else 0)   # as `dcslam slam` does
     H, W = 375, 1242
     if kind == "dense":                                    # every pixel ray-cast: reduced size to stay affordable
         H, W = round(H * args.dense_scale), round(W * args.dense_scale)
@@ -338,7 +339,8 @@ def main() -> None:
     parser.add_argument("--malloc-trim-every", type=int, default=0,
                         help="memory run: call glibc's malloc_trim(0) after every N frames (0 = never)")
     parser.add_argument("--mmap-threshold-mb", type=float, default=SLAM_MMAP_THRESHOLD / 2 ** 20,
-                        help="memory run: glibc mmap threshold fixed as `dcslam slam` fixes it (0 = glibc's own)")
+                        help="memory run: glibc mmap threshold fixed as `dcslam slam` fixes it, with its trim "
+                             "threshold and one arena (0 = glibc's own settings, all three)")
     parser.add_argument("--probe-trim", action="store_true",
                         help="memory run: at each mark, also the RSS after malloc_trim(0) (how much malloc held free)")
     parser.add_argument("--memory-child", choices=("sparse", "dense"), help=argparse.SUPPRESS)

@@ -57,17 +57,21 @@ def test_the_environment_variable_wins():
 
 # A 3 MB block (under the 4 MB threshold: from the heap, at its top) allocated and freed: does the heap keep the
 # memory (the arena as large as with the block in it) or give it back to the system?
+# (mallinfo2 bound once, before the block: nothing between malloc and free may take heap memory above the block)
 TRIM_PROBE = """
 import ctypes, sys
-from dcslam.allocator import fix_allocator, heap_mb
+from dcslam.allocator import _MallInfo2, fix_allocator
 libc = ctypes.CDLL("libc.so.6")
 libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
 libc.free.argtypes = [ctypes.c_void_p]
+libc.mallinfo2.restype = _MallInfo2
+mallinfo2 = libc.mallinfo2
 fixed = fix_allocator(trim_bytes=0 if sys.argv[1] == "no-trim" else 32 << 20)
+mallinfo2()
 block = libc.malloc(3 << 20)
-held = heap_mb()[0]
+held = mallinfo2().arena
 libc.free(block)
-print(fixed, heap_mb()[0] > held - 1)
+print(fixed, mallinfo2().arena > held - (1 << 20))
 """
 
 
@@ -115,11 +119,12 @@ import ctypes, sys, threading
 from dcslam.allocator import fix_allocator
 libc = ctypes.CDLL("libc.so.6")
 libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, [ctypes.c_size_t]
-libc.malloc_usable_size.restype, libc.malloc_usable_size.argtypes = ctypes.c_size_t, [ctypes.c_void_p]
 fix_allocator(arenas=1 if sys.argv[1] == "one" else 0)
 main = libc.malloc(64)
 seen = []
-threading.Thread(target=lambda: seen.append(libc.malloc(64))).start()
+thread = threading.Thread(target=lambda: seen.append(libc.malloc(64)))
+thread.start()
+thread.join()
 # a block of a thread arena lies in that arena's own mapping, far (>= 1 MB aligned heaps) from the main heap
 print(abs(seen[0] - main) < (64 << 20))
 """
