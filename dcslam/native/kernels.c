@@ -543,6 +543,10 @@ static __thread uint32_t stamp = 0;
 static __thread Centre *centres = NULL;
 static __thread Cover *covers = NULL;
 static __thread size_t n_centres = 0, n_covers = 0;
+/* One bit per pixel of the window, set where this call covered it: the covered pixels are read off it in raster
+ * order without reading every pixel's entry (sparse depth, drive 1000 of bench_slam.py, profiled: 3.0 -> 2.6 ms a call). */
+static __thread uint64_t *covered = NULL;
+static __thread size_t n_covered = 0;
 
 /* Growth by half again, and every page written at once: memory the kernels read before writing would otherwise be
  * the kernel's shared zero page, and each first write to it a copy-on-write fault that, with a second thread of the
@@ -585,8 +589,11 @@ static void *grow(size_t bytes, size_t capacity) {
         const size_t n_pad = (size_t)(Hp * Wp), n_out = (size_t)(height * width), cap = (size_t)capacity;        \
         centres = entries(centres, &n_centres, n_pad, sizeof(Centre), cap);                                      \
         covers = entries(covers, &n_covers, n_out, sizeof(Cover), cap);                                          \
+        const size_t words = (n_out + 63) / 64;                                                                  \
+        covered = entries(covered, &n_covered, words, sizeof(uint64_t), (cap + 63) / 64);                        \
         int64_t *out = grow(2 * (n_out + 1) * sizeof(int64_t), 2 * (cap + 1) * sizeof(int64_t));                \
-        if (!centres || !covers || !out) return -1;                                                              \
+        if (!centres || !covers || !covered || !out) return -1;                                                  \
+        memset(covered, 0, words * sizeof(uint64_t));                                                            \
         if (++stamp == 0) {                                                                                      \
             memset(centres, 0, n_centres * sizeof(Centre)); memset(covers, 0, n_covers * sizeof(Cover)); stamp = 1; \
         }                                                                                                        \
@@ -614,17 +621,22 @@ static void *grow(size_t bytes, size_t capacity) {
                 for (int64_t kx = 0; kx < side; kx++) {                                                          \
                     const int64_t u = cc - 2 * splat + kx;                                                       \
                     if (u < 0 || u >= width) continue;                                                           \
-                    Cover *p = covers + v * width + u;                                                           \
+                    const int64_t k = v * width + u;                                                             \
+                    Cover *p = covers + k;                                                                       \
                     const uint32_t r = (uint32_t)(ky * side + kx);                                               \
                     if (p->stamp != now || zc < p->z || (zc == p->z && r > p->rank)) {                           \
                         p->stamp = now; p->z = zc; p->rank = r; p->shown = c->owner;                             \
+                        covered[k >> 6] |= (uint64_t)1 << (k & 63);                                              \
                     }                                                                                            \
                 }                                                                                                \
             }                                                                                                    \
         }                                                                                                        \
         int64_t count = 0;                                                                                       \
-        for (size_t k = 0; k < n_out; k++) {   /* without a branch: a covered pixel is unpredictable */          \
-            out[2 * count] = (int64_t)k; out[2 * count + 1] = covers[k].shown; count += covers[k].stamp == now;  \
+        for (size_t w = 0; w < words; w++) {   /* the set bits, lowest first: raster order */                    \
+            for (uint64_t bits = covered[w]; bits; bits &= bits - 1) {                                           \
+                const size_t k = w * 64 + (size_t)__builtin_ctzll(bits);                                         \
+                out[2 * count] = (int64_t)k; out[2 * count + 1] = covers[k].shown; count++;                      \
+            }                                                                                                    \
         }                                                                                                        \
         kept = out; kept_count = count;                                                                          \
         return count;                                                                                            \
