@@ -544,7 +544,8 @@ static __thread Centre *centres = NULL;
 static __thread Cover *covers = NULL;
 static __thread size_t n_centres = 0, n_covers = 0;
 /* One bit per pixel of the window, set where this call covered it: the covered pixels are read off it in raster
- * order without reading every pixel's entry (sparse depth, drive 1000 of bench_slam.py, profiled: 3.0 -> 2.6 ms a call). */
+ * order without reading every pixel's entry (sparse depth, drive 1000 of bench_slam.py, profiled: 3.0 -> 2.6 ms
+ * a call). */
 static __thread uint64_t *covered = NULL;
 static __thread size_t n_covered = 0;
 
