@@ -174,22 +174,23 @@ def fastest(repeats: list[dict], what: str) -> dict:
             "peak_rss_mb": max(r["peak_rss_mb"] for r in repeats)}
 
 
+def frames_per_cpu_s(runs: list[dict]) -> float:
+    """All the runs' frames over all their CPU seconds."""
+    return sum(r["frames"] for r in runs) / sum(r["cpu_s"] for r in runs)
+
+
 def sparse_ratios(results: dict[tuple[str, str], list[dict]], system: str) -> str:
     """``system``'s frames per CPU-second on sparse depth over KISS-ICP's, over all drives and drive by drive, each
     drive's with KISS-ICP's ATE there (over all drives the ratio hides a drive KISS-ICP loses)."""
     ours, peer = results[system, "sparse"], results["KISS-ICP", "velodyne 360"]
-
-    def fps(runs: list[dict]) -> float:
-        return sum(r["frames"] for r in runs) / sum(r["cpu_s"] for r in runs)
-
-    each = [f"{fps([a]) / fps([b]):.2f} on {a['drive']} (KISS-ICP ATE {b['ate_m']:.3f} m)"
+    each = [f"{frames_per_cpu_s([a]) / frames_per_cpu_s([b]):.2f} on {a['drive']} (KISS-ICP ATE {b['ate_m']:.3f} m)"
             for a, b in zip(ours, peer)]
-    return f"{fps(ours) / fps(peer):.2f} over all drives; " + ", ".join(each)
+    return f"{frames_per_cpu_s(ours) / frames_per_cpu_s(peer):.2f} over all drives; " + ", ".join(each)
 
 
 def _each(runs: list[dict], key: str, spec: str) -> str:
     """The drives' values of ``key`` (``fps``: frames per CPU-second) formatted by ``spec``, comma separated."""
-    return ", ".join(format(r["frames"] / r["cpu_s"] if key == "fps" else r[key], spec) for r in runs)
+    return ", ".join(format(frames_per_cpu_s([r]) if key == "fps" else r[key], spec) for r in runs)
 
 
 def side_by_side(args) -> None:
@@ -225,7 +226,7 @@ def side_by_side(args) -> None:
     fps = {}
     for (system, depth), runs in sorted(results.items(), key=lambda item: "dOK".index(item[0][0][0])):
         frames = sum(r["frames"] for r in runs)
-        fps[system, depth] = frames / sum(r["cpu_s"] for r in runs)
+        fps[system, depth] = frames_per_cpu_s(runs)
         label = {"ip-basic": "IP-Basic of sparse", "planefit": "planefit of sparse"}.get(depth, depth)
         print(f"| {system} | {label} | {fps[system, depth]:.2f} ({_each(runs, 'fps', '.1f')}) | "
               f"{_each(runs, 'ate_m', '.3f')} | {_each(runs, 'drift_pct', '.2f')} | "
