@@ -50,6 +50,7 @@ from dcslam.allocator import SLAM_ARENAS, SLAM_MMAP_THRESHOLD, heap_mb, trim  # 
 from dcslam.workers import SHARED_CORES  # noqa: E402
 
 COMPLETERS = {"ip-basic": "ip-basic-fast", "planefit": "planefit"}   # row name -> registered completer
+SPARSE_TARGET, COMPLETED_TARGET = 1.5, 8.0   # x KISS-ICP's frames per CPU-second; frames per CPU-second
 ONE_THREAD = "dcslam, one thread"                 # the row without the prefetch thread, and its child's name
 CHILD = {ONE_THREAD: "dcslam1"}
 DEPTHS = ("sparse", "dense", *COMPLETERS)
@@ -183,9 +184,16 @@ def sparse_ratios(results: dict[tuple[str, str], list[dict]], system: str) -> st
     """``system``'s frames per CPU-second on sparse depth over KISS-ICP's, over all drives and drive by drive, each
     drive's with KISS-ICP's ATE there (over all drives the ratio hides a drive KISS-ICP loses)."""
     ours, peer = results[system, "sparse"], results["KISS-ICP", "velodyne 360"]
-    each = [f"{frames_per_cpu_s([a]) / frames_per_cpu_s([b]):.2f} on {a['drive']} (KISS-ICP ATE {b['ate_m']:.3f} m)"
-            for a, b in zip(ours, peer)]
-    return f"{frames_per_cpu_s(ours) / frames_per_cpu_s(peer):.2f} over all drives; " + ", ".join(each)
+    each = [f"{against(frames_per_cpu_s([a]) / frames_per_cpu_s([b]), SPARSE_TARGET)} on {a['drive']} "
+            f"(KISS-ICP ATE {b['ate_m']:.3f} m)" for a, b in zip(ours, peer)]
+    return f"{against(frames_per_cpu_s(ours) / frames_per_cpu_s(peer), SPARSE_TARGET)} over all drives; " + \
+        ", ".join(each)
+
+
+def against(value: float, target: float) -> str:
+    """``value`` with whether it reaches ``target``: the table says so itself, the script's exit status does not
+    (a benchmark reports, it does not gate)."""
+    return f"{value:.2f} ({'meets' if value >= target else 'BELOW'} {target:g})"
 
 
 def _each(runs: list[dict], key: str, spec: str) -> str:
@@ -236,11 +244,12 @@ def side_by_side(args) -> None:
           f"{platform.processor() or platform.machine()})")
     for system in ("dcslam", ONE_THREAD):
         if kiss:
-            print(f"{system} sparse / KISS-ICP frames per CPU-s: {sparse_ratios(results, system)} (target >= 1.5; "
-                  f"a KISS-ICP that diverges iterates to its cap and runs slower: read each drive's ratio beside "
-                  f"KISS-ICP's ATE on it)")
-        print(f"{system} on IP-Basic's completion: {fps[system, 'ip-basic']:.2f} frames per CPU-s (target >= 8), "
-              f"on planefit's {fps[system, 'planefit']:.2f}", flush=True)
+            print(f"{system} sparse / KISS-ICP frames per CPU-s: {sparse_ratios(results, system)} (a KISS-ICP that "
+                  f"diverges iterates to its cap and runs slower: read each drive's ratio beside KISS-ICP's ATE on "
+                  f"it)")
+        print(f"{system} frames per CPU-s on IP-Basic's completion: "
+              f"{against(fps[system, 'ip-basic'], COMPLETED_TARGET)}, on planefit's "
+              f"{against(fps[system, 'planefit'], COMPLETED_TARGET)}", flush=True)
 
 
 def _rss_mb() -> float:
