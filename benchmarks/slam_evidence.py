@@ -65,6 +65,15 @@ def _measured(source: str) -> str | None:
     return measured_kind(source if is_depth_kind(source) else Path(source))
 
 
+def measured_depth(record: dict) -> bool:
+    """Whether a run's depth input was measured (``dense``, ``exact``: a drive depth kind), not completed, as
+    ``dcslam slam`` tells them apart when the companion is suspect."""
+    from dcslam.io.drive import is_depth_kind
+
+    source = str(record.get("settings", {}).get("source", ""))
+    return is_depth_kind(source)
+
+
 def companion_layer(layer: str, record: dict) -> str | None:
     """The layer folder of the run's measured depth kind (None: a sparse input, its own evidence)."""
     from dcslam.io.drive import is_depth_kind
@@ -220,7 +229,8 @@ def verdicts(runs: dict, rules: HealthRules | None, evidence: EvidenceRules | No
 
             companion = companions.run(kind, drive, record)
             health = merge(own if rules is None else health,
-                           companion_verdict(SimpleNamespace(T_world_cam=run["T"]), companion, kind, evidence))
+                           companion_verdict(SimpleNamespace(T_world_cam=run["T"]), companion, kind, evidence,
+                                             measured=measured_depth(record)))
         elif evidence is not None and kind is not None:
             companion = runs.get((kind, drive))
             if companion is None:
@@ -228,7 +238,8 @@ def verdicts(runs: dict, rules: HealthRules | None, evidence: EvidenceRules | No
             else:
                 c_health = (companion["record"]["health"] if rules is None
                             else rejudge(companion["record"]["health"], rules))
-                health = merge(health, judge(run["T"], companion["T"], c_health, kind, evidence))
+                health = merge(health, judge(run["T"], companion["T"], c_health, kind, evidence,
+                                             measured=measured_depth(record)))
                 verdict = health["evidence"]["verdict"]
         source, beams = layer_input(layer)
         stored = health.get("evidence") or {}

@@ -19,7 +19,7 @@ def report(results: list[slam.SlamDriveResult]) -> None:
         sources = f", ICP sources {used['kind']}" if used.get("mode") == "measured" else ""
         said = evidence_line(h)
         if not h["suspect"] and said:  # completed depth no companion vouches for is not simply ok
-            verdict = f"ok, {said}" if h["evidence"]["verdict"] == "agrees" else f"UNVERIFIED ({said})"
+            verdict = f"ok, {said}" if h["evidence"]["verdict"] in ("agrees", "own") else f"UNVERIFIED ({said})"
         summary(f"{r.drive}: {s['frames']} frames, {s['points']} points, {s['seconds_per_frame']:.2f} s/frame, "
                 f"final drift {s['translation_error_m']['final']:.3f} m{sources}, steps {h['accepted']} accepted / "
                 f"{h['degraded']} degraded / {h['rejected']} rejected, {verdict} -> {r.written['trajectory'].parent}")

@@ -200,11 +200,12 @@ def frame_preparer(slam, K, device: str, confidence: ConfidenceUse) -> Callable[
     return prepare
 
 
-def companion_verdict(main: DriveRun, companion: DriveRun, kind: str, rules=None) -> dict:
+def companion_verdict(main: DriveRun, companion: DriveRun, kind: str, rules=None, measured: bool = False) -> dict:
     """The evidence verdict of ``main`` against ``companion``, a run with the same settings and frames on the
     measured depth kind ``kind`` behind ``main``'s input (:func:`dcslam.slam.evidence.judge` under ``rules``, an
-    :class:`~dcslam.slam.evidence.EvidenceRules`; None: the defaults), with the companion's final error against the
-    ground truth, as run and road-corrected, and its seconds.
+    :class:`~dcslam.slam.evidence.EvidenceRules`; None: the defaults; ``measured``: ``main``'s depth was measured,
+    not completed), with the companion's final error against the ground truth, as run and road-corrected, and its
+    seconds.
 
     When its health rules fit the road (``max_road_drift_m`` above 0), the companion's trajectory is road-corrected
     (:func:`dcslam.slam.road.road_corrected`: its pitch, roll and height from the road planes of its own frames) and
@@ -223,7 +224,7 @@ def companion_verdict(main: DriveRun, companion: DriveRun, kind: str, rules=None
     else:
         T = companion.T_world_cam
     verdict = judge(main.T_world_cam, T, summarise(companion.reports, health_rules, companion.frame_interval_s()), kind,
-                    rules or EvidenceRules(), road_corrected=corrected)
+                    rules or EvidenceRules(), road_corrected=corrected, measured=measured)
     final, fixed = (float(np.linalg.norm(t[-1, :3, 3] - companion.T_gt[-1, :3, 3])) for t in (companion.T_world_cam, T))
     return {**verdict, "companion_final_error_m": round(final, 4), "companion_corrected_error_m": round(fixed, 4),
             "companion_seconds": round(companion.seconds, 3)}

@@ -9,7 +9,8 @@ the main run must stay within that companion's trajectory plus the companion's o
 
 :func:`judge` compares the two: the main run *departs* when it ends further from the companion than
 ``max(floor_m, sigmas * companion drift_sigma_m)``; the evidence is *unbounded* (and the run suspect: nothing
-independent vouches for it) when the companion is itself suspect; :func:`unavailable` records a run for which no
+independent vouches for it) when the companion is itself suspect, unless the run's depth was measured (``dense``,
+``exact``), which its own steps then judge, as they judge a sparse input; :func:`unavailable` records a run for which no
 companion could be made (a layer that does not say what it was predicted from) or that was not asked for.
 :func:`merge` folds the verdict into a health summary so that every reader of ``health.suspect`` and
 ``health.reasons`` follows. The SLAM stage hands :func:`judge` the companion's road-corrected trajectory
@@ -55,10 +56,16 @@ def position_gaps(T_main: np.ndarray, T_companion: np.ndarray) -> np.ndarray:
 
 
 def judge(T_main: np.ndarray, T_companion: np.ndarray, companion_health: dict, companion: str,
-          rules: EvidenceRules = EvidenceRules(), road_corrected: bool = False) -> dict:
+          rules: EvidenceRules = EvidenceRules(), road_corrected: bool = False, measured: bool = False) -> dict:
     """The evidence verdict of a run against its companion (``companion``: the measured depth kind it ran on;
     ``companion_health``: its :func:`dcslam.slam.health.summarise`; ``road_corrected``: ``T_companion`` is its
-    road-corrected trajectory, said so in the reason).
+    road-corrected trajectory, said so in the reason; ``measured``: the run's depth was measured, not completed,
+    e.g. ``dense`` or ``exact``).
+
+    A suspect companion bounds nothing. A completion is then ``unbounded`` (suspect): its own steps do not see the
+    errors of a completion that is wrong in a consistent way, which is why it has a companion. Measured depth is
+    then judged by its own steps, the evidence a sparse input has (``own``, not suspect on this account): those
+    steps' checks were calibrated on measured depth (docs/slam.md, "Independent evidence for completed depth").
 
     The gap that counts is the one at the last frame both have: the question, as for every figure of the health
     verdict, is how far the run *ends* from the truth (a gap beyond the bound that closes again is not counted; the
@@ -84,6 +91,9 @@ def judge(T_main: np.ndarray, T_companion: np.ndarray, companion_health: dict, c
               "bound_m": round(bound, 4), "companion_sigma_m": round(sigma, 4),
               "companion_reasons": [str(r) for r in companion_health.get("reasons", [])]}
     if companion_health.get("suspect"):
+        if measured:   # the companion's reasons are in its record
+            return {"verdict": "own", "suspect": False, **record, "reason": None,
+                    "note": f"judged by its own steps, as measured depth: {name} is itself suspect"}
         why = "; ".join(record["companion_reasons"]) or "suspect"
         return {"verdict": "unbounded", "suspect": True, **record,
                 "reason": f"no evidence bounds the drift ({name} is itself suspect: {why})"}
@@ -139,6 +149,8 @@ def evidence_line(health: dict) -> str | None:
                 f"(bound {ev['bound_m']:.2f} m)")
     if ev["verdict"] == "unavailable":
         return ev["reason"]
+    if ev["verdict"] == "own" and ev.get("companion"):
+        return ev["note"]
     if ev["verdict"] == "off":
         return "no evidence bounds the drift (--evidence none)"
     return None

@@ -318,10 +318,12 @@ def companion_evidence(drive_path: Path, source: str | Path, config: SlamStageCo
 
     args = (drive_path, kind, config, torch.get_num_threads(), f"{drive_path.stem} companion {kind}")
 
+    measured = named is not None and is_depth_kind(named)    # dense or exact depth: not a completion
+
     def verdict(main: DriveRun, companion: DriveRun) -> dict:
         if keep is not None:
             keep(companion)
-        return companion_verdict(main, companion, kind)
+        return companion_verdict(main, companion, kind, measured=measured)
 
     if not companion_beside(config, min(config.frames or frames, frames) * height * width):
         yield lambda main: verdict(main, companion_run(*args))

@@ -62,6 +62,23 @@ def test_a_suspect_companion_bounds_nothing():
                                  "13 of 29 steps rejected)")
 
 
+def test_measured_depth_with_a_suspect_companion_is_judged_by_its_own_steps():
+    """Dense or exact depth is no completion: when its sparse companion is suspect, its own steps judge it, as they
+    judge a sparse run; a completion stays unbounded whatever its own steps say."""
+    companion = {"suspect": True, "reasons": ["8 of 29 steps degraded (more than 10%)"], "drift_sigma_m": 0.07}
+    verdict = judge(_trajectory([0, 1]), _trajectory([0, 3]), companion, "sparse", measured=True)
+    assert verdict["verdict"] == "own" and not verdict["suspect"] and verdict["reason"] is None
+    assert verdict["gap_m"] == pytest.approx(2.0) and verdict["companion"] == "sparse"
+    assert verdict["note"] == "judged by its own steps, as measured depth: the sparse companion is itself suspect"
+    assert verdict["companion_reasons"] == companion["reasons"]
+    fine = merge({"suspect": False, "reasons": []}, verdict)
+    assert not fine["suspect"] and evidence_line(fine) == verdict["note"]
+    weak = merge({"suspect": True, "reasons": ["1 of 29 steps rejected"], "rejected": 1}, verdict)
+    assert weak["suspect"] and weak["reasons"] == ["1 of 29 steps rejected"] and "overruled" not in weak
+    completed = judge(_trajectory([0, 1]), _trajectory([0, 1]), companion, "sparse")
+    assert completed["verdict"] == "unbounded" and merge({"suspect": False, "reasons": []}, completed)["suspect"]
+
+
 def test_without_a_companion_the_summary_says_so_and_stays_unflagged():
     none = unavailable("layer.h5 does not say which measured depth it was made from")
     health = merge({"suspect": False, "reasons": []}, none)

@@ -111,3 +111,21 @@ def test_the_companion_waits_for_the_main_run_where_no_core_is_free_or_the_run_i
     monkeypatch.setattr("os.getloadavg", lambda: (0.2, 0.2, 0.2))
     monkeypatch.setattr("os.cpu_count", lambda: 1)
     assert not slam.companion_beside(config, long)
+
+
+def test_the_stage_tells_measured_depth_from_a_completion(scaled, tmp_path, monkeypatch):
+    """Dense and exact depth are judged as measured depth (their own steps, when the companion is suspect); a layer
+    as a completion."""
+    import dcslam.slam.drive as drive_module
+
+    ws, path, layer = scaled
+    seen, real = [], drive_module.companion_verdict
+
+    def spy(main, companion, kind, rules=None, measured=False):
+        seen.append(measured)
+        return real(main, companion, kind, rules, measured)
+
+    monkeypatch.setattr(drive_module, "companion_verdict", spy)
+    dense = _run(ws, path, "dense", tmp_path / "dense", "auto")
+    _run(ws, path, layer, tmp_path / "layer", "auto")
+    assert seen == [True, False] and dense.summary["health"]["evidence"]["companion"] == "sparse"
