@@ -121,3 +121,28 @@ def test_bench_slam_gives_the_sparse_ratio_drive_by_drive_beside_kiss_icps_error
         "(KISS-ICP ATE 13.500 m)"
     results["dcslam", "sparse"][0]["cpu_s"] = 1.5        # 20 frames per CPU-second against KISS-ICP's 15
     assert bench.sparse_ratios(results, "dcslam").split("; ")[1].startswith("1.33 (BELOW 1.5) on d0")
+
+
+def test_slam_evidence_judges_measured_depth_by_its_own_steps_when_its_companion_is_suspect():
+    """``slam_evidence.py`` judges stored runs as ``dcslam slam`` does: a dense run whose sparse companion is suspect
+    is judged by its own steps, a completion (a layer) beside the same companion is unbounded."""
+    import numpy as np
+
+    spec = importlib.util.spec_from_file_location("slam_evidence", BENCHMARKS / "slam_evidence.py")
+    evidence = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(evidence)
+    T = np.tile(np.eye(4), (3, 1, 1))
+
+    def run(source, suspect=False):
+        health = {"suspect": suspect, "reasons": ["1 of 2 steps rejected"] if suspect else [], "accepted": 2,
+                  "degraded": 0, "rejected": int(suspect), "drift_sigma_m": 0.01}
+        return {"record": {"health": health, "settings": {"source": source},
+                           "translation_error_m": {"final": 0.1, "max": 0.1}}, "T": T}
+
+    runs = {("sparse", "d"): run("sparse", suspect=True), ("dense", "d"): run("dense"),
+            ("ip-basic-fast-sparse64", "d"): run("not-a-file.h5")}
+    assert evidence.measured_depth(runs[("dense", "d")]["record"])
+    assert not evidence.measured_depth(runs[("ip-basic-fast-sparse64", "d")]["record"])
+    rows = {r["layer"]: r for r in evidence.verdicts(runs, None, evidence.EvidenceRules())}
+    assert rows["dense"]["evidence"] == "own" and not rows["dense"]["flagged"]
+    assert rows["ip-basic-fast-sparse64"]["evidence"] == "unbounded" and rows["ip-basic-fast-sparse64"]["flagged"]
