@@ -71,10 +71,11 @@ def judge(T_main: np.ndarray, T_companion: np.ndarray, companion_health: dict, c
     verdict, is how far the run *ends* from the truth (a gap beyond the bound that closes again is not counted; the
     largest gap is kept beside it).
 
-    Returns ``{"verdict": "agrees" | "departs" | "unbounded", "companion": str, "road_corrected": bool,
+    Returns ``{"verdict": "agrees" | "departs" | "unbounded" | "own", "companion": str, "road_corrected": bool,
     "suspect": bool, "reason": str | None, "gap_m": the last frame's gap, "gap_frame": the first frame from which
     the gap stays beyond the bound (the last frame when it ends within it), "max_gap_m": the largest gap,
-    "max_gap_frame": its frame, "bound_m": the bound, "companion_sigma_m": s, "companion_reasons": [str]}``.
+    "max_gap_frame": its frame, "bound_m": the bound, "companion_sigma_m": s, "companion_reasons": [str]}``, and
+    ``"note"`` with ``own``.
     """
     gaps = position_gaps(T_main, T_companion)
     sigma = float(companion_health.get("drift_sigma_m", 0.0))
