@@ -7,11 +7,13 @@ depth, on the annotated dense depth and on two completions of the sparse depth (
 by ``dcslam.complete_drive`` before the runs); the same on one thread (``dcslam, one thread``: no prefetch thread,
 as the workers of ``dcslam reproduce --jobs N`` run when they fill the cores, and as KISS-ICP's and Open3D's rows
 run); Open3D's point-to-plane ICP frame to frame on the same depths; KISS-ICP 1.3.0 on the 360 degree Velodyne scans
-(the ``bench`` extra; a line says so when it is missing). ``--open3d-completed`` chooses which completions Open3D
+(the ``bench`` extra; a line says so when it is missing) on one thread, and as its users run it (``KISS-ICP, its
+threads``: its registration on every core, its default), the peer of dcslam's default row. ``--open3d-completed`` chooses which completions Open3D
 also runs on (default IP-Basic only), and ``--open3d-completed-drives`` over how many drives (default the first:
 Open3D takes 3-5 CPU-seconds a frame there).
 
-Each run is a child process of its own with one torch / OpenMP thread (KISS-ICP's registration on one thread too),
+Each run is a child process of its own with one torch / OpenMP thread (KISS-ICP's registration on one thread too,
+but in its own-threads row),
 so that its peak memory (``VmHWM``, the imports included) is its own; the runs go drive by drive, dcslam and its
 peers interleaved, ``--jobs`` at a time (default 2), so that a change of the machine's load touches every row
 alike. A run's CPU time is its process time from opening its input to its trajectory: reading and decoding the
@@ -52,7 +54,8 @@ from dcslam.workers import SHARED_CORES  # noqa: E402
 COMPLETERS = {"ip-basic": "ip-basic-fast", "planefit": "planefit"}   # row name -> registered completer
 SPARSE_TARGET, COMPLETED_TARGET = 1.5, 8.0   # x KISS-ICP's frames per CPU-second; frames per CPU-second
 ONE_THREAD = "dcslam, one thread"                 # the row without the prefetch thread, and its child's name
-CHILD = {ONE_THREAD: "dcslam1"}
+KISS_THREADS = "KISS-ICP, its threads"            # KISS-ICP's registration on every core (its default)
+CHILD = {ONE_THREAD: "dcslam1", KISS_THREADS: "kissicp0"}
 DEPTHS = ("sparse", "dense", *COMPLETERS)
 
 
@@ -127,7 +130,7 @@ def _child(system: str, drive: Path, source: str, frames: int, kitti_root: Path)
             return run_open3d(drive, depth, n)
     else:
         def run(n: int):
-            return run_kiss_icp(kitti_root, drive, n, threads=1)
+            return run_kiss_icp(kitti_root, drive, n, threads=0 if system == "kissicp0" else 1)
     run(2)
     rss_warm = _peak_rss_mb()
     result = run(frames)
@@ -155,7 +158,7 @@ def _tasks(args, paths: list[Path], layers: dict, kiss: bool) -> list[tuple[str,
     for k, drive in enumerate(paths):
         peers = ("sparse", "dense", *(args.open3d_completed if k < args.open3d_completed_drives else ()))
         rows = [(system, d) for system in ("dcslam", ONE_THREAD) for d in DEPTHS] + [("Open3D", d) for d in peers]
-        rows += [("KISS-ICP", "velodyne 360")] if kiss else []
+        rows += [("KISS-ICP", "velodyne 360"), (KISS_THREADS, "velodyne 360")] if kiss else []
         tasks += [(system, depth, drive, str(layers[drive.stem, depth]) if depth in COMPLETERS else depth)
                   for system, depth in rows]
     return tasks
@@ -180,10 +183,10 @@ def frames_per_cpu_s(runs: list[dict]) -> float:
     return sum(r["frames"] for r in runs) / sum(r["cpu_s"] for r in runs)
 
 
-def sparse_ratios(results: dict[tuple[str, str], list[dict]], system: str) -> str:
-    """``system``'s frames per CPU-second on sparse depth over KISS-ICP's, over all drives and drive by drive, each
-    drive's with KISS-ICP's ATE there (over all drives the ratio hides a drive KISS-ICP loses)."""
-    ours, peer = results[system, "sparse"], results["KISS-ICP", "velodyne 360"]
+def sparse_ratios(results: dict[tuple[str, str], list[dict]], system: str, peer: str = "KISS-ICP") -> str:
+    """``system``'s frames per CPU-second on sparse depth over the KISS-ICP row ``peer``'s, over all drives and drive
+    by drive, each drive's with KISS-ICP's ATE there (over all drives the ratio hides a drive KISS-ICP loses)."""
+    ours, peer = results[system, "sparse"], results[peer, "velodyne 360"]
     each = [f"{against(frames_per_cpu_s([a]) / frames_per_cpu_s([b]), SPARSE_TARGET)} on {a['drive']} "
             f"(KISS-ICP ATE {b['ate_m']:.3f} m)" for a, b in zip(ours, peer)]
     return f"{against(frames_per_cpu_s(ours) / frames_per_cpu_s(peer), SPARSE_TARGET)} over all drives; " + \
@@ -211,7 +214,8 @@ def side_by_side(args) -> None:
     layers = _layers(paths)
     kiss = kiss_icp_available() and (kitti_root / "raw").is_dir()
     print(f"side by side: {len(paths)} drives x {args.frames} frames at full size ({', '.join(p.stem for p in paths)})"
-          f"; dcslam defaults {SlamSettings().to_dict()}; one thread per run, each in its own process, "
+          f"; dcslam defaults {SlamSettings().to_dict()}; one compute thread per run (dcslam's prefetch thread and "
+          f"KISS-ICP's own-threads row aside), each in its own process, "
           f"{args.jobs} at a time"
           + (f", every run {args.repeat} times round by round, its fastest counted" if args.repeat > 1 else "")
           + f"; load average {load_before[0]:.1f} before", flush=True)
@@ -242,11 +246,12 @@ def side_by_side(args) -> None:
     load_after = os.getloadavg()
     print(f"\nload average {load_before[0]:.1f} before, {load_after[0]:.1f} after ({os.cpu_count()} cores, "
           f"{platform.processor() or platform.machine()})")
-    for system in ("dcslam", ONE_THREAD):
+    for system, peer in (("dcslam", KISS_THREADS), ("dcslam", "KISS-ICP"), (ONE_THREAD, "KISS-ICP")):
         if kiss:
-            print(f"{system} sparse / KISS-ICP frames per CPU-s: {sparse_ratios(results, system)} (a KISS-ICP that "
-                  f"diverges iterates to its cap and runs slower: read each drive's ratio beside KISS-ICP's ATE on "
-                  f"it)")
+            print(f"{system} sparse / {peer} frames per CPU-s: {sparse_ratios(results, system, peer)} (a KISS-ICP "
+                  f"that diverges iterates to its cap and runs slower: read each drive's ratio beside KISS-ICP's ATE "
+                  f"on it)")
+    for system in ("dcslam", ONE_THREAD):
         print(f"{system} frames per CPU-s on IP-Basic's completion: "
               f"{against(fps[system, 'ip-basic'], COMPLETED_TARGET)}, on planefit's "
               f"{against(fps[system, 'planefit'], COMPLETED_TARGET)}", flush=True)
@@ -354,7 +359,7 @@ def main() -> None:
     parser.add_argument("--probe-trim", action="store_true",
                         help="memory run: at each mark, also the RSS after malloc_trim(0) (how much malloc held free)")
     parser.add_argument("--memory-child", choices=("sparse", "dense"), help=argparse.SUPPRESS)
-    parser.add_argument("--child", choices=("dcslam", "dcslam1", "open3d", "kissicp"), help=argparse.SUPPRESS)
+    parser.add_argument("--child", choices=("dcslam", "dcslam1", "open3d", "kissicp", "kissicp0"), help=argparse.SUPPRESS)
     parser.add_argument("--child-drive", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--child-source", help=argparse.SUPPRESS)
     parser.add_argument("--child-kitti", type=Path, help=argparse.SUPPRESS)

@@ -123,6 +123,30 @@ def test_bench_slam_gives_the_sparse_ratio_drive_by_drive_beside_kiss_icps_error
     assert bench.sparse_ratios(results, "dcslam").split("; ")[1].startswith("1.33 (BELOW 1.5) on d0")
 
 
+def test_bench_slam_runs_kiss_icp_on_its_own_threads_too_as_the_peer_of_dcslams_default():
+    """dcslam's default row runs a prefetch thread beside its frame loop; its like-for-like peer is KISS-ICP as its
+    users run it (registration on every core, ``threads=0``), a row of its own beside the one-thread one, and the
+    ratio names the row it was taken against."""
+    from argparse import Namespace
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("bench_slam", BENCHMARKS / "bench_slam.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    args = Namespace(open3d_completed=[], open3d_completed_drives=0)
+    drive = Path("d0.h5")
+    layers = {("d0", row): Path(f"d0.{row}.h5") for row in bench.COMPLETERS}
+    kiss = [t[0] for t in bench._tasks(args, [drive], layers, kiss=True) if t[1] == "velodyne 360"]
+    assert kiss == ["KISS-ICP", bench.KISS_THREADS]
+    assert not [t for t in bench._tasks(args, [drive], layers, kiss=False) if t[1] == "velodyne 360"]
+    assert bench.CHILD[bench.KISS_THREADS] == "kissicp0"
+    results = {("dcslam", "sparse"): [{"frames": 30, "cpu_s": 1.0, "drive": "d0"}],
+               ("KISS-ICP", "velodyne 360"): [{"frames": 30, "cpu_s": 2.0, "ate_m": 1.2, "drive": "d0"}],
+               (bench.KISS_THREADS, "velodyne 360"): [{"frames": 30, "cpu_s": 1.2, "ate_m": 1.2, "drive": "d0"}]}
+    assert bench.sparse_ratios(results, "dcslam", bench.KISS_THREADS).startswith("1.20 (BELOW 1.5) over all drives")
+    assert bench.sparse_ratios(results, "dcslam").startswith("2.00 (meets 1.5) over all drives")
+
+
 def test_slam_evidence_judges_measured_depth_by_its_own_steps_when_its_companion_is_suspect():
     """``slam_evidence.py`` judges stored runs as ``dcslam slam`` does: a dense run whose sparse companion is suspect
     is judged by its own steps, a completion (a layer) beside the same companion is unbounded."""
