@@ -8,18 +8,18 @@ by ``dcslam.complete_drive`` before the runs); the same on one thread (``dcslam,
 as the workers of ``dcslam reproduce --jobs N`` run when they fill the cores, and as KISS-ICP's and Open3D's rows
 run); Open3D's point-to-plane ICP frame to frame on the same depths; KISS-ICP 1.3.0 on the 360 degree Velodyne scans
 (the ``bench`` extra; a line says so when it is missing) on one thread, and as its users run it (``KISS-ICP, its
-threads``: its registration on every core, its default), the peer of dcslam's default row. ``--open3d-completed`` chooses which completions Open3D
-also runs on (default IP-Basic only), and ``--open3d-completed-drives`` over how many drives (default the first:
-Open3D takes 3-5 CPU-seconds a frame there).
+threads``: its registration on every core, its default), the peer of dcslam's default row. ``--open3d-completed``
+chooses which completions Open3D also runs on (default IP-Basic only), and ``--open3d-completed-drives`` over how
+many drives (default the first: Open3D takes 3-5 CPU-seconds a frame there).
 
 Each run is a child process of its own with one torch / OpenMP thread (KISS-ICP's registration on one thread too,
-but in its own-threads row),
-so that its peak memory (``VmHWM``, the imports included) is its own; the runs go drive by drive, dcslam and its
-peers interleaved, ``--jobs`` at a time (default 2), so that a change of the machine's load touches every row
-alike. A run's CPU time is its process time from opening its input to its trajectory: reading and decoding the
-frames are counted for every row. Over the drives: frames per CPU-second = all frames / all CPU-seconds (and
-each drive's), ATE (RMSE of the position errors, no alignment: every run starts at the true first pose) and drift
-(final position error / distance travelled) of each drive, peak RSS the largest. ``--json`` writes every run's figures.
+but in its own-threads row), so that its peak memory (``VmHWM``, the imports included) is its own; the runs go drive
+by drive, dcslam and its peers interleaved, ``--jobs`` at a time (default 2), so that a change of the machine's load
+touches every row alike. A run's CPU time is its process time from opening its input to its trajectory: reading and
+decoding the frames are counted for every row. Over the drives: frames per CPU-second = all frames / all CPU-seconds
+(and each drive's), wall seconds of each drive (the repeat counted: what a second thread buys), ATE (RMSE of the
+position errors, no alignment: every run starts at the true first pose) and drift (final position error / distance
+travelled) of each drive, peak RSS the largest. ``--json`` writes every run's figures.
 
 Drives: ``--drives DIR`` (prepared drive files, the KITTI root beside them for the Velodyne scans), else
 ``$DCSLAM_WORKSPACE/drives``, else 2 drives of ``--frames`` frames generated into a temporary folder (seed 2027).
@@ -232,16 +232,16 @@ def side_by_side(args) -> None:
         results.setdefault((system, depth), []).append({**run, "drive": drive.stem})
     if args.json:
         args.json.write_text(json.dumps({f"{s} {d}": runs for (s, d), runs in results.items()}, indent=1))
-    print("\n| system | depth | frames per CPU-s: all (per drive) | ATE m per drive | drift % per drive "
-          "| peak RSS MB | frames |", flush=True)
-    print("| --- | --- | --- | --- | --- | --- | --- |")
+    print("\n| system | depth | frames per CPU-s: all (per drive) | wall s per drive | ATE m per drive "
+          "| drift % per drive | peak RSS MB | frames |", flush=True)
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     fps = {}
     for (system, depth), runs in sorted(results.items(), key=lambda item: "dOK".index(item[0][0][0])):
         frames = sum(r["frames"] for r in runs)
         fps[system, depth] = frames_per_cpu_s(runs)
         label = {"ip-basic": "IP-Basic of sparse", "planefit": "planefit of sparse"}.get(depth, depth)
         print(f"| {system} | {label} | {fps[system, depth]:.2f} ({_each(runs, 'fps', '.1f')}) | "
-              f"{_each(runs, 'ate_m', '.3f')} | {_each(runs, 'drift_pct', '.2f')} | "
+              f"{_each(runs, 'wall_s', '.2f')} | {_each(runs, 'ate_m', '.3f')} | {_each(runs, 'drift_pct', '.2f')} | "
               f"{max(r['peak_rss_mb'] for r in runs):.0f} | {frames} |", flush=True)
     load_after = os.getloadavg()
     print(f"\nload average {load_before[0]:.1f} before, {load_after[0]:.1f} after ({os.cpu_count()} cores, "
@@ -359,7 +359,8 @@ def main() -> None:
     parser.add_argument("--probe-trim", action="store_true",
                         help="memory run: at each mark, also the RSS after malloc_trim(0) (how much malloc held free)")
     parser.add_argument("--memory-child", choices=("sparse", "dense"), help=argparse.SUPPRESS)
-    parser.add_argument("--child", choices=("dcslam", "dcslam1", "open3d", "kissicp", "kissicp0"), help=argparse.SUPPRESS)
+    parser.add_argument("--child", choices=("dcslam", "dcslam1", "open3d", "kissicp", "kissicp0"),
+                        help=argparse.SUPPRESS)
     parser.add_argument("--child-drive", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--child-source", help=argparse.SUPPRESS)
     parser.add_argument("--child-kitti", type=Path, help=argparse.SUPPRESS)
