@@ -130,7 +130,7 @@ def _child(system: str, drive: Path, source: str, frames: int, kitti_root: Path)
             return run_open3d(drive, depth, n)
     else:
         def run(n: int):
-            return run_kiss_icp(kitti_root, drive, n, threads=0 if system == "kissicp0" else 1)
+            return run_kiss_icp(kitti_root, drive, n, threads=0 if system == CHILD[KISS_THREADS] else 1)
     run(2)
     rss_warm = _peak_rss_mb()
     result = run(frames)
@@ -359,8 +359,7 @@ def main() -> None:
     parser.add_argument("--probe-trim", action="store_true",
                         help="memory run: at each mark, also the RSS after malloc_trim(0) (how much malloc held free)")
     parser.add_argument("--memory-child", choices=("sparse", "dense"), help=argparse.SUPPRESS)
-    parser.add_argument("--child", choices=("dcslam", "dcslam1", "open3d", "kissicp", "kissicp0"),
-                        help=argparse.SUPPRESS)
+    parser.add_argument("--child", choices=("dcslam", "open3d", "kissicp", *CHILD.values()), help=argparse.SUPPRESS)
     parser.add_argument("--child-drive", type=Path, help=argparse.SUPPRESS)
     parser.add_argument("--child-source", help=argparse.SUPPRESS)
     parser.add_argument("--child-kitti", type=Path, help=argparse.SUPPRESS)
