@@ -9,7 +9,10 @@ PROFILE    ?= quick
 WORKSPACE  ?= workspace
 KITTI_ROOT ?=
 JOBS       ?= $(shell nproc 2>/dev/null || echo 1)
-REPRO_ARGS  = --profile $(PROFILE) --workspace $(WORKSPACE) --jobs $(JOBS) $(if $(KITTI_ROOT),--kitti $(KITTI_ROOT))
+# SEEDS: training seeds per trained run (default: the profile's); e.g. make reproduce-beams SEEDS=2
+SEEDS      ?=
+REPRO_ARGS  = --profile $(PROFILE) --workspace $(WORKSPACE) --jobs $(JOBS) $(if $(KITTI_ROOT),--kitti $(KITTI_ROOT)) \
+              $(if $(SEEDS),--seeds $(SEEDS))
 
 .PHONY: setup python-env system-libs test test-cluster bench clean reproduce-table-5-2 reproduce-table-5-1 reproduce-beams reproduce-surface demo-icl results pages
 
