@@ -2,9 +2,9 @@
 this machine by a short probe.
 
 The probe runs a sample of Table 5.2's stages at a profile's settings (its image scale, learning rate, SLAM settings,
-filters): synth, prepare-kitti, one training of each loss (mse, chamfer, pose) and one of the surface experiment's
-network on planefit's scaffold (:data:`SCAFFOLD_PROBE`: it computes the fill of every frame it trains on and
-predicts), a prediction by each trained run and by IP-Basic and by each other classical completer
+filters): synth, prepare-kitti, one training of each loss (mse, chamfer, pose) and one of each network that corrects a
+classical fill (:data:`FILL_PROBES`: the surface experiment's on planefit's scaffold and the beams experiment's on
+the nearest-neighbour fill; each computes the fill of every frame it trains on and predicts), a prediction by each trained run and by IP-Basic and by each other classical completer
 (:data:`PROBE_COMPLETERS`), a filter, SLAM of sparse, annotated dense and predicted depth and over a whole drive,
 and the tables; twice, on 3 generated drives of :data:`PROBE_SIZES` frames with depth (training and SLAM on as many
 frames; the larger sample runs SLAM on one more completion, so that the tables score more runs), each in a temporary
@@ -41,6 +41,10 @@ PROBE_COMPLETERS = ("ip-basic-multiscale", "scanline", "planefit")
 # the surface experiment's network on planefit's scaffold, trained at the profile's scale, epochs and frames, and its
 # prediction: kinds train-mse+planefit and predict+planefit
 SCAFFOLD_PROBE = "scaffold-planefit"
+# the beams experiment's networks correct the nearest-neighbour fill of their input: kinds train-mse+nearest and
+# predict+nearest (its 64-beam input only: the probe prepares no other beam count)
+NEAREST_PROBE = "fill-nearest"
+FILL_PROBES = (SCAFFOLD_PROBE, NEAREST_PROBE)
 # imported before the samples run: otherwise the first stage of a kind in the first sample pays them (1-2 s of CPU),
 # which the fit would take for a fixed part of every stage of that kind
 WARM_IMPORTS = ("torch", "matplotlib.pyplot", "dcslam.depth.train", "dcslam.depth.train_pose", "dcslam.depth.chamfer",
@@ -79,7 +83,7 @@ def probe_profile(profile, frames: int):
 
 def _wanted(profile, layers: tuple[str, ...]) -> Callable[[str], bool]:
     names = set(PROBE_STAGES) | {f"filter-mse-dense+{name}" for name in list(profile.filters)[:1]} \
-        | {f"predict-{name}" for name in (*PROBE_COMPLETERS, SCAFFOLD_PROBE)} | {f"train-{SCAFFOLD_PROBE}"}
+        | {f"predict-{name}" for name in (*PROBE_COMPLETERS, *FILL_PROBES)} | {f"train-{name}" for name in FILL_PROBES}
     prefixes = tuple(f"slam-{layer}-" for layer in layers) + tuple(f"slam-long-{layer}-" for layer in
                                                                      profile.long_layers if layer in layers)
     return lambda name: name in names or name.startswith(prefixes)
@@ -104,29 +108,39 @@ def sample(profile, frames: int, layers: tuple[str, ...], root: Path,
             made = ws.predictions / name
             pipe.run(Stage(f"predict-{name}", predict.run, predict.PredictConfig(model=name),
                            outputs=lambda made=made: [made], kind="predict"))
-        _scaffold(pipe, small)
+        for name in FILL_PROBES:
+            _fill_network(pipe, small, name)
         for stage in [s for s in pipe.ran if s.name.startswith("train-")]:  # measured again: the first training of
             (ws.root / ".reproduce" / f"{stage.name}.json").unlink()      # a process also sets torch up (~1 s)
             pipe.run(stage)
     return measure(root)
 
 
-def _scaffold(pipe: _Sample, small) -> None:
-    """Train the surface experiment's scaffold network (:data:`SCAFFOLD_PROBE`) at the sample's settings on its
-    train and val drives, and predict the test drive with it."""
+def _fill_recipe(name: str) -> dict:
+    """The training options of fill probe ``name`` (:data:`FILL_PROBES`): its experiment's recipe, on the sparse
+    input alone."""
+    from dcslam.stages.experiments.beams import FILL_RECIPE
+    from dcslam.stages.experiments.surface import SCAFFOLD_RECIPE
+
+    recipe = SCAFFOLD_RECIPE if name == SCAFFOLD_PROBE else FILL_RECIPE
+    return {key: value for key, value in recipe.items() if key != "input_mix"}
+
+
+def _fill_network(pipe: _Sample, small, name: str) -> None:
+    """Train fill probe ``name`` (a SparseConvNet on its experiment's fill: :func:`_fill_recipe`) at the sample's
+    settings on its train and val drives, and predict the test drive with it."""
     from dcslam.io.drive import read_splits
     from dcslam.stages import predict
     from dcslam.stages.experiments.beams import train_stage
     from dcslam.stages.experiments.common import train_options
-    from dcslam.stages.experiments.surface import SCAFFOLD_RECIPE
 
     ws = pipe.ws
     splits = read_splits(ws.drives / "splits.json")
-    learn = [ws.drives / f"{name}.h5" for name in splits["train"] + splits["val"]]
-    config = (train_options(model="sparse-conv") | small.train | SCAFFOLD_RECIPE).build(name=SCAFFOLD_PROBE, seed=0)
-    pipe.run(train_stage(ws, config, learn, 0))
-    made = ws.predictions / SCAFFOLD_PROBE
-    pipe.run(Stage(f"predict-{SCAFFOLD_PROBE}", predict.run, predict.PredictConfig(run=SCAFFOLD_PROBE, output=made),
+    learn = [ws.drives / f"{drive}.h5" for drive in splits["train"] + splits["val"]]
+    options = train_options(model="sparse-conv") | small.train | {"model": "sparse-conv", **_fill_recipe(name)}
+    pipe.run(train_stage(ws, options.build(name=name, seed=0), learn, 0))
+    made = ws.predictions / name
+    pipe.run(Stage(f"predict-{name}", predict.run, predict.PredictConfig(run=name, output=made),
                    outputs=lambda: [made], kind="predict"))
 
 

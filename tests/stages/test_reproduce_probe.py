@@ -6,7 +6,8 @@ import pytest
 
 from dcslam.stages.experiments.table_5_2 import PROFILES
 from dcslam.stages.reproduce_cost import CALIBRATION, read_costs
-from dcslam.stages.reproduce_probe import PROBE_SIZES, PROBE_SLAM, SCAFFOLD_PROBE, _wanted, fit, probe_profile
+from dcslam.stages.reproduce_probe import (FILL_PROBES, NEAREST_PROBE, PROBE_SIZES, PROBE_SLAM, SCAFFOLD_PROBE,
+                                          _fill_recipe, _wanted, fit, probe_profile)
 
 
 def test_fit_is_the_line_through_the_two_samples_per_stage():
@@ -42,7 +43,23 @@ def test_probe_profile_shrinks_the_counts_and_keeps_the_settings():
     assert not wanted("slam-mse-sparse-2011_09_26_drive_1002_sync") and not wanted("train-chamfer-1")
     assert not wanted("slam-mse-dense+edges-2011_09_26_drive_1002_sync") and not wanted("predict-pose")
     assert wanted("predict-planefit") and wanted("predict-scanline") and wanted("predict-ip-basic-fast")
-    assert wanted(f"train-{SCAFFOLD_PROBE}") and wanted(f"predict-{SCAFFOLD_PROBE}")  # the network on a fill
+    assert all(wanted(f"train-{name}") and wanted(f"predict-{name}") for name in FILL_PROBES)  # networks on a fill
+
+
+def test_each_fill_probe_trains_its_experiments_recipe_on_the_sparse_input():
+    from dcslam.stages.experiments.beams import PROFILES as BEAMS
+    from dcslam.stages.experiments.surface import SCAFFOLD_RECIPE
+    from dcslam.stages.reproduce_cost import run_fills
+
+    assert set(FILL_PROBES) == {SCAFFOLD_PROBE, NEAREST_PROBE}
+    scaffold, nearest = _fill_recipe(SCAFFOLD_PROBE), _fill_recipe(NEAREST_PROBE)
+    assert scaffold == SCAFFOLD_RECIPE and "input_mix" not in nearest  # the probe prepares the 64-beam input only
+    beams = BEAMS["quick"].train["sparse-conv"]
+    assert {k: v for k, v in beams.items() if k in nearest} == {k: v for k, v in nearest.items() if k != "fill"}
+    # the kinds the probe's trainings price are the experiments' own
+    fills = run_fills([(f"train-{name}", {"correct_fill": True, **_fill_recipe(name), "name": name})
+                       for name in FILL_PROBES])
+    assert fills == {SCAFFOLD_PROBE: "planefit", NEAREST_PROBE: "nearest"}
 
 
 def test_calibrate_writes_the_fit_the_dry_run_then_estimates_with(cli, tmp_path, monkeypatch):

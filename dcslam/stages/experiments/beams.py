@@ -107,6 +107,8 @@ _QUICK = {"epochs": 2, "max_frames": 31, "scale": 0.5}  # as the Table 5.2 quick
 # confirmed on the seed-11 drives with 2 training seeds; RESULTS.md, "Fill correction")
 _CORRECT = {"correct_fill": True, "input_mix": ["sparse", "sparse", "sparse", "sparse@32", "sparse@16", "sparse@8"],
             "l1_weight": 30.0, "lr": 1e-3, "lr_schedule": "cosine"}
+# that recipe as the cost probe of `dcslam reproduce --calibrate` trains it (its fill named)
+FILL_RECIPE = {**_CORRECT, "fill": "nearest"}
 # nconv fine-tuned through the pose loss: the network's confidence is each pixel's ICP weight, so this
 # loss is the one that can teach the confidence which pixels ICP should trust
 _POSE = {"model": "nconv", "loss": "pose", "init": "nconv"}
