@@ -3,17 +3,18 @@ this machine by a short probe.
 
 The probe runs a sample of Table 5.2's stages at a profile's settings (its image scale, learning rate, SLAM settings,
 filters): synth, prepare-kitti, one training of each loss (mse, chamfer, pose) and one of each network that corrects a
-classical fill (:data:`FILL_PROBES`: the surface experiment's on planefit's scaffold and the beams experiment's on
-the nearest-neighbour fill; each computes the fill of every frame it trains on and predicts), a prediction by each trained run and by IP-Basic and by each other classical completer
-(:data:`PROBE_COMPLETERS`), a filter, SLAM of sparse, annotated dense and predicted depth and over a whole drive,
-and the tables; twice, on 3 generated drives of :data:`PROBE_SIZES` frames with depth (training and SLAM on as many
-frames; the larger sample runs SLAM on one more completion, so that the tables score more runs), each in a temporary
-workspace, with one torch thread. The larger sample runs first and generates the drives; the smaller prepares the
-first frames of the same drives (synth, about half of a sample's CPU, runs once). The trainings are measured on a
-second run, as the first training of a process also sets torch up. Each stage's stamp records its CPU seconds; the
-two samples of each kind give its fixed part per stage (``stage_s``) and its part per unit (``unit_s``) by a line
-through the two (:func:`fit`; synth: per generated frame), written for the profile into
-``<workspace>/.reproduce/calibration.json`` (``reproduce_costs.json``'s layout), which the estimate then uses.
+classical fill (:data:`FILL_PROBES`: the surface experiment's on planefit's scaffold and the beams experiment's on the
+nearest-neighbour fill; each computes the fill of every frame it trains on and predicts), a prediction by each trained
+run and by IP-Basic and by each other classical completer (:data:`PROBE_COMPLETERS`), a filter, SLAM of sparse,
+annotated dense and predicted depth and over a whole drive, and the tables; twice, on 3 generated drives of
+:data:`PROBE_SIZES` frames with depth (training and SLAM on as many frames; the larger sample runs SLAM on one more
+completion, so that the tables score more runs), each in a temporary workspace, with one torch thread. The larger sample
+runs first and generates the drives; the smaller prepares the first frames of the same drives (synth, about half of a
+sample's CPU, runs once). The trainings are measured on a second run, as the first training of a process also sets torch
+up. Each stage's stamp records its CPU seconds; the two samples of each kind give its fixed part per stage (``stage_s``)
+and its part per unit (``unit_s``) by a line through the two (:func:`fit`; synth: per generated frame), written for the
+profile into ``<workspace>/.reproduce/calibration.json`` (``reproduce_costs.json``'s layout), which the estimate then
+uses.
 """
 from __future__ import annotations
 
