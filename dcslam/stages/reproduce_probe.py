@@ -117,29 +117,29 @@ def sample(profile, frames: int, layers: tuple[str, ...], root: Path,
     return measure(root)
 
 
-def _fill_recipe(name: str) -> dict:
-    """The training options of fill probe ``name`` (:data:`FILL_PROBES`): its experiment's recipe, on the sparse
-    input alone."""
+def _fill_config(small, name: str):
+    """The training configuration of fill probe ``name`` (:data:`FILL_PROBES`) at the sample profile ``small``'s
+    settings: its experiment's recipe on the sparse input alone (the probe prepares no other beam count)."""
     from dcslam.stages.experiments.beams import FILL_RECIPE
+    from dcslam.stages.experiments.common import train_options
     from dcslam.stages.experiments.surface import SCAFFOLD_RECIPE
 
-    recipe = SCAFFOLD_RECIPE if name == SCAFFOLD_PROBE else FILL_RECIPE
-    return {key: value for key, value in recipe.items() if key != "input_mix"}
+    recipe = {SCAFFOLD_PROBE: SCAFFOLD_RECIPE, NEAREST_PROBE: FILL_RECIPE}[name]
+    mine = {key: value for key, value in recipe.items() if key != "input_mix"}
+    return (train_options(model="sparse-conv") | small.train | mine).build(name=name, seed=0)
 
 
 def _fill_network(pipe: _Sample, small, name: str) -> None:
-    """Train fill probe ``name`` (a SparseConvNet on its experiment's fill: :func:`_fill_recipe`) at the sample's
-    settings on its train and val drives, and predict the test drive with it."""
+    """Train fill probe ``name`` (:func:`_fill_config`) on the sample's train and val drives, and predict the test
+    drive with it."""
     from dcslam.io.drive import read_splits
     from dcslam.stages import predict
     from dcslam.stages.experiments.beams import train_stage
-    from dcslam.stages.experiments.common import train_options
 
     ws = pipe.ws
     splits = read_splits(ws.drives / "splits.json")
     learn = [ws.drives / f"{drive}.h5" for drive in splits["train"] + splits["val"]]
-    options = train_options(model="sparse-conv") | small.train | {"model": "sparse-conv", **_fill_recipe(name)}
-    pipe.run(train_stage(ws, options.build(name=name, seed=0), learn, 0))
+    pipe.run(train_stage(ws, _fill_config(small, name), learn, 0))
     made = ws.predictions / name
     pipe.run(Stage(f"predict-{name}", predict.run, predict.PredictConfig(run=name, output=made),
                    outputs=lambda: [made], kind="predict"))

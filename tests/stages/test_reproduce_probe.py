@@ -7,7 +7,7 @@ import pytest
 from dcslam.stages.experiments.table_5_2 import PROFILES
 from dcslam.stages.reproduce_cost import CALIBRATION, read_costs
 from dcslam.stages.reproduce_probe import (FILL_PROBES, NEAREST_PROBE, PROBE_SIZES, PROBE_SLAM, SCAFFOLD_PROBE,
-                                          _fill_recipe, _wanted, fit, probe_profile)
+                                          _fill_config, _wanted, fit, probe_profile)
 
 
 def test_fit_is_the_line_through_the_two_samples_per_stage():
@@ -47,19 +47,22 @@ def test_probe_profile_shrinks_the_counts_and_keeps_the_settings():
 
 
 def test_each_fill_probe_trains_its_experiments_recipe_on_the_sparse_input():
+    from dcslam.stages.config import to_dict
     from dcslam.stages.experiments.beams import PROFILES as BEAMS
-    from dcslam.stages.experiments.surface import SCAFFOLD_RECIPE
-    from dcslam.stages.reproduce_cost import run_fills
+    from dcslam.stages.experiments.surface import PROFILES as SURFACE, SCAFFOLD_RUN
+    from dcslam.stages.reproduce_cost import stage_kind
 
-    assert set(FILL_PROBES) == {SCAFFOLD_PROBE, NEAREST_PROBE}
-    scaffold, nearest = _fill_recipe(SCAFFOLD_PROBE), _fill_recipe(NEAREST_PROBE)
-    assert scaffold == SCAFFOLD_RECIPE and "input_mix" not in nearest  # the probe prepares the 64-beam input only
-    beams = BEAMS["quick"].train["sparse-conv"]
-    assert {k: v for k, v in beams.items() if k in nearest} == {k: v for k, v in nearest.items() if k != "fill"}
-    # the kinds the probe's trainings price are the experiments' own
-    fills = run_fills([(f"train-{name}", {"correct_fill": True, **_fill_recipe(name), "name": name})
-                       for name in FILL_PROBES])
-    assert fills == {SCAFFOLD_PROBE: "planefit", NEAREST_PROBE: "nearest"}
+    small = probe_profile(PROFILES["quick"], PROBE_SIZES[1])
+    made = {name: to_dict(_fill_config(small, name)) for name in FILL_PROBES}
+    experiments = {SCAFFOLD_PROBE: SURFACE["study"].train[SCAFFOLD_RUN],
+                   NEAREST_PROBE: BEAMS["quick"].train["sparse-conv"]}
+    for name, config in made.items():
+        recipe = {k: v for k, v in experiments[name].items() if k not in ("input_mix", "epochs", "max_frames", "scale")}
+        assert {k: config[k] for k in recipe} == recipe, name     # the experiment's recipe ...
+        assert config["max_frames"] == PROBE_SIZES[1] and config["input_mix"] == []  # ... at probe size, sparse only
+    # the kinds the probe prices are those the experiments' trainings are priced by
+    assert stage_kind(f"train-{SCAFFOLD_PROBE}", made[SCAFFOLD_PROBE]) == "train-mse+planefit"
+    assert stage_kind(f"train-{NEAREST_PROBE}", made[NEAREST_PROBE]) == "train-mse+nearest"
 
 
 def test_calibrate_writes_the_fit_the_dry_run_then_estimates_with(cli, tmp_path, monkeypatch):

@@ -105,10 +105,9 @@ _QUICK = {"epochs": 2, "max_frames": 31, "scale": 0.5}  # as the Table 5.2 quick
 # to the fill on), lr 1e-3 with a cosine schedule: the recipe that beat the fill and its untrained self at 64, 32, 16
 # and 8 beams, MAE and RMSE, for all three networks in benchmarks/beams_quality.py (chosen on the seed-7 drives,
 # confirmed on the seed-11 drives with 2 training seeds; RESULTS.md, "Fill correction")
-_CORRECT = {"correct_fill": True, "input_mix": ["sparse", "sparse", "sparse", "sparse@32", "sparse@16", "sparse@8"],
-            "l1_weight": 30.0, "lr": 1e-3, "lr_schedule": "cosine"}
-# that recipe as the cost probe of `dcslam reproduce --calibrate` trains it (its fill named)
-FILL_RECIPE = {**_CORRECT, "fill": "nearest"}
+# (also what the cost probe of `dcslam reproduce --calibrate` trains: the fill is the training's default, nearest)
+FILL_RECIPE = {"correct_fill": True, "input_mix": ["sparse", "sparse", "sparse", "sparse@32", "sparse@16", "sparse@8"],
+               "l1_weight": 30.0, "lr": 1e-3, "lr_schedule": "cosine"}
 # nconv fine-tuned through the pose loss: the network's confidence is each pixel's ICP weight, so this
 # loss is the one that can teach the confidence which pixels ICP should trust
 _POSE = {"model": "nconv", "loss": "pose", "init": "nconv"}
@@ -131,8 +130,8 @@ _POSE_QUICK = {"epochs": 1, "max_frames": 16, "scale": 0.5, "lr": 1e-3, "pose_gr
 PROFILES = {
     "quick": BeamsProfile(
         name="quick", drives=8, frames=42, split=(3, 1, 4), slam_frames=30,
-        train={**_corrected({**_QUICK, **_CORRECT}), "nconv": {**_QUICK, **_CORRECT},
-               "nconv-guided": {**_QUICK, **_CORRECT}, "nconv-pose": {**_POSE, **_POSE_QUICK}},
+        train={**_corrected({**_QUICK, **FILL_RECIPE}), "nconv": {**_QUICK, **FILL_RECIPE},
+               "nconv-guided": {**_QUICK, **FILL_RECIPE}, "nconv-pose": {**_POSE, **_POSE_QUICK}},
         description="8 generated drives of 42 frames (3 train / 1 val / 4 test, the drives of the Table 5.2 quick "
                     "profile), 64/32/16/8 beams, SparseConvNet (against the annotated depth, the exact depth, and the "
                     "exact depth with the geometry losses), nconv and nconv-guided each correcting a "
@@ -150,15 +149,15 @@ PROFILES = {
                     "over 2 frames): numbers mean nothing"),
     "thesis": BeamsProfile(
         name="thesis", drives=24, frames=211, slam_frames=30,
-        train={**_corrected({"epochs": 5, "max_frames": 200, **_CORRECT}),
-               "nconv": {"epochs": 5, "max_frames": 200, **_CORRECT},
-               "nconv-guided": {"epochs": 5, "max_frames": 200, **_CORRECT},
+        train={**_corrected({"epochs": 5, "max_frames": 200, **FILL_RECIPE}),
+               "nconv": {"epochs": 5, "max_frames": 200, **FILL_RECIPE},
+               "nconv-guided": {"epochs": 5, "max_frames": 200, **FILL_RECIPE},
                "nconv-pose": {**_POSE, "epochs": 1, "max_frames": 200}},
         description="the thesis's scale: 15 / 4 / 5 drives of 200 frames, full resolution (use a GPU)"),
     "study": BeamsProfile(
         name="study", drives=14, frames=42, split=(5, 1, 8), slam_frames=30, beams=(64, 16, 8), seeds=3,
-        train={**_corrected({**_QUICK, **_CORRECT}), "nconv": {**_QUICK, **_CORRECT},
-               "nconv-guided": {**_QUICK, **_CORRECT}, "nconv-pose": {**_POSE, **_POSE_QUICK}},
+        train={**_corrected({**_QUICK, **FILL_RECIPE}), "nconv": {**_QUICK, **FILL_RECIPE},
+               "nconv-guided": {**_QUICK, **FILL_RECIPE}, "nconv-pose": {**_POSE, **_POSE_QUICK}},
         description="the quick profile's training at a scale whose rows can be told apart: 14 generated drives of "
                     "42 frames (5 train / 1 val / 8 test, the drives of the Table 5.2 study profile), 64/16/8 "
                     "beams, every trained completer with 3 training seeds, SLAM on the first 30 frames of each test "
