@@ -87,6 +87,8 @@ def child(drive: Path, frames: int, out: Path, extra: list[str]) -> dict:
 
 
 def main() -> int:
+    from dcslam.allocator import tuned_environment
+
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--frames", type=int, nargs="+", default=[15, 30, 60, 200])
     parser.add_argument("--workdir", type=Path, help="where the drive and outputs go (default: a temporary folder)")
@@ -105,6 +107,7 @@ def main() -> int:
         write_street_drive(drive, longest)
         print(f"wrote {drive} ({longest} frames, {time.process_time() - cpu:.1f} CPU-s)", flush=True)
     env = dict(os.environ, DCSLAM_PROGRESS="0", OMP_NUM_THREADS="1")
+    env = tuned_environment(env) or env   # glibc's tunables, as the dcslam command starts itself (dcslam.launch)
     load = os.getloadavg()[0]
     print(f"dcslam slam --depth sparse over the analytic street at {WIDTH} x {HEIGHT} (LiDAR-like: every 4th row "
           f"and column), defaults{' but ' + args.slam_args if args.slam_args else ''}, each run a fresh process; "

@@ -48,7 +48,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from slam_drives import score  # noqa: E402
 from slam_references import kiss_icp_available, run_kiss_icp, run_open3d  # noqa: E402
 
-from dcslam.allocator import SLAM_ARENAS, SLAM_MMAP_THRESHOLD, heap_mb, trim  # noqa: E402
+from dcslam.allocator import SLAM_ARENAS, SLAM_MMAP_THRESHOLD, heap_mb, trim, tuned_environment  # noqa: E402
 from dcslam.workers import SHARED_CORES  # noqa: E402
 
 COMPLETERS = {"ip-basic": "ip-basic-fast", "planefit": "planefit"}   # row name -> registered completer
@@ -143,6 +143,8 @@ def _run_child(args, system: str, drive: Path, source: str, kitti_root: Path) ->
     env = dict(os.environ, DCSLAM_PROGRESS="0", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
     if system == "dcslam1":
         env[SHARED_CORES] = "1"                    # no prefetch thread: the frame loop alone
+    if system.startswith("dcslam"):
+        env = tuned_environment(env) or env         # glibc's tunables, as the dcslam command starts itself
     cmd = [sys.executable, __file__, "--child", system, "--child-drive", str(drive), "--child-source", source,
            "--frames", str(args.frames), "--child-kitti", str(kitti_root)]
     done = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, text=True)

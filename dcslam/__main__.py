@@ -1,4 +1,4 @@
-"""`python -m dcslam`: the command line (dcslam.cli)."""
-import dcslam.cli
+"""`python -m dcslam`: the command line (dcslam.launch, then dcslam.cli)."""
+from dcslam.launch import main
 
-dcslam.cli.main()
+main()
