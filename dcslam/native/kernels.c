@@ -553,12 +553,18 @@ static __thread size_t n_covered = 0;
  * the kernel's shared zero page, and each first write to it a copy-on-write fault that, with a second thread of the
  * process running on another core (dcslam slam's prefetch), flushes that core's TLB by an interrupt: measured as a
  * tenth of a sparse SLAM run's CPU time. */
+/* memset called through a volatile pointer: the compiler cannot fold malloc and memset(0) into calloc, which leaves
+ * fresh pages unwritten: the first read maps the shared zero page and the first write then takes a copy-on-write
+ * fault that flushes the TLB of every core running the process (an interrupt on the other core, each time, while a
+ * second thread runs), and a sparse map's z-buffer touches new pages for the first time frame after frame. */
+static void *(*volatile write_bytes)(void *, int, size_t) = memset;
+
 static void *entries(void *array, size_t *size, size_t n, size_t item, size_t capacity) {
     if (n > *size) {
         free(array);
         n = capacity >= n ? capacity : n + n / 2;     /* the caller's bound, else half again */
         array = malloc(n * item);
-        if (array) memset(array, 0, n * item);
+        if (array) write_bytes(array, 0, n * item);   /* written once here (see write_bytes) */
         *size = array ? n : 0;
     }
     return array;
@@ -569,7 +575,7 @@ static void *grow(size_t bytes, size_t capacity) {
         free(scratch);
         bytes = capacity >= bytes ? capacity : bytes + bytes / 2;
         scratch = malloc(bytes);
-        if (scratch) memset(scratch, 0, bytes);
+        if (scratch) write_bytes(scratch, 0, bytes);
         scratch_bytes = scratch ? bytes : 0;
     }
     return scratch;
