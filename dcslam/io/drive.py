@@ -265,6 +265,8 @@ def check_depth(depth: np.ndarray, source: str, first_frame: int = 0) -> np.ndar
     depth = np.asarray(depth)
     if depth.dtype.kind != "f":
         raise DcslamError(f"{source}: depth has dtype {depth.dtype}, expected float32 metres")
+    if depth.size and depth.min() >= 0 and depth.max() < np.inf:   # two passes, no temporaries: the common case
+        return depth
     bad = ~np.isfinite(depth) | (depth < 0)
     if bad.any():
         frames = bad.reshape(-1, *depth.shape[-2:]).any(axis=(1, 2))

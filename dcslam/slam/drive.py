@@ -195,7 +195,9 @@ def frame_preparer(slam, K, device: str, confidence: ConfidenceUse) -> Callable[
             sparse = torch.from_numpy(np.ascontiguousarray(item.sources)).to(device)[None, None]
             source_frame = prepare_frame(sparse, K, None, slam.frame_settings)
         slam.precompute(frame, source_frame)
-        return frame, source_frame, int((item.depth > 0).sum()), int((depth_np > 0).sum())
+        measured = int(np.count_nonzero(item.depth > 0))
+        kept = measured if depth_np is item.depth else int(np.count_nonzero(depth_np > 0))
+        return frame, source_frame, measured, kept
 
     return prepare
 

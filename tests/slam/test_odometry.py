@@ -216,3 +216,53 @@ def test_icp_in_each_dtype_and_on_each_device(device, dtype, association):
         assert result.T_world_cam.dtype == dtype and result.T_world_cam.device.type == device.type
         dt, dr = pose_error(result.T_world_cam.double().cpu(), T[1].double().cpu())
         assert float(dt) < 0.02 and math.degrees(float(dr)) < 0.1, type(solver).__name__
+
+
+def _weak_by_eigh(problem, lin):
+    """What PointToPlane._weak gave before its Cholesky test: the eigenvectors below the floor, by eigh alone."""
+    DD = problem._D[1]
+    values, vectors = torch.linalg.eigh(lin.H.detach() / DD / max(lin.weight or lin.count, 1e-12))
+    return vectors[:, values < problem.hold_below]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_conditioning_check_holds_what_eigh_holds(seed):
+    """Normal equations whose smallest normalised eigenvalue lies anywhere from far below the floor to far above it
+    (through the Cholesky test's margin of twice the floor): the directions held are eigh's, bit for bit, and the
+    test alone answers where every eigenvalue is clearly above."""
+    from dcslam.slam.odometry import PointToPlane, _clear_above
+    from dcslam.slam.solvers import Linearization
+
+    g = torch.Generator().manual_seed(seed)
+    problem = PointToPlane(torch.zeros(10, 3), torch.zeros(10, 3), None, max_distance=1.0, cos_max_angle=0.5,
+                           hold_below=0.0025)
+    problem.scale = 7.5
+    fast = 0
+    for smallest in (1e-5, 1e-3, 0.0024, 0.0026, 0.0049, 0.00501, 0.006, 0.02, 0.5):
+        Q = torch.linalg.qr(torch.randn(6, 6, generator=g, dtype=torch.float64))[0]
+        values = torch.tensor([smallest, 0.03, 0.1, 0.4, 1.0, 2.0], dtype=torch.float64)
+        D = torch.tensor([1, 1, 1, 7.5, 7.5, 7.5], dtype=torch.float64)
+        count = 1234
+        H = (Q * values) @ Q.T * (D[:, None] * D[None, :]) * count
+        lin = Linearization(H, torch.zeros(6, dtype=torch.float64), torch.tensor(0.0), count)
+        weak, _ = problem._weak(lin)
+        expected = _weak_by_eigh(problem, lin)
+        assert weak.shape == expected.shape and torch.equal(weak, expected), smallest
+        fast += _clear_above(H.tolist(), D.tolist(), float(count), 2 * problem.hold_below)
+        if smallest >= 0.006:
+            assert _clear_above(H.tolist(), D.tolist(), float(count), 2 * problem.hold_below), smallest
+        if smallest <= 0.005:
+            assert not _clear_above(H.tolist(), D.tolist(), float(count), 2 * problem.hold_below), smallest
+    assert fast == 4      # 0.00501 and up: just past twice the floor
+
+
+def test_the_conditioning_test_leaves_doubt_to_eigh():
+    from dcslam.slam.odometry import _clear_above
+
+    eye = torch.eye(6, dtype=torch.float64).tolist()
+    assert _clear_above(eye, [1.0] * 6, 1.0, 0.5)
+    assert not _clear_above(eye, [1.0] * 6, 1.0, 1.0)                 # on the floor: not clearly above
+    nan = [row[:] for row in eye]
+    nan[3][3] = math.nan
+    assert not _clear_above(nan, [1.0] * 6, 1.0, 0.5)
+    assert not _clear_above(eye, [1.0, 1.0, 1.0, 0.0, 0.0, 0.0], 1.0, 0.5)
