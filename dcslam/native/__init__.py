@@ -154,6 +154,7 @@ def _signatures() -> dict[str, tuple[list, object]]:
             "voxel_keys": ([p, i64, real, p], None),
             "merge": ([i64, i64, p, i64] + [p] * 17, None),
             "rows_times": ([p, p, i64, p, i32], None),
+            "depth_range": ([p, i64, real, real, p, p], i64),
             "pairs": ([p, p, p, i64, p, p, p, p, real, real, real, real, i64, i64, p, p, real, real, i32, i32,
                        p, p, p, p, p, i32, p], i64),
         }.items()})
@@ -239,6 +240,21 @@ def point_normals(points, idx, shape: tuple[int, int, int], search: int, max_rel
     root = torch.sqrt(square)   # torch's root, as the torch code takes it (MKL's: not always IEEE's)
     finish(points.data_ptr(), ok.data_ptr(), root.data_ptr(), N, normal.data_ptr())
     return normal, ok
+
+
+def depth_range(depth, lo: float, hi: float):
+    """The native range gate of :func:`dcslam.slam.frame.prepare_frame`, or None where it does not apply (no library;
+    not float32 / float64 on the CPU; a gradient): the caller runs the torch code. Shape: depth (...) -> (in range
+    (...) bool: ``lo <= depth <= hi``, the depth with the others at +0 (...), how many are in range)."""
+    import torch
+
+    if not _plain(depth) or (kernel := _kernel("depth_range", depth.dtype)) is None:
+        return None
+    depth = depth.detach().contiguous()
+    inside, kept = torch.empty(depth.shape, dtype=torch.bool), torch.empty_like(depth)
+    cast = _in_dtype(depth.dtype)
+    count = kernel(depth.data_ptr(), depth.numel(), cast(lo), cast(hi), inside.data_ptr(), kept.data_ptr())
+    return inside, kept, int(count)
 
 
 def voxel_keys(points, voxel_size: float):

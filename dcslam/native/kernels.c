@@ -669,5 +669,22 @@ void dcslam_take_pairs(int64_t *pix, int64_t *hit, int64_t count) {
     for (int64_t i = 0; i < count && i < kept_count; i++) { pix[i] = kept[2 * i]; hit[i] = kept[2 * i + 1]; }
 }
 
+/* dcslam.slam.frame.prepare_frame's range gate in one pass: in[i] = lo <= d[i] <= hi (NaN: out of range), out[i] =
+ * d[i] where in range, else +0 (the torch code: two comparisons, their and, torch.where with a zero); returns how
+ * many are in range (the torch code's in_range.sum()). lo and hi as torch compares them: in the depth's type. */
+#define DEPTH_RANGE(NAME, T)                                                                                      \
+    int64_t NAME(const T *d, int64_t N, T lo, T hi, unsigned char *in, T *out) {                                 \
+        int64_t count = 0;                                                                                       \
+        for (int64_t i = 0; i < N; i++) {                                                                        \
+            const T v = d[i];                                                                                    \
+            const int k = (v >= lo) & (v <= hi);                                                                 \
+            in[i] = (unsigned char)k; out[i] = k ? v : (T)0; count += k;                                         \
+        }                                                                                                        \
+        return count;                                                                                            \
+    }
+
+DEPTH_RANGE(dcslam_depth_range_f32, float)
+DEPTH_RANGE(dcslam_depth_range_f64, double)
+
 /* The version of this file's interface: the loader refuses a library of another. */
 int dcslam_native_version(void) { return 2; }

@@ -10,6 +10,7 @@ from dcslam.constants import MIN_DEPTH_M
 from dcslam.errors import DcslamError
 from dcslam.geometry.camera import backproject, backproject_pixels, check_depth, check_K
 from dcslam.geometry.normals import choose, point_normals, vertex_normals
+from dcslam.native import depth_range
 
 
 #: Normal search (pixels) for sparse depth: far enough to reach the next LiDAR scan line at 64 beams (a shorter
@@ -166,12 +167,18 @@ def prepare_frame(depth: torch.Tensor, K: torch.Tensor, rgb: torch.Tensor | None
     if B != 1:
         raise DcslamError(f"one frame at a time: depth has batch {B}")
     K = check_K(K)[0].to(depth.dtype)
-    in_range = (depth >= settings.min_depth) & (depth <= settings.max_depth)
-    depth = choose(in_range, depth, torch.zeros((), dtype=depth.dtype, device=depth.device))
+    gated = depth_range(depth, settings.min_depth, settings.max_depth)    # the same in one pass, where it applies
+    if gated is None:
+        in_range = (depth >= settings.min_depth) & (depth <= settings.max_depth)
+        depth = choose(in_range, depth, torch.zeros((), dtype=depth.dtype, device=depth.device))
+        count = None
+    else:
+        in_range, depth, count = gated
     search = settings.normal_search
     if search <= 0:
         # the float32 mean of the mask, as an exact count divided once: no float image of it
-        search = normal_search_for(float(torch.tensor(int(in_range.sum()), dtype=torch.float32) / in_range.numel()))
+        count = int(in_range.sum()) if count is None else count
+        search = normal_search_for(float(torch.tensor(count, dtype=torch.float32) / in_range.numel()))
     pixels = None
     if search == 1 and H > 1 and W > 1:   # dense: one pass over the pixel grid
         vertex, normal, ok = _grid_surfels(depth, in_range, K, settings.max_relative_gap)

@@ -410,3 +410,27 @@ def test_the_zbuffer_writes_its_memory_when_it_takes_it():
     malloc and memset(0) folded into calloc by the compiler they cost 2,440."""
     done = subprocess.run([sys.executable, "-c", FAULTS], capture_output=True, text=True, check=True)
     assert int(done.stdout.strip()) < 600, done.stdout
+
+
+@needs_compiler
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("bounds", ["defaults", (0.7, 1.3)])   # 0.1 rounds up in float32, 0.7 and 1.3 down
+def test_depth_range_is_the_torch_codes(dtype, bounds):
+    """prepare_frame's range gate: depths at the bounds as the depth's type holds them and one step either side,
+    zeros, negative zero, NaN and infinities, random depths: the same mask, the same bits kept and the same count."""
+    from dcslam.native import depth_range
+    from dcslam.slam.frame import FrameSettings
+
+    lo, hi = (FrameSettings().min_depth, FrameSettings().max_depth) if bounds == "defaults" else bounds
+    g = torch.Generator().manual_seed(7)
+    edges = torch.tensor([lo, hi], dtype=dtype)
+    special = torch.cat([edges, torch.nextafter(edges, edges - 1), torch.nextafter(edges, edges + 1),
+                         torch.tensor([0.0, -0.0, float("nan"), float("inf"), -float("inf"), -1.0], dtype=dtype)])
+    depth = torch.cat([special, (torch.rand(5038, generator=g, dtype=torch.float64) * 100).to(dtype)])
+    depth = depth[torch.randperm(depth.numel(), generator=g)].reshape(1, 1, 50, -1)
+    inside, kept, count = depth_range(depth, lo, hi)
+    expected = (depth >= lo) & (depth <= hi)
+    assert torch.equal(inside, expected) and count == int(expected.sum())
+    zeroed = torch.where(expected, depth, torch.zeros((), dtype=dtype))
+    assert torch.equal(_bits(kept), _bits(zeroed))
+    assert depth_range(depth.requires_grad_(), lo, hi) is None              # a gradient: the torch code's
