@@ -48,7 +48,8 @@ def surfel_radius(frame: Frame, points_cam: torch.Tensor, normals_cam: torch.Ten
     """Keller's surfel radius sqrt(2) z / f / |cos(view angle)| (cosine clamped at 0.2). Shape: (F, 3) -> (F,)."""
     f = 0.5 * (frame.K[0, 0].abs() + frame.K[1, 1].abs())  # fy < 0 for ICL-NUIM
     z = points_cam[:, 2]
-    ray = points_cam / points_cam.norm(dim=1, keepdim=True).clamp_min(1e-9)
+    # vector_norm: the op Tensor.norm runs, without torch.functional.norm's Python around it (the same bits)
+    ray = points_cam / torch.linalg.vector_norm(points_cam, dim=1, keepdim=True).clamp_min(1e-9)
     cos = (ray * normals_cam).sum(1).abs().clamp_min(0.2)
     return math.sqrt(2) * z / f / cos
 
@@ -164,7 +165,7 @@ class PointFusion(MapperBase):
         v_i = v_cam.detach().index_select(0, i)
         z_frame = v_i[:, 2]
         gate = torch.clamp(self.max_relative_distance * z_frame, min=self.max_distance)
-        dist = (p_cam.index_select(0, j) - v_i).norm(dim=1)
+        dist = torch.linalg.vector_norm(p_cam.index_select(0, j) - v_i, dim=1)
         agree = (pm.normals.detach().index_select(0, j) * n_w.detach().index_select(0, i)).sum(1) > self.cos_max_angle
         ok = (dist < gate) & agree
         free_space = torch.zeros(len(pm), dtype=torch.bool, device=device)

@@ -114,7 +114,7 @@ class PointToPlane:
         self.associate, self.max_distance, self.cos_max_angle = associate, max_distance, cos_max_angle
         self.kernel = kernel if kernel is not None else Quadratic()
         self.hold_below = hold_below
-        self.scale = float(source.detach().norm(dim=1).mean()) if source.shape[0] else 1.0
+        self.scale = float(torch.linalg.vector_norm(source.detach(), dim=1).mean()) if source.shape[0] else 1.0
         self.pairs = None
         self._usable = None if weights is None else weights.detach() > 0   # the weight gate, once per problem
         self._D: tuple[torch.Tensor, torch.Tensor, list] | None = None      # _hold's scaling, once per problem
@@ -404,7 +404,7 @@ class ICPOdometry:
     def _conditioning(lin: Linearization, source: torch.Tensor) -> float:
         """Smallest eigenvalue of J^T W J per unit weight, rotations scaled by the mean range: how well the pairs
         that count constrain each direction of motion (about 1/3 for a well-spread scene, 0 for a plane)."""
-        scale = float(source.detach().norm(dim=1).mean())
+        scale = float(torch.linalg.vector_norm(source.detach(), dim=1).mean())
         D = torch.tensor([1, 1, 1, scale, scale, scale], dtype=torch.float64, device=lin.H.device)
         total = lin.weight if lin.weight is not None else lin.count
         Hn = lin.H.detach() / (D[:, None] * D[None, :]) / max(total, 1e-12)
