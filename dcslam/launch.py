@@ -23,9 +23,12 @@ def restart_tuned() -> None:
     argv = getattr(sys, "orig_argv", None)  # Python >= 3.10: the interpreter's options included
     if environ is None or not argv:
         return
+    for stream in (sys.stdout, sys.stderr):   # nothing is written before this; a closed stream is no matter
+        try:
+            stream.flush()
+        except (AttributeError, OSError, ValueError):
+            pass
     try:
-        sys.stdout.flush()
-        sys.stderr.flush()
         os.execve(sys.executable, [sys.executable, *argv[1:]], environ)
     except OSError:
         return

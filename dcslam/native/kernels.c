@@ -551,12 +551,10 @@ static __thread size_t n_covered = 0;
 
 /* Growth by half again, and every page written at once: memory the kernels read before writing would otherwise be
  * the kernel's shared zero page, and each first write to it a copy-on-write fault that, with a second thread of the
- * process running on another core (dcslam slam's prefetch), flushes that core's TLB by an interrupt: measured as a
- * tenth of a sparse SLAM run's CPU time. */
-/* memset called through a volatile pointer: the compiler cannot fold malloc and memset(0) into calloc, which leaves
- * fresh pages unwritten: the first read maps the shared zero page and the first write then takes a copy-on-write
- * fault that flushes the TLB of every core running the process (an interrupt on the other core, each time, while a
- * second thread runs), and a sparse map's z-buffer touches new pages for the first time frame after frame. */
+ * process running on another core (dcslam slam's prefetch), flushes that core's TLB by an interrupt. The zeros go
+ * through a volatile pointer to memset: called directly, the compiler folds malloc and memset(0) into calloc, which
+ * leaves fresh pages unwritten, and a sparse map's z-buffer then reached new pages frame after frame (800 such
+ * interrupts per 30 sparse frames). */
 static void *(*volatile write_bytes)(void *, int, size_t) = memset;
 
 static void *entries(void *array, size_t *size, size_t n, size_t item, size_t capacity) {
