@@ -2,7 +2,7 @@
 command line (:func:`dcslam.cli.main`).
 
 Contract: when the environment names no ``GLIBC_TUNABLES`` and the process runs on glibc, the same interpreter is
-started again in this process (``execv``: the same process id, arguments and standard streams) with
+started again in this process (``execve``: the same process id, arguments and standard streams) with
 :data:`dcslam.allocator.SLAM_TUNABLES` added to its environment, before anything is read or written; the processes
 it starts (workers, Slurm jobs) inherit them. Set ``GLIBC_TUNABLES`` (even empty) and nothing is started again. Why:
 glibc reads its tunables only when a process starts, and the per-thread cache they turn off fragments a long SLAM

@@ -1,19 +1,11 @@
 """dcslam.allocator: the fixed glibc mmap threshold of SLAM processes (each check in a fresh interpreter, so that this
 test process's allocator keeps glibc's defaults)."""
-import ctypes
 import subprocess
 import sys
 
-import pytest
 
 from dcslam.allocator import ARENA_ENV, ENV, SLAM_MMAP_THRESHOLD, SLAM_TRIM_THRESHOLD, TRIM_ENV, fix_allocator
-
-
-def _glibc_with_mallinfo2() -> bool:
-    try:
-        return hasattr(ctypes.CDLL("libc.so.6"), "mallinfo2")
-    except OSError:
-        return False
+from tests.fixtures.glibc import needs_mallinfo2
 
 
 # Frees an 8 MB block that glibc served by mmap (glibc then raises its own threshold to 8 MB), then allocates 6 MB
@@ -40,16 +32,14 @@ def _probe(mode: str, env: dict | None = None, code: str = PROBE) -> str:
     return out.stdout.strip()
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux") or not _glibc_with_mallinfo2(),
-                    reason="needs glibc >= 2.33 (mallinfo2)")
+@needs_mallinfo2
 def test_a_fixed_threshold_keeps_serving_large_blocks_by_mmap_after_glibc_would_have_raised_it():
     assert SLAM_MMAP_THRESHOLD < 6 << 20
     assert _probe("default") == "False False"   # glibc's own threshold rose to 8 MB: 6 MB came from the heap
     assert _probe("fix") == "True True"         # fixed at 4 MB: 6 MB is its own mmap, returned at free
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux") or not _glibc_with_mallinfo2(),
-                    reason="needs glibc >= 2.33 (mallinfo2)")
+@needs_mallinfo2
 def test_the_environment_variable_wins():
     # glibc applied MALLOC_MMAP_THRESHOLD_ itself (here 16 MB, so the 6 MB block is from the heap); dcslam leaves it
     assert _probe("fix", {ENV: str(16 << 20)}) == "False False"
@@ -75,8 +65,7 @@ print(fixed, mallinfo2().arena > held - (1 << 20))
 """
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux") or not _glibc_with_mallinfo2(),
-                    reason="needs glibc >= 2.33 (mallinfo2)")
+@needs_mallinfo2
 def test_the_top_of_the_heap_is_kept_for_the_next_frame():
     assert 3 << 20 < SLAM_TRIM_THRESHOLD
     assert _probe("no-trim", code=TRIM_PROBE) == "True False"   # glibc's 128 kB: the freed top goes back at once
@@ -91,8 +80,7 @@ def test_nothing_is_set_for_a_threshold_of_zero():
     assert fix_allocator(0) is False and fix_allocator(-1) is False
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux") or not _glibc_with_mallinfo2(),
-                    reason="needs glibc >= 2.33 (mallinfo2)")
+@needs_mallinfo2
 def test_heap_figures_see_a_block_in_use():
     # in a fresh interpreter, like the checks above: in this process, a free chunk that earlier tests left in the
     # heap may serve the block without a mapping of its own
@@ -130,8 +118,7 @@ print(abs(seen[0] - main) < (64 << 20))
 """
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux") or not _glibc_with_mallinfo2(),
-                    reason="needs glibc >= 2.33 (mallinfo2)")
+@needs_mallinfo2
 def test_threads_share_the_one_arena():
     assert _probe("one", code=ARENA_PROBE) == "True"
     assert _probe("glibc", code=ARENA_PROBE) == "False"

@@ -4,26 +4,10 @@ import os
 import subprocess
 import sys
 
-import pytest
 
 from dcslam.allocator import SLAM_TUNABLES, TUNABLES_ENV, tuned_environment
+from tests.fixtures.glibc import is_glibc, needs_glibc, needs_mallinfo2
 
-
-def _glibc() -> bool:
-    try:
-        return sys.platform.startswith("linux") and os.confstr("CS_GNU_LIBC_VERSION").startswith("glibc")
-    except (ValueError, OSError):
-        return False
-
-
-def _mallinfo2() -> bool:
-    import ctypes
-
-    return _glibc() and hasattr(ctypes.CDLL("libc.so.6"), "mallinfo2")
-
-
-needs_glibc = pytest.mark.skipif(not _glibc(), reason="needs Linux with glibc")
-needs_mallinfo2 = pytest.mark.skipif(not _mallinfo2(), reason="needs glibc >= 2.33 (mallinfo2)")
 
 # Restarts as the command does, then frees 64 blocks of 904 bytes: glibc's per-thread cache keeps 7 of them (the
 # allocations emptied its bin for that size), which mallinfo2 counts as in use; without it every block is freed.
@@ -69,7 +53,7 @@ def test_the_environment_is_built_not_changed(monkeypatch):
     environ = {"PATH": "/bin"}
     tuned = tuned_environment(environ)
     assert environ == {"PATH": "/bin"}
-    if _glibc():
+    if is_glibc():
         assert tuned == {"PATH": "/bin", TUNABLES_ENV: SLAM_TUNABLES}
     assert tuned_environment({TUNABLES_ENV: ""}) is None
     monkeypatch.setattr(sys, "platform", "darwin")
