@@ -15,8 +15,9 @@ process keeps 15-20 MB off the peak of a 200-frame run at the same CPU.
 One setting cannot be made from inside a running process: glibc's per-thread cache of freed small blocks (up to 7
 of each size under 1 kB, per thread), read from ``GLIBC_TUNABLES`` when the process starts. The blocks it holds are
 never merged with their free neighbours, and a SLAM run's heap fragments around them: 1.5-2.4 points more peak
-memory over 200 frames than over 15 (three runs each way), at the same CPU. The ``dcslam`` command therefore starts itself once more with
-the cache off when the environment names no tunables (:func:`tuned_environment`, :mod:`dcslam.launch`).
+memory over 200 frames than over 15 (three runs each way), at the same CPU. The ``dcslam`` command therefore starts
+itself once more with the cache off when the environment names no tunables (:func:`tuned_environment`,
+:mod:`dcslam.launch`).
 """
 from __future__ import annotations
 
