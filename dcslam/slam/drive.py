@@ -187,7 +187,8 @@ def frame_preparer(slam, K, device: str, confidence: ConfidenceUse) -> Callable[
         depth_np, weight_np = confidence.apply(item.depth, item.confidence)
         depth = torch.from_numpy(np.ascontiguousarray(depth_np)).to(device)[None, None]
         weight = None if weight_np is None else torch.from_numpy(weight_np).to(device)[None, None]
-        rgb = torch.from_numpy(item.rgb).to(device).permute(2, 0, 1)[None]   # uint8: read at the valid pixels only
+        # uint8: read at the valid pixels only; None: a map without colours (grey), the same geometry
+        rgb = None if item.rgb is None else torch.from_numpy(item.rgb).to(device).permute(2, 0, 1)[None]
         frame = prepare_frame(depth, K, rgb, slam.frame_settings, weight)
         source_frame = None
         if item.sources is not None:

@@ -268,14 +268,15 @@ def torch_threads(threads: int):
 
 
 def run_drive_file(drive_path: Path, source: str | Path, slam, frames: int | None = None, device: str = "cpu",
-                   description: str | None = None, **options) -> DriveRun:
+                   description: str | None = None, colour: bool = True, **options) -> DriveRun:
     """:func:`dcslam.slam.drive.run_drive` over the first ``frames`` frames (all if None) of the drive file
     ``drive_path`` with depth from ``source`` (a depth kind of the drive or a layer file), read as they are used
-    (:func:`dcslam.io.drive_frames.drive_frames`); ``options``: run_drive's (``sources_kind``: the drive depth kind
-    whose pixels the odometry aligns, e.g. ``sparse@16``)."""
+    (:func:`dcslam.io.drive_frames.drive_frames`); ``colour`` False: the colour images are not read and the map is
+    grey (the poses are the same); ``options``: run_drive's (``sources_kind``: the drive depth kind whose pixels the
+    odometry aligns, e.g. ``sparse@16``)."""
     from dcslam.io.drive_frames import drive_frames
 
-    with drive_frames(drive_path, source, frames, options.get("sources_kind")) as drive:
+    with drive_frames(drive_path, source, frames, options.get("sources_kind"), colour) as drive:
         return run_drive(drive, slam, device, description, **options)
 
 
@@ -335,10 +336,11 @@ def companion_evidence(drive_path: Path, source: str | Path, config: SlamStageCo
         yield lambda main: verdict(main, companion.result())
 
 
-#: Pixels (frames x height x width) a companion run must cover before it goes to a worker process of its own: a
-#: worker's start (importing torch and dcslam) costs 1.5-2 CPU-seconds, about 10 full-size KITTI frames of the main
-#: run on completed depth, so shorter runs would wait longer for the start than for the companion.
-BESIDE_MIN_PIXELS = 10 * 375 * 1242
+#: Pixels (frames x height x width) a companion run must cover before it goes to a worker process of its own: the
+#: worker (its start: importing torch and dcslam) costs 0.9-1.6 CPU-seconds more, on the core the main run's
+#: prefetch thread also uses, so a shorter companion ends later beside the main run than after it (measured on a
+#: quiet machine, docs/benchmarks.md "The companion check beside the main run": even at 60 full-size frames).
+BESIDE_MIN_PIXELS = 60 * 375 * 1242
 
 
 def companion_beside(config: SlamStageConfig, pixels: int) -> bool:
@@ -368,9 +370,10 @@ def companion_run(drive_path: Path, kind: str, config: SlamStageConfig, threads:
     if not progress:
         os.environ["DCSLAM_PROGRESS"] = "0"
     torch.set_num_threads(threads)
+    # only its poses and steps are judged and recorded: no colour read, no map carried back from a worker
     run = run_drive_file(drive_path, kind, build_slam(config.settings()), config.frames or None, config.device,
-                         description=description)
-    run.map = None       # only its poses and steps are judged and recorded: no map to carry back from a worker
+                         description=description, colour=False)
+    run.map = None
     return run
 
 

@@ -43,6 +43,22 @@ def test_frames_are_those_of_the_whole_file_readers(drive, tmp_path):
         assert all(f.sources is None and f.confidence is None for f in read)
 
 
+def test_without_colour_no_colour_image_is_read(drive, monkeypatch):
+    with DriveFile(drive) as d:
+        depth = [d.depth("sparse", i) for i in range(N)]
+
+    def refuse(self, i):
+        raise AssertionError(f"colour image {i} read")
+
+    monkeypatch.setattr(DriveFile, "rgb", refuse)
+    with drive_frames(drive, "sparse", colour=False) as frames:
+        read = list(frames.frames)
+    assert len(read) == N and all(f.rgb is None for f in read)
+    assert all(np.array_equal(f.depth, depth[i]) for i, f in enumerate(read))
+    with drive_frames(drive, "sparse") as frames, pytest.raises(AssertionError, match="colour image 0 read"):
+        next(frames.frames)
+
+
 def test_only_the_frames_asked_for_are_read(drive, tmp_path):
     """A bad value in frame 4 of a layer stops a run over all its frames at that frame, not one over the first 3."""
     layer = _layer(drive, tmp_path / "layer" / "street.h5")

@@ -41,6 +41,25 @@ def test_prefetched_frames_give_the_poses_of_a_plain_loop(tmp_path):
         assert len(run.map) == len(slam.mapper.global_map())
 
 
+def test_a_run_without_colour_has_the_poses_and_geometry_of_one_with_it(tmp_path):
+    """The companion runs without colour images: its poses, steps and map geometry are those of the run with them,
+    bit for bit; only the map's colours differ (grey)."""
+    from dcslam.stages.slam import SlamStageConfig, companion_run
+
+    path = tmp_path / "street.h5"
+    _write_drive(path, frames=5)
+    for depth in ("sparse", "dense"):
+        coloured = run_drive_file(path, depth, build_slam(SlamSettings()))
+        grey = run_drive_file(path, depth, build_slam(SlamSettings()), colour=False)
+        assert np.array_equal(coloured.T_world_cam, grey.T_world_cam), depth
+        assert [r.iterations for r in coloured.reports] == [r.iterations for r in grey.reports]
+        assert torch.equal(coloured.map.points, grey.map.points) and torch.equal(coloured.map.normals, grey.map.normals)
+        assert torch.all(grey.map.colors == 0.5) and not torch.all(coloured.map.colors == 0.5)
+    companion = companion_run(path, "sparse", SlamStageConfig(), 1, "companion", progress=True)
+    assert companion.map is None
+    assert np.array_equal(companion.T_world_cam, run_drive_file(path, "sparse", build_slam(SlamSettings())).T_world_cam)
+
+
 def test_prefetch_errors_reach_the_caller():
     import threading
 
