@@ -7,7 +7,9 @@ Prints, per input and beam count, runs / ending > truth / flagged of those / fla
 verdicts (``stored``: the health in each JSON as written) and for the candidate rules (``--floors``, ``--sigmas``,
 ``--min-pairs``, ``--drift-sigmas``: each run judged against the stored run of its companion as run; with
 ``--rejudge`` against the companion run again and road-corrected, summarised under this checkout's health rules);
-``--json`` also writes the per-run rows, ``--flags`` prints every false flag and miss of the stored verdicts with
+``--stored-floors`` the stored verdicts with the evidence floor lowered (by the stored gaps: nothing is run again)
+and how far the completions' errors lie from their gaps near ``--truth``; ``--json`` also writes the per-run rows,
+``--flags`` prints every false flag and miss of the stored verdicts with
 its reasons, ``--weak-steps`` what the flagged steps of each sparse, dense and exact run were (held on a measured
 velocity, held from step 1, or a jump or rejection), ``--drives 1000-1003`` keeps those drives only (a half of the
 test set), ``--group`` prints the stored verdicts once more with the inputs grouped by kind (sparse, dense, exact,
@@ -23,6 +25,7 @@ run is named with its difference and the script exits 1 (MKL's summation order: 
     python benchmarks/slam_evidence.py /tmp/calib-ws --flags --drives 1000-1003
     python benchmarks/slam_evidence.py /tmp/study-ws --group
     python benchmarks/slam_evidence.py /tmp/study-ws --group --rejudge
+    python benchmarks/slam_evidence.py /tmp/calib-ws --stored-floors 0.49,0.48,0.45
 """
 from __future__ import annotations
 
@@ -247,11 +250,41 @@ def verdicts(runs: dict, rules: HealthRules | None, evidence: EvidenceRules | No
                      "final_m": float(record["translation_error_m"]["final"]),
                      "max_m": float(record["translation_error_m"]["max"]), "flagged": bool(health["suspect"]),
                      "evidence": verdict or stored.get("verdict"), "gap_m": stored.get("gap_m"),
+                     "companion_sigma_m": stored.get("companion_sigma_m"),
                      "reasons": list(health["reasons"]), "overruled": list(health.get("overruled", [])),
                      "road_m": (health.get("road") or {}).get("drift_m"),
                      "bound_m": (health.get("drift") or {}).get("bound_m"),
                      "weakest_share": (health.get("drift") or {}).get("weakest_share")})
     return rows
+
+
+def moved_floor(rows: list[dict], floor: float, sigmas: float = EvidenceRules().sigmas) -> list[dict]:
+    """``rows`` (the stored verdicts) with the evidence floor lowered to ``floor``: a completion that agrees with its
+    companion as stored departs, and is flagged, when its stored gap exceeds ``max(floor, sigmas x the companion's
+    sigma)``. Nothing is run again: the gap is the one ``dcslam slam`` measured (a floor above the stored one would
+    need the reasons a departure hid, so it is refused)."""
+    moved = []
+    for r in rows:
+        if r["evidence"] == "agrees" and r["gap_m"] is not None:
+            bound = max(floor, sigmas * (r["companion_sigma_m"] or 0.0))
+            if r["gap_m"] > bound:
+                r = {**r, "flagged": True, "evidence": "departs",
+                     "reasons": [*r["reasons"], f"ends {r['gap_m']:.2f} m from its companion (floor {floor:g} m)"]}
+        moved.append(r)
+    return moved
+
+
+def gap_bias(rows: list[dict], truth: float, within: float = 0.2) -> str:
+    """How far the final error of the completions judged against a companion (agrees or departs) lies from their gap,
+    over those whose gap is within ``within`` of ``truth``: the runs the floor decides."""
+    near = [r["final_m"] - r["gap_m"] for r in rows if r["evidence"] in ("agrees", "departs")
+            and r["gap_m"] is not None and abs(r["gap_m"] - truth) <= within]
+    if not near:
+        return f"no completion with a gap within {within:g} m of {truth:g} m"
+    d = np.asarray(near)
+    return (f"final error - gap over the {len(d)} completions with a gap within {within:g} m of {truth:g} m: median "
+            f"{np.median(d):+.3f} m, 10th-90th percentile {np.percentile(d, 10):+.3f} to {np.percentile(d, 90):+.3f}"
+            f" m, error above the gap in {np.mean(d > 0):.0%}")
 
 
 def input_group(source: str) -> str:
@@ -377,6 +410,8 @@ def parser() -> argparse.ArgumentParser:
                    help="also print the stored verdicts with the inputs grouped by kind")
     p.add_argument("--weak-steps", action="store_true",
                    help="print what the flagged steps of every sparse, dense and exact run were")
+    p.add_argument("--stored-floors", help="the stored verdicts with the evidence floor lowered to each of these "
+                   "(comma-separated, metres; by the stored gaps, nothing run again), and the gap's bias near --truth")
     p.add_argument("--rejudge", action="store_true",
                    help="judge the completions under this checkout's evidence rule, the candidates' included, "
                         "against their companions run again and road-corrected")
@@ -418,6 +453,16 @@ def main(argv=None) -> int:
     if args.group:
         print_table(title.split(" (")[0] + ", inputs grouped by kind", table(grouped(results["stored"]), args.truth),
                     args.truth)
+    if args.stored_floors:
+        print(f"\n{gap_bias(results['stored'], args.truth)}")
+        for floor in [float(f) for f in args.stored_floors.split(",")]:
+            if floor > EvidenceRules().floor_m:
+                print(f"--stored-floors {floor:g}: above the stored floor {EvidenceRules().floor_m:g} m",
+                      file=sys.stderr)
+                return 2
+            results[f"stored, floor {floor:g} m"] = moved_floor(results["stored"], floor)
+            print_table(f"stored verdicts, evidence floor {floor:g} m", table(results[f"stored, floor {floor:g} m"],
+                                                                               args.truth), args.truth)
     if args.flags:
         print_flags(results["stored"], args.truth)
     if args.weak_steps:

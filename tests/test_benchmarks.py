@@ -170,3 +170,28 @@ def test_slam_evidence_judges_measured_depth_by_its_own_steps_when_its_companion
     rows = {r["layer"]: r for r in evidence.verdicts(runs, None, evidence.EvidenceRules())}
     assert rows["dense"]["evidence"] == "own" and not rows["dense"]["flagged"]
     assert rows["ip-basic-fast-sparse64"]["evidence"] == "unbounded" and rows["ip-basic-fast-sparse64"]["flagged"]
+
+
+def test_slam_evidence_lowers_the_floor_by_the_stored_gaps():
+    """``--stored-floors``: a completion that agrees with its companion as stored departs when its stored gap exceeds
+    the lowered floor (or the companion's sigma bound), and is flagged; every other row stays as stored."""
+    spec = importlib.util.spec_from_file_location("slam_evidence", BENCHMARKS / "slam_evidence.py")
+    evidence = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(evidence)
+
+    def row(layer, final, gap, verdict="agrees", sigma=0.01, flagged=False):
+        return {"layer": layer, "input": layer, "beams": "64", "final_m": final, "gap_m": gap, "evidence": verdict,
+                "companion_sigma_m": sigma, "flagged": flagged, "reasons": []}
+
+    rows = [row("near", 0.51, 0.485), row("below", 0.40, 0.47), row("sigma", 0.6, 0.49, sigma=0.17),
+            row("departs", 0.7, 0.6, "departs", flagged=True), row("sparse", 0.2, None, "own")]
+    moved = {r["layer"]: r for r in evidence.moved_floor(rows, 0.48)}
+    assert moved["near"]["flagged"] and moved["near"]["evidence"] == "departs" and "floor 0.48 m" in moved["near"][
+        "reasons"][0]
+    assert not moved["below"]["flagged"] and moved["below"]["evidence"] == "agrees"
+    assert not moved["sigma"]["flagged"]            # 3 x 0.17 m bounds it above the gap
+    assert moved["departs"] == rows[3] and moved["sparse"] == rows[4]
+    assert not rows[0]["flagged"]                   # the stored rows are not changed
+    assert evidence.table(evidence.moved_floor(rows, 0.48), 0.5)[-1] == ("all", "", 5, 3, 2, 0)
+    bias = evidence.gap_bias(rows, 0.5)
+    assert "over the 4 completions" in bias and "median +0.062 m" in bias and "error above the gap in 75%" in bias
