@@ -96,7 +96,8 @@ def rejudge(health: dict, rules: HealthRules) -> dict:
     degraded only for its pair count becomes accepted when it has at least ``min_pairs`` pairs (its other checks
     passed); a step only weak where it was held (:func:`modelled_frames`) is not counted as degraded; the run-level
     rules of :func:`dcslam.slam.health.summarise` then apply as written, the road figure, the drift bound (where it
-    counted) and the hold bound as stored. ``health`` without its evidence (:func:`own_health`)."""
+    counted), the prediction bound and the hold bound as stored. ``health`` without its evidence
+    (:func:`own_health`)."""
     verdicts = {}
     modelled = modelled_frames(health)
     for step in health.get("flagged_steps", []):
@@ -133,6 +134,12 @@ def rejudge(health: dict, rules: HealthRules) -> dict:
              else rules.drift_sigmas * float(health.get("drift_sigma_m", 0.0)))
     if rules.max_drift_m > 0 and bound > rules.max_drift_m and (drift or {}).get("counted", True):
         reasons.append(f"accumulated uncertainty {bound:.2f} m ({rules.drift_sigmas:g} sigma)")
+    prediction = health.get("prediction")                  # the prediction bound as written (none before it existed)
+    if prediction and rules.max_drift_m > 0:
+        predicted = float(prediction["bound_m"]) * rules.drift_sigmas / float(prediction["sigmas"])
+        if predicted > rules.max_drift_m:
+            reasons.append(f"{len(prediction['frames'])} steps left a direction degenerate: the prediction there "
+                           f"{predicted:.2f} m ({rules.drift_sigmas:g} sigma)")
     hold = health.get("hold")                              # the hold bound as written (none before it existed)
     if hold and rules.max_drift_m > 0:
         held_bound = float(hold["bound_m"]) * rules.drift_sigmas / float(hold["sigmas"])

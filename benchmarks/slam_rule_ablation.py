@@ -1,18 +1,23 @@
 """What each part of the health verdict does: every SLAM run of a calibration workspace (``slam_calibration.py``'s
 inputs: sparse at each beam count, dense, exact and every prediction layer, on the test drives) run again in this
-process at the defaults, and each judged, with its companion where it has one, under four rules:
+process at the defaults, and each judged, with its companion where it has one, under each rule of :data:`RULES`
+(health rules and evidence rules):
 
-- ``previous``: held steps counted as degraded and a direction degenerate by its share alone (the rule before the
-  hold bound: ``hold_bound`` off, ``degenerate_pairs`` infinite);
-- ``holds only``: the hold bound (:func:`dcslam.slam.health.hold_bound`), degeneracy by share alone;
-- ``pairs only``: degeneracy by share and pairs, held steps counted as degraded;
-- ``this rule``: both, the defaults of :class:`dcslam.slam.health.HealthRules`.
+- ``before the hold bound``: held steps counted as degraded and a direction degenerate by its share alone;
+- ``holds only``, ``pairs only``: the hold bound (:func:`dcslam.slam.health.hold_bound`) alone, degeneracy by share
+  and pairs alone;
+- ``before the prediction bound``: the whole drift bound counted once a step is degenerate, the evidence floor at
+  0.5 m (the rule before :attr:`~dcslam.slam.health.HealthRules.prediction_bound`);
+- ``prediction bound only``, ``floor 0.48 m only``: each change of the rule after it alone;
+- ``this rule``: the defaults of :class:`dcslam.slam.health.HealthRules` and
+  :class:`dcslam.slam.evidence.EvidenceRules`.
 
 Prints, per rule, the runs that end more than ``--truth`` metres off and how many are flagged, and the others and
-how many are flagged, over all the drives and over each half (``--halves``), then the per-input table of the
-previous rule and this one side by side, and every false flag and miss of this rule. The SLAM runs take what
-``dcslam slam`` takes (about 10 minutes for 88 runs of 30 full-size frames on one core); the trajectories are
-those of ``dcslam slam --evidence auto``, whose stored verdicts ``slam_evidence.py`` reads.
+how many are flagged, over all the drives and over each half (``--halves``), then the per-input table of
+``--compare`` (a rule's name; default ``before the prediction bound``) and this rule side by side, and every false
+flag and miss of this rule. The SLAM runs take what ``dcslam slam`` takes (about 10 minutes for 88 runs of 30
+full-size frames on one core); the trajectories are those of ``dcslam slam --evidence auto``, whose stored
+verdicts ``slam_evidence.py`` reads.
 
     OMP_NUM_THREADS=1 python benchmarks/slam_rule_ablation.py /tmp/calib-ws --halves 1000-1003,1004-1007
 """
@@ -32,14 +37,19 @@ sys.path.insert(0, str(Path(__file__).parent))
 from slam_evidence import drive_numbers, layer_input, table  # noqa: E402
 
 from dcslam.slam.drive import DriveRun, companion_verdict  # noqa: E402
-from dcslam.slam.evidence import merge  # noqa: E402
+from dcslam.slam.evidence import EvidenceRules, merge  # noqa: E402
 from dcslam.slam.health import HealthRules, summarise  # noqa: E402
 
-#: name -> health rules
-RULES = {"previous": HealthRules(degenerate_pairs=math.inf, hold_bound=False),
-         "holds only": HealthRules(degenerate_pairs=math.inf),
-         "pairs only": HealthRules(hold_bound=False),
-         "this rule": HealthRules()}
+_BEFORE = HealthRules(prediction_bound=False)
+#: name -> (health rules, evidence rules)
+RULES = {"before the hold bound": (replace(_BEFORE, degenerate_pairs=math.inf, hold_bound=False),
+                                   EvidenceRules(floor_m=0.5)),
+         "holds only": (replace(_BEFORE, degenerate_pairs=math.inf), EvidenceRules(floor_m=0.5)),
+         "pairs only": (replace(_BEFORE, hold_bound=False), EvidenceRules(floor_m=0.5)),
+         "before the prediction bound": (_BEFORE, EvidenceRules(floor_m=0.5)),
+         "prediction bound only": (HealthRules(prediction_bound=True), EvidenceRules(floor_m=0.5)),
+         "floor 0.48 m only": (_BEFORE, EvidenceRules(floor_m=0.48)),
+         "this rule": (HealthRules(), EvidenceRules())}
 
 
 def inputs(ws: Path) -> list[str]:
@@ -80,9 +90,9 @@ def run_all(ws: Path, frames: int) -> dict[tuple[str, str], DriveRun]:
     return runs
 
 
-def judge(runs: dict, rules: HealthRules) -> list[dict]:
+def judge(runs: dict, rules: HealthRules, evidence: EvidenceRules = EvidenceRules()) -> list[dict]:
     """One row per run (``slam_evidence.table``'s keys): its health under ``rules``, merged with its companion's
-    verdict (the companion judged under ``rules`` too) where it has one."""
+    verdict under ``evidence`` (the companion judged under ``rules`` too) where it has one."""
     rows = []
     for (layer, drive), run in sorted(runs.items()):
         main = replace(run, health_rules=rules)
@@ -90,7 +100,8 @@ def judge(runs: dict, rules: HealthRules) -> list[dict]:
         kind = companion_kind(layer)
         if kind is not None:
             companion = replace(runs[(kind, drive)], health_rules=rules)
-            health = merge(health, companion_verdict(main, companion, kind))
+            health = merge(health, companion_verdict(main, companion, kind, evidence,
+                                                     measured=layer in ("dense", "exact")))
         final = float(np.linalg.norm(run.T_world_cam[-1, :3, 3] - run.T_gt[-1, :3, 3]))
         source, beams = layer_input(layer)
         rows.append({"input": source, "beams": beams, "layer": layer, "drive": drive, "final_m": final,
@@ -121,12 +132,14 @@ def main(argv=None) -> int:
     p.add_argument("--truth", type=float, default=0.5, help="a run ending further than this (m) is bad")
     p.add_argument("--halves", help="two drive ranges to count apart, e.g. 1000-1003,1004-1007")
     p.add_argument("--json", type=Path, help="write every rule's rows here")
+    p.add_argument("--compare", default="before the prediction bound", choices=[r for r in RULES if r != "this rule"],
+                   help="the rule whose per-input table is printed beside this rule's")
     args = p.parse_args(argv)
     if not (args.workspace / "drives" / "splits.json").is_file():
         print(f"{args.workspace}: no drives/splits.json (run slam_calibration.py first)", file=sys.stderr)
         return 1
     runs = run_all(args.workspace, args.frames)
-    results = {name: judge(runs, rules) for name, rules in RULES.items()}
+    results = {name: judge(runs, *rules) for name, rules in RULES.items()}
     halves = args.halves.split(",") if args.halves else []
     print(f"{args.workspace}: {len(runs)} runs, {args.frames} frames; bad = ending more than {args.truth:g} m off")
     for name, rows in results.items():
@@ -135,8 +148,9 @@ def main(argv=None) -> int:
             keep = drive_numbers(half)
             mine = [r for r in rows if r["drive"].removesuffix("_sync")[-4:] in keep]
             parts.append(f"{half}: {counts(mine, args.truth)}")
-        print(f"{name:10s} | " + " | ".join(parts))
-    print_side_by_side(table(results["previous"], args.truth), table(results["this rule"], args.truth), args.truth)
+        print(f"{name:27s} | " + " | ".join(parts))
+    print(f"\nper input: {args.compare} -> this rule")
+    print_side_by_side(table(results[args.compare], args.truth), table(results["this rule"], args.truth), args.truth)
     for r in results["this rule"]:
         if (r["final_m"] > args.truth) != r["flagged"]:
             what = "MISS " if r["final_m"] > args.truth else "FALSE"

@@ -12,8 +12,9 @@ Each odometry step gets one verdict:
 :func:`summarise` turns a run's reports into counts and a ``suspect`` flag with its reasons: a run is suspect when
 any step was rejected, when more than a small fraction of its steps were degraded, when two consecutive steps were,
 when its road figure (:func:`dcslam.slam.road.road_drift`: the road plane of each frame's depth, step by step) says
-it sank or rose more than ``max_road_drift_m``, or when some step left a translation direction degenerate and its
-drift bound (:func:`drift_bound`) says it may end more than ``max_drift_m`` from the truth.
+it sank or rose more than ``max_road_drift_m``, when the steps that left a translation direction degenerate rest on a
+prediction that may have put it more than ``max_drift_m`` from the truth (:func:`prediction_bound`), or when the
+steps held at the prediction may have (:func:`hold_bound`).
 
 The drift bound is the degeneracy analysis of Zhang & Singh (ICRA 2016) carried along a run: each measured step's
 point-to-plane information J^T W J says how well its pairs constrain each direction of motion (its smallest
@@ -94,6 +95,13 @@ class HealthRules:
         as before the bound; ``benchmarks/slam_rule_ablation.py`` compares the two). Rejected steps are counted
         either way (``max_rejected``): judging those after a measured velocity by the bound as well missed an 8-beam
         run 0.785 m off on a seed it was not chosen on, whose only symptom was 5 rejected steps (docs/slam.md).
+    prediction_bound: judge a run whose steps left a direction degenerate by what the prediction may have cost
+        along those directions alone (:func:`prediction_bound`: ``prior_sigma_m`` a step, ``first_prior_sigma_m`` at
+        the first, correlated, ``drift_sigmas``), not by the whole drift bound (off: the whole bound counts once
+        some step is degenerate, the previous rule). The whole bound overstates where the pairs measured: at 8
+        beams it passes 0.5 m on every run, and one degenerate step among 29 made it count; over the 1,392 stored
+        runs of eight workspaces it was the only reason of 5 runs, all ending within 0.5 m (docs/slam.md, "The
+        prediction bound and a 0.48 m floor").
     degenerate_pairs: a translation direction is degenerate only when the pairs' information along it (the smallest
         eigenvalue of the translation block of J^T W J: the number of unit normals' worth of pairs facing it) is
         also below this, whatever its share: a dense frame's 2 % share is still tens of pairs. On seed 6262 (8
@@ -118,6 +126,7 @@ class HealthRules:
     frame_interval_s: float = 0.1
     degenerate_pairs: float = 20.0
     hold_bound: bool = True
+    prediction_bound: bool = True
 
 
 #: The start of the reason :func:`assess` gives a weakly constrained step.
@@ -264,16 +273,45 @@ def _step_covariance(report, rules: HealthRules, holds: dict) -> np.ndarray | No
         if np.linalg.cond(inner) < 1e12:
             C = C - CV @ np.linalg.solve(inner, CV.T)
         return C
-    information = getattr(report, "information", None)
-    if information is not None and np.isfinite(_numpy(information)).all():
-        block = _numpy(information)[:3, :3]
-        trace = float(np.trace(block))
-        values, vectors = np.linalg.eigh(block / trace) if trace > 0 else (np.zeros(3), np.eye(3))
-        prior = rules.first_prior_sigma_m if report.index == 1 else rules.prior_sigma_m
-        for value, v in zip(values, vectors.T):
-            if value < rules.degenerate_share and value * trace < rules.degenerate_pairs:
-                C[:3, :3] += prior ** 2 * np.outer(v, v)
+    prior = _prior_sigma(report, rules)
+    for v in degenerate_directions(report, rules):
+        C[:3, :3] += prior ** 2 * np.outer(v, v)
     return C
+
+
+def _prior_sigma(report, rules: HealthRules) -> float:
+    """The constant-velocity prediction's standard deviation (m) at a step: the first ICP step has no velocity."""
+    return rules.first_prior_sigma_m if report.index == 1 else rules.prior_sigma_m
+
+
+def degenerate_directions(report, rules: HealthRules) -> list[np.ndarray]:
+    """The unit translation directions (3,: camera frame) a step's pairs leave degenerate: their share of the
+    translation block of its information below ``degenerate_share`` and fewer than ``degenerate_pairs`` pairs' worth
+    facing them (Zhang & Singh); none without a finite information."""
+    information = getattr(report, "information", None)
+    if information is None or not np.isfinite(_numpy(information)).all():
+        return []
+    block = _numpy(information)[:3, :3]
+    trace = float(np.trace(block))
+    values, vectors = np.linalg.eigh(block / trace) if trace > 0 else (np.zeros(3), np.eye(3))
+    return [v for value, v in zip(values, vectors.T)
+            if value < rules.degenerate_share and value * trace < rules.degenerate_pairs]
+
+
+def _prediction_covariances(reports, rules: HealthRules, holds: dict) -> list[tuple]:
+    """(report, (6, 6) twist covariance) of every measured step (not rejected, not held where the hold bound models
+    it) that left a translation direction degenerate: the prediction's variance along those directions alone."""
+    out = []
+    for r in reports:
+        if r.index == 0 or r.verdict == "rejected" or r.index in holds:
+            continue
+        directions = degenerate_directions(r, rules)
+        if directions:
+            C = np.zeros((6, 6))
+            for v in directions:
+                C[:3, :3] += _prior_sigma(r, rules) ** 2 * np.outer(v, v)
+            out.append((r, C))
+    return out
 
 
 def _hold_covariances(reports, rules: HealthRules, interval_s: float, holds: dict) -> list[tuple]:
@@ -377,6 +415,28 @@ def hold_bound(reports, rules: HealthRules | None = None, interval_s: float | No
     directions' names, "acceleration_mps2": ..., "interval_s": ...}``; :func:`summarise` fills in ``from_frame``
     when the bound exceeds ``max_drift_m``."""
     return _hold(reports, HealthRules() if rules is None else rules, interval_s)[0]
+
+
+def prediction_bound(reports, rules: HealthRules | None = None) -> dict:
+    """How far the constant-velocity prediction may have put the run's last position along the directions its steps
+    left degenerate (:func:`degenerate_directions`: there the pose is the prediction's, whatever the pairs'
+    covariance says), and in which direction: ``rules.drift_sigmas`` times the correlated sum (as
+    :func:`drift_bound`) of ``prior_sigma_m`` a step along each such direction (``first_prior_sigma_m`` at the first
+    step, which has no velocity to predict from). Steps held where the hold bound models them are its, not this.
+
+    Returns ``{"bound_m", "sigmas", "direction_world", "direction", "from_frame": None, "largest_frame", "frames":
+    the steps counted, "prior_sigma_m", "first_prior_sigma_m"}``; :func:`summarise` fills in ``from_frame`` when the
+    bound exceeds ``max_drift_m``."""
+    return _prediction(reports, HealthRules() if rules is None else rules)[0]
+
+
+def _prediction(reports, rules: HealthRules) -> tuple[dict, tuple | None]:
+    """:func:`prediction_bound`, and its curve for :func:`_first_frame_over`."""
+    steps = _prediction_covariances(reports, rules, modelled_holds(reports, rules))
+    result, curve = _accumulate(reports, steps, rules.drift_sigmas)
+    result.update(frames=[int(r.index) for r, _ in steps], prior_sigma_m=rules.prior_sigma_m,
+                  first_prior_sigma_m=rules.first_prior_sigma_m)
+    return result, curve
 
 
 def _accumulate(reports, measured: list[tuple], sigmas: float) -> tuple[dict, tuple | None]:
@@ -488,8 +548,9 @@ def summarise(reports, rules: HealthRules = HealthRules(), interval_s: float | N
     Returns ``{"accepted": n, "degraded": n, "rejected": n, "held": n (of the degraded: held only), "suspect":
     bool, "reasons": [str], "flagged_steps": [{"frame": i, "verdict": v, "why": [str], "held": [names]}],
     "drift_sigma_m": s (:func:`drift_sigma_m`), "drift": :func:`drift_bound` with ``counted`` (whether it took part
-    in the verdict), "hold": :func:`hold_bound`, "road": :func:`dcslam.slam.road.road_drift` of the reports'
-    ``road`` planes (None when ``max_road_drift_m`` is 0)}``.
+    in the verdict), "prediction": :func:`prediction_bound` (None with ``prediction_bound`` off), "hold":
+    :func:`hold_bound`, "road": :func:`dcslam.slam.road.road_drift` of the reports' ``road`` planes (None when
+    ``max_road_drift_m`` is 0)}``.
     """
     steps = [r for r in reports if r.index > 0]
     counts = {v: sum(r.verdict == v for r in steps) for v in VERDICTS}
@@ -510,11 +571,13 @@ def summarise(reports, rules: HealthRules = HealthRules(), interval_s: float | N
         reasons.append(f"{longest} consecutive steps degraded")
     road = _road(reports, rules, reasons)
     drift = _drift_verdict(reports, rules, reasons)
+    prediction = _prediction_verdict(reports, rules, reasons)
     hold = _hold_verdict(reports, rules, interval_s, reasons)
     flagged = [{"frame": r.index, "verdict": r.verdict, "why": list(r.health), "held": held_names(_held(r))}
                for r in steps if r.verdict != "accepted"]
     return {**counts, "held": len(held), "suspect": bool(reasons), "reasons": reasons, "flagged_steps": flagged,
-            "drift_sigma_m": round(drift_sigma_m(reports), 4), "drift": drift, "hold": hold, "road": road}
+            "drift_sigma_m": round(drift_sigma_m(reports), 4), "drift": drift, "prediction": prediction, "hold": hold,
+            "road": road}
 
 
 def _past(bound: dict, curve, rules: HealthRules, reports) -> bool:
@@ -529,17 +592,46 @@ def _past(bound: dict, curve, rules: HealthRules, reports) -> bool:
 
 def _drift_verdict(reports, rules: HealthRules, reasons: list[str]) -> dict:
     """The drift bound of :func:`summarise`; counted (and, past ``max_drift_m``, a reason appended to ``reasons``)
-    only when some step that the odometry did not hold left a translation direction degenerate, or no step's
-    information says."""
+    when no step's information says which directions were measured, or, with ``prediction_bound`` off, when some
+    step that the odometry did not hold left a translation direction degenerate."""
     drift, curve = _drift(reports, rules)
     informed = any(getattr(r, "information", None) is not None for r in reports if r.index > 0)
-    drift["counted"] = bool(rules.max_drift_m > 0 and (drift["degenerate_frames"] or not informed))
+    degenerate = bool(drift["degenerate_frames"]) and not rules.prediction_bound
+    drift["counted"] = bool(rules.max_drift_m > 0 and (degenerate or not informed))
     if _past(drift, curve, rules, reports) and drift["counted"]:
         reasons.append(f"accumulated uncertainty {drift['bound_m']:.2f} m ({rules.drift_sigmas:g} sigma, steps "
                        f"correlated) exceeds {rules.max_drift_m:g} m: {drift['direction']} left unconstrained, "
                        f"past {rules.max_drift_m:g} m from frame {drift['from_frame']} (most from step "
                        f"{drift['largest_frame']})")
     return drift
+
+
+def _prediction_verdict(reports, rules: HealthRules, reasons: list[str]) -> dict | None:
+    """The prediction bound of :func:`summarise` (None with ``prediction_bound`` off): past ``max_drift_m`` (above
+    0), a reason appended to ``reasons``."""
+    if not rules.prediction_bound:
+        return None
+    prediction, curve = _prediction(reports, rules)
+    if _past(prediction, curve, rules, reports):
+        frames = prediction["frames"]
+        reasons.append(f"{len(frames)} steps left a direction degenerate (frames {_frame_list(frames)}): the "
+                       f"prediction there may have put it {prediction['bound_m']:.2f} m off ({rules.drift_sigmas:g} "
+                       f"sigma of {rules.prior_sigma_m:g} m a step, {rules.first_prior_sigma_m:g} m at the first), "
+                       f"more than {rules.max_drift_m:g} m: {prediction['direction']} left unconstrained, past "
+                       f"{rules.max_drift_m:g} m from frame {prediction['from_frame']}")
+    return prediction
+
+
+def _frame_list(frames: list[int]) -> str:
+    """``[1, 2, 3, 7]`` -> ``1-3, 7``."""
+    runs, start = [], None
+    for k, f in enumerate(frames):
+        if start is None:
+            start = f
+        if k + 1 == len(frames) or frames[k + 1] != f + 1:
+            runs.append(str(start) if start == f else f"{start}-{f}")
+            start = None
+    return ", ".join(runs)
 
 
 def _hold_verdict(reports, rules: HealthRules, interval_s: float | None, reasons: list[str]) -> dict:

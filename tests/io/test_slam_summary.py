@@ -20,10 +20,11 @@ DRIVE = "2011_09_26_drive_1000_sync"
 #: Rules under which every step of a run is degraded (no step has this many pairs) and neither the drift bound nor
 #: the road figure fires.
 ONLY_DEGRADED = health.HealthRules(min_pairs=10 ** 9, max_drift_m=0.0, max_road_drift_m=0.0)
-#: Rules under which only the drift bound fires: any accumulated uncertainty exceeds it, and it counts because every
-#: step's weakest direction is taken as degenerate (a share is at most 1/3, and any count of pairs is below inf).
+#: Rules under which only the drift bound fires: any accumulated uncertainty exceeds it, and it counts (the whole
+#: bound, ``prediction_bound`` off) because every step's weakest direction is taken as degenerate (a share is at most
+#: 1/3, and any count of pairs is below inf).
 ONLY_DRIFT = health.HealthRules(max_drift_m=1e-9, degenerate_share=1.0, degenerate_pairs=math.inf,
-                                max_road_drift_m=0.0)
+                                max_road_drift_m=0.0, prediction_bound=False)
 
 
 def _invoke(*args):

@@ -9,7 +9,7 @@ import torch
 
 from dcslam.geometry.se3 import pose_error
 from dcslam.slam.health import (AXIS_NAMES, HealthRules, _position_covariances, axis_name, drift_bound,
-                                step_degeneracy, summarise)
+                                prediction_bound, step_degeneracy, summarise)
 from dcslam.slam.pipeline import StepReport
 
 #: Rules whose drift bound is three standard deviations, so that the expected bounds below are round numbers.
@@ -97,17 +97,47 @@ def test_a_degenerate_direction_carries_the_predictions_uncertainty():
     assert bound["bound_m"] == pytest.approx(3 * (0.5 + 4 * 0.05), rel=1e-2)
     assert bound["direction"] == "along the road (camera z)" and bound["weakest_direction"] == bound["direction"]
     s = summarise(reports, THREE)
-    assert s["suspect"] and s["drift"]["from_frame"] == 1
+    assert s["suspect"] and s["prediction"]["from_frame"] == 1 and s["prediction"]["frames"] == [1, 2, 3, 4, 5]
+    assert s["prediction"]["bound_m"] == pytest.approx(3 * (0.5 + 4 * 0.05), rel=1e-6)   # the prediction alone
+    assert s["reasons"][-1].startswith("5 steps left a direction degenerate (frames 1-5): the prediction there may "
+                                       "have put it 2.10 m off (3 sigma of 0.05 m a step, 0.5 m at the first)")
     assert "along the road (camera z) left unconstrained, past 0.5 m from frame 1" in s["reasons"][-1]
+    previous = summarise(reports, HealthRules(drift_sigmas=3.0, prediction_bound=False))
+    assert previous["suspect"] and previous["drift"]["counted"] and previous["prediction"] is None
+    assert "accumulated uncertainty 2.10 m" in previous["reasons"][-1]
     walled = [_report(0, 0.0)] + [_report(i, float(i), C, _corridor_information(along=50)) for i in range(1, 6)]
     assert not summarise(walled, THREE)["suspect"] and summarise(walled, THREE)["drift"]["bound_m"] < 0.05
     late = [_report(0, 0.0), _report(1, 1.0, C, _corridor_information(along=50))] + \
         [_report(i, float(i), C, corridor) for i in range(2, 5)]
     assert not summarise(late, THREE)["suspect"]                            # 3 x 3 x 0.05 m
     longer = late + [_report(i, float(i), C, corridor) for i in range(5, 8)]
-    assert summarise(longer, THREE)["suspect"] and summarise(longer, THREE)["drift"]["from_frame"] == 5  # 3 x 4 x 0.05
+    assert summarise(longer, THREE)["suspect"] and summarise(longer, THREE)["prediction"]["from_frame"] == 5  # 3x4x5cm
     assert not summarise(reports, HealthRules(max_drift_m=0))["suspect"]
     assert json.loads(json.dumps(s))["drift"] == s["drift"]                 # written as is in the run's summary
+    assert json.loads(json.dumps(s))["prediction"] == s["prediction"]
+
+
+def test_one_degenerate_step_among_loose_measured_ones_is_judged_by_the_prediction_alone():
+    """At 8 beams every measured step's covariance is wide, and their correlated sum passes 0.5 m on runs that end
+    0.1 m off; one degenerate step among them adds the prediction's 5 cm (2.5 sigma: 0.125 m), not that sum. The
+    previous rule (``prediction_bound`` off) counted the whole sum as soon as one step was degenerate."""
+    loose = np.diag([4e-3, 4e-3, 4e-3, 1e-8, 1e-8, 1e-8])                  # 6.3 cm a step, every direction measured
+    walled = _corridor_information(along=50)
+    reports = [_report(0, 0.0)] + [_report(i, float(i), loose, _corridor_information() if i == 12 else walled)
+                                   for i in range(1, 30)]
+    s = summarise(reports)
+    assert s["drift"]["bound_m"] > 1.0 and s["drift"]["degenerate_frames"] == [12] and not s["drift"]["counted"]
+    assert s["prediction"]["bound_m"] == pytest.approx(2.5 * 0.05, rel=1e-6) and s["prediction"]["frames"] == [12]
+    assert not s["suspect"]
+    assert prediction_bound(reports)["bound_m"] == s["prediction"]["bound_m"]
+    previous = summarise(reports, HealthRules(prediction_bound=False))
+    assert previous["suspect"] and previous["drift"]["counted"]
+    assert "accumulated uncertainty" in previous["reasons"][0]
+    first = [_report(0, 0.0)] + [_report(i, float(i), loose, _corridor_information() if i == 1 else walled)
+                                 for i in range(1, 30)]
+    s = summarise(first)                                                    # the first step has no velocity: 0.5 m
+    assert s["suspect"] and s["prediction"]["bound_m"] == pytest.approx(1.25, rel=1e-6)
+    assert "1 steps left a direction degenerate (frames 1)" in s["reasons"][0]
 
 
 def test_axis_names():
@@ -146,9 +176,9 @@ def test_an_8_beam_drive_between_two_walls_is_flagged_along_the_road():
     error = (poses[-1, :3, 3].double() - T[-1, :3, 3]).abs()
     assert float(dt[-1]) > 0.5 and int(error.argmax()) == 2        # it drifted, along the road
     s = slam.health_summary()
-    assert s["suspect"] and s["drift"]["bound_m"] > 0.5
-    assert s["drift"]["direction"] == "along the road (camera z)" and s["drift"]["from_frame"] is not None
-    reason = [r for r in s["reasons"] if r.startswith("accumulated uncertainty")]
+    assert s["suspect"] and s["prediction"]["bound_m"] > 0.5 and 1 in s["prediction"]["frames"]
+    assert s["prediction"]["direction"] == "along the road (camera z)" and s["prediction"]["from_frame"] is not None
+    reason = [r for r in s["reasons"] if "left a direction degenerate" in r]
     assert reason and "along the road (camera z) left unconstrained, past 0.5 m from frame" in reason[0]
 
 
@@ -271,9 +301,11 @@ def test_a_degenerate_direction_needs_few_pairs_as_well_as_a_small_share():
     dense = [_report(0, 0.0)] + [_report(i, float(i), C, information(5000)) for i in (1, 2)]
     sparse = [_report(0, 0.0)] + [_report(i, float(i), C, information(200)) for i in (1, 2)]
     assert step_degeneracy(information(5000))["translation_pairs"] == pytest.approx(75)
-    d, s = summarise(dense)["drift"], summarise(sparse)["drift"]
-    assert d["degenerate_frames"] == [] and not d["counted"] and d["bound_m"] < 0.01
-    assert s["degenerate_frames"] == [1, 2] and s["counted"] and s["bound_m"] == pytest.approx(2.5 * 0.55, rel=1e-2)
+    d, s = summarise(dense), summarise(sparse)
+    assert d["drift"]["degenerate_frames"] == [] and not d["drift"]["counted"] and d["drift"]["bound_m"] < 0.01
+    assert d["prediction"]["frames"] == [] and d["prediction"]["bound_m"] == 0.0
+    assert s["drift"]["degenerate_frames"] == [1, 2] and s["prediction"]["frames"] == [1, 2]
+    assert s["prediction"]["bound_m"] == pytest.approx(2.5 * 0.55, rel=1e-2) and s["suspect"]
 
 
 def test_without_the_hold_bound_held_steps_count_as_degraded():

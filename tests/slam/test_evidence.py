@@ -21,18 +21,18 @@ def test_position_gaps_over_the_frames_both_have():
 def test_a_run_that_agrees_with_its_companion_is_ok():
     verdict = judge(_trajectory([0, 1, 2.1]), _trajectory([0, 1, 2]), GOOD, "sparse@16")
     assert verdict["verdict"] == "agrees" and not verdict["suspect"] and verdict["reason"] is None
-    assert verdict["gap_m"] == pytest.approx(0.1) and verdict["bound_m"] == 0.5
+    assert verdict["gap_m"] == pytest.approx(0.1) and verdict["bound_m"] == 0.48
     health = merge({"suspect": False, "reasons": []}, verdict)
     assert not health["suspect"] and health["evidence"] is verdict
-    assert evidence_line(health) == "ends within 0.10 m of the sparse@16 companion (bound 0.50 m)"
+    assert evidence_line(health) == "ends within 0.10 m of the sparse@16 companion (bound 0.48 m)"
 
 
 def test_a_gap_beyond_the_bound_flags_the_run_and_says_why():
     verdict = judge(_trajectory([0, 1.2, 2.8, 3.9]), _trajectory([0, 1, 2, 3]), GOOD, "sparse")
     assert verdict["verdict"] == "departs" and verdict["suspect"] and verdict["gap_frame"] == 2
     assert verdict["gap_m"] == pytest.approx(0.9) and verdict["max_gap_m"] == pytest.approx(0.9)
-    assert verdict["reason"] == ("ends 0.90 m from the sparse companion, past the bound from frame 2 (bound 0.50 m: "
-                                 "3 x its sigma 0.020 m, at least 0.5 m)")
+    assert verdict["reason"] == ("ends 0.90 m from the sparse companion, past the bound from frame 2 (bound 0.48 m: "
+                                 "3 x its sigma 0.020 m, at least 0.48 m)")
     health = merge({"suspect": False, "reasons": ["x"], "accepted": 3}, verdict)
     assert health["suspect"] and health["reasons"] == ["x", verdict["reason"]] and health["accepted"] == 3
 
@@ -45,6 +45,16 @@ def test_the_gap_that_counts_is_where_the_run_ends():
     assert away["verdict"] == "departs" and away["gap_frame"] == 3 and away["road_corrected"]
     assert away["reason"].startswith("ends 0.70 m from the sparse@8 companion (road-corrected), past the bound from "
                                      "frame 3")
+
+
+def test_the_floor_sits_just_under_the_half_metre_asked_about():
+    """A run that ends 0.49 m from its companion may end beyond 0.5 m from the truth: the default floor flags it, one of
+    exactly 0.5 m (the rule before) did not."""
+    near = judge(_trajectory([0, 1, 2.49]), _trajectory([0, 1, 2]), GOOD, "sparse")
+    assert near["verdict"] == "departs" and near["suspect"] and near["bound_m"] == 0.48
+    assert judge(_trajectory([0, 1, 2.47]), _trajectory([0, 1, 2]), GOOD, "sparse")["verdict"] == "agrees"
+    assert judge(_trajectory([0, 1, 2.49]), _trajectory([0, 1, 2]), GOOD, "sparse",
+                 EvidenceRules(floor_m=0.5))["verdict"] == "agrees"
 
 
 def test_the_bound_grows_with_the_companions_own_uncertainty():

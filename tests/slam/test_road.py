@@ -88,7 +88,9 @@ def test_a_sinking_run_is_flagged_with_the_road_reason():
 
 def test_the_drift_bound_counts_only_where_a_step_is_degenerate():
     """Steps of 5 cm standard deviation, well measured in every direction (their information an even share each):
-    the bound exceeds 0.5 m and is written, but only a degenerate step would make it count."""
+    the bound exceeds 0.5 m and is written, but only degenerate steps would make the run suspect: by the
+    prediction's uncertainty along what they left degenerate (the rule), or, with ``prediction_bound`` off, by the
+    whole bound then counted (the previous rule)."""
     C, H = np.diag([0.05 ** 2] * 3 + [1e-10] * 3), np.eye(6)
     estimated = np.stack([pose(float(k)) for k in range(8)])
     reports = [StepReport(i, torch.from_numpy(T), True, "", 0, 0, 0.0, 0, 0.0, covariance=torch.from_numpy(C),
@@ -100,5 +102,8 @@ def test_the_drift_bound_counts_only_where_a_step_is_degenerate():
     for r in reports[1:]:
         r.information = torch.from_numpy(H_corridor)
     s = summarise(reports)
-    assert s["drift"]["counted"] is True and s["suspect"]
+    assert s["drift"]["counted"] is False and s["suspect"] and s["prediction"]["frames"] == list(range(1, 8))
+    assert s["prediction"]["bound_m"] == pytest.approx(2.5 * (0.5 + 6 * 0.05), rel=1e-6)
+    previous = summarise(reports, HealthRules(prediction_bound=False))
+    assert previous["drift"]["counted"] is True and previous["suspect"]
     assert "along the road (camera z) left unconstrained" in s["reasons"][0]
