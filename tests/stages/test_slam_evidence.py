@@ -94,6 +94,28 @@ def test_the_companion_beside_the_main_run_gives_the_verdict_it_gives_after_it(s
     assert evidences[True] == evidences[False]
 
 
+def test_a_companion_worker_that_dies_leaves_the_companion_to_this_process(scaled, tmp_path, monkeypatch, capfd):
+    """A worker that dies (killed for memory, say: here it exits as it starts) breaks its pool; the companion runs in
+    this process instead, to the verdict it gives there, and one line says so."""
+    import multiprocessing
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+
+    ws, path, layer = scaled
+    monkeypatch.setattr(slam, "companion_beside", lambda config, pixels: False)
+    after = _run(ws, path, layer, tmp_path / "after", "auto").summary["health"]["evidence"]
+    monkeypatch.setattr(slam, "companion_beside", lambda config, pixels: True)
+    monkeypatch.setattr("dcslam.workers.process_pool", lambda jobs, tasks: ProcessPoolExecutor(
+        1, mp_context=multiprocessing.get_context("spawn"), initializer=os._exit, initargs=(1,)))
+    capfd.readouterr()
+    died = _run(ws, path, layer, tmp_path / "died", "auto").summary["health"]["evidence"]
+    assert "note: the companion worker of street.h5 stopped; running the companion in this process" in \
+        capfd.readouterr().err
+    assert died["verdict"] == "departs"
+    assert {k: v for k, v in died.items() if k != "companion_seconds"} == \
+        {k: v for k, v in after.items() if k != "companion_seconds"}
+
+
 def test_the_companion_waits_for_the_main_run_where_no_core_is_free_or_the_run_is_short(monkeypatch):
     config, long = slam.SlamStageConfig(threads=1), slam.BESIDE_MIN_PIXELS
     monkeypatch.setattr("os.cpu_count", lambda: 2)
