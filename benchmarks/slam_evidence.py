@@ -134,18 +134,15 @@ def rejudge(health: dict, rules: HealthRules) -> dict:
              else rules.drift_sigmas * float(health.get("drift_sigma_m", 0.0)))
     if rules.max_drift_m > 0 and bound > rules.max_drift_m and (drift or {}).get("counted", True):
         reasons.append(f"accumulated uncertainty {bound:.2f} m ({rules.drift_sigmas:g} sigma)")
-    prediction = health.get("prediction")                  # the prediction bound as written (none before it existed)
-    if prediction and rules.max_drift_m > 0:
-        predicted = float(prediction["bound_m"]) * rules.drift_sigmas / float(prediction["sigmas"])
-        if predicted > rules.max_drift_m:
-            reasons.append(f"{len(prediction['frames'])} steps left a direction degenerate: the prediction there "
-                           f"{predicted:.2f} m ({rules.drift_sigmas:g} sigma)")
-    hold = health.get("hold")                              # the hold bound as written (none before it existed)
-    if hold and rules.max_drift_m > 0:
-        held_bound = float(hold["bound_m"]) * rules.drift_sigmas / float(hold["sigmas"])
-        if held_bound > rules.max_drift_m:
-            reasons.append(f"{hold['steps']} steps held at the constant-velocity prediction: {held_bound:.2f} m "
-                           f"({rules.drift_sigmas:g} sigma)")
+    # the prediction and hold bounds as written (none in a summary from before each existed), rescaled to the sigmas
+    for key, what in (("prediction", "steps left a direction degenerate: the prediction there"),
+                      ("hold", "steps held at the constant-velocity prediction:")):
+        stored = health.get(key)
+        if stored and rules.max_drift_m > 0:
+            rescaled = float(stored["bound_m"]) * rules.drift_sigmas / float(stored["sigmas"])
+            if rescaled > rules.max_drift_m:
+                count = len(stored["frames"]) if key == "prediction" else stored["steps"]
+                reasons.append(f"{count} {what} {rescaled:.2f} m ({rules.drift_sigmas:g} sigma)")
     return {**health, "accepted": steps - rejected - degraded - held, "degraded": degraded + held, "held": held,
             "rejected": rejected,
             "suspect": bool(reasons), "reasons": reasons}
