@@ -329,25 +329,27 @@ def companion_evidence(drive_path: Path, source: str | Path, config: SlamStageCo
     if not companion_beside(config, min(config.frames or frames, frames) * height * width):
         yield lambda main: verdict(main, companion_run(*args))
         return
-    from concurrent.futures.process import BrokenProcessPool
-
     from dcslam.workers import process_pool
-
-    def beside(main: DriveRun, companion) -> dict:
-        try:
-            return verdict(main, companion.result())
-        except BrokenProcessPool:
-            # the worker died (killed for memory, or a calling script without a __main__ guard ran itself again
-            # in it): the companion runs here instead, to the same verdict
-            import sys
-
-            sys.stderr.write(f"note: the companion worker of {drive_path.name} stopped; running the companion in this "
-                             "process\n")
-            return verdict(main, companion_run(*args))
 
     with process_pool(1, 1) as pool:
         companion = pool.submit(companion_run, *args, progress=False)
-        yield lambda main: beside(main, companion)
+        yield lambda main: verdict(main, _companion_result(companion, args))
+
+
+def _companion_result(companion, args: tuple) -> DriveRun:
+    """The companion run of a worker (``companion``: its future), or, where the worker died (killed for memory, or a
+    calling script without a ``__main__`` guard ran itself again in it), the same run made here (``args``:
+    :func:`companion_run`'s), with one line saying so: its verdict is the same either way."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    try:
+        return companion.result()
+    except BrokenProcessPool:
+        import sys
+
+        sys.stderr.write(f"note: the companion worker of {Path(args[0]).name} stopped; running the companion in this "
+                         "process\n")
+        return companion_run(*args)
 
 
 #: Pixels (frames x height x width) a companion run must cover before it goes to a worker process of its own: the
