@@ -67,6 +67,13 @@ def known_errors(command):
         except KeyboardInterrupt:
             interrupt.tell(lambda line: typer.echo(line, err=True))
             raise typer.Exit(interrupt.exit_code()) from None
+        except SystemError as error:
+            # an interrupt that landed in a C extension's callback (h5py iterating a file's attributes under its
+            # lock) comes back as a SystemError caused by it: still an interrupt, not a traceback
+            if not isinstance(error.__cause__, KeyboardInterrupt):
+                raise
+            interrupt.tell(lambda line: typer.echo(line, err=True))
+            raise typer.Exit(interrupt.exit_code()) from None
 
     return wrapper
 

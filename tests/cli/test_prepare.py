@@ -155,6 +155,41 @@ def test_interrupted_conversion(cli, tmp_path, monkeypatch):
     assert _files(tmp_path / "drives") == []
 
 
+def test_an_interrupt_a_c_extension_wraps_is_still_an_interrupt(cli, tmp_path, monkeypatch):
+    """SIGTERM landing in h5py's attribute callback comes back as a SystemError caused by the KeyboardInterrupt
+    (h5py's lock): the command exits as interrupted, with no traceback and nothing published. Any other
+    SystemError stays an error."""
+    root = tmp_path / "kitti"
+    fx.write_tiny_drive(root, "2011_09_26_drive_0001_sync")
+    real_read = kitti.read_depth_png
+    count = []
+
+    def wrapped(path):
+        count.append(path)
+        if len(count) == 4:
+            try:
+                raise KeyboardInterrupt
+            except KeyboardInterrupt as interrupt:
+                raise SystemError("<cyfunction FastRLock.__exit__> returned a result with an exception set") \
+                    from interrupt
+        return real_read(path)
+
+    from dcslam import interrupt
+
+    monkeypatch.setattr(interrupt, "_told", False)      # a process tells once; this test's command is its own
+    monkeypatch.setattr(kitti, "read_depth_png", wrapped)
+    result = cli("prepare-kitti", "--kitti", root, "--out", tmp_path / "drives")
+    assert result.exit_code == 130 and "interrupted" in result.stderr and "Traceback" not in result.stderr
+    assert _files(tmp_path / "drives") == []
+
+    def broken(path):
+        raise SystemError("a bug")
+
+    monkeypatch.setattr(kitti, "read_depth_png", broken)
+    with pytest.raises(SystemError, match="a bug"):
+        cli("prepare-kitti", "--kitti", root, "--out", tmp_path / "drives2")
+
+
 def test_beams_option(cli, workspace):
     scans = workspace / "kitti" / "raw" / "2011_09_26" / REAL / "velodyne_points" / "data"
     scans.mkdir(parents=True)
