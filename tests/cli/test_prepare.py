@@ -137,7 +137,8 @@ def test_bad_input_one_line_exit_1_nothing_written(cli, tmp_path, what):
     assert _files(tmp_path / "drives") == []
 
 
-def test_interrupted_conversion(cli, tmp_path, monkeypatch):
+def _interrupt_fourth_read(tmp_path, monkeypatch, error):
+    """A tiny KITTI drive whose fourth depth PNG read raises ``error()`` -> the KITTI root."""
     root = tmp_path / "kitti"
     fx.write_tiny_drive(root, "2011_09_26_drive_0001_sync")
     real_read = kitti.read_depth_png
@@ -146,38 +147,38 @@ def test_interrupted_conversion(cli, tmp_path, monkeypatch):
     def interrupted(path):
         count.append(path)
         if len(count) == 4:
-            raise KeyboardInterrupt
+            raise error()
         return real_read(path)
 
     monkeypatch.setattr(kitti, "read_depth_png", interrupted)
+    return root
+
+
+def test_interrupted_conversion(cli, tmp_path, monkeypatch):
+    root = _interrupt_fourth_read(tmp_path, monkeypatch, KeyboardInterrupt)
     result = cli("prepare-kitti", "--kitti", root, "--out", tmp_path / "drives")
     assert result.exit_code == 130 and "interrupted" in result.stderr
     assert _files(tmp_path / "drives") == []
+
+
+def _wrapped_interrupt() -> SystemError:
+    """What h5py's lock makes of a KeyboardInterrupt raised in its callback: a SystemError caused by it."""
+    try:
+        raise KeyboardInterrupt
+    except KeyboardInterrupt as interrupt:
+        error = SystemError("<cyfunction FastRLock.__exit__> returned a result with an exception set")
+        error.__cause__ = interrupt
+        return error
 
 
 def test_an_interrupt_a_c_extension_wraps_is_still_an_interrupt(cli, tmp_path, monkeypatch):
     """SIGTERM landing in h5py's attribute callback comes back as a SystemError caused by the KeyboardInterrupt
     (h5py's lock): the command exits as interrupted, with no traceback and nothing published. Any other
     SystemError stays an error."""
-    root = tmp_path / "kitti"
-    fx.write_tiny_drive(root, "2011_09_26_drive_0001_sync")
-    real_read = kitti.read_depth_png
-    count = []
-
-    def wrapped(path):
-        count.append(path)
-        if len(count) == 4:
-            try:
-                raise KeyboardInterrupt
-            except KeyboardInterrupt as interrupt:
-                raise SystemError("<cyfunction FastRLock.__exit__> returned a result with an exception set") \
-                    from interrupt
-        return real_read(path)
-
     from dcslam import interrupt
 
+    root = _interrupt_fourth_read(tmp_path, monkeypatch, _wrapped_interrupt)
     monkeypatch.setattr(interrupt, "_told", False)      # a process tells once; this test's command is its own
-    monkeypatch.setattr(kitti, "read_depth_png", wrapped)
     result = cli("prepare-kitti", "--kitti", root, "--out", tmp_path / "drives")
     assert result.exit_code == 130 and "interrupted" in result.stderr and "Traceback" not in result.stderr
     assert _files(tmp_path / "drives") == []
