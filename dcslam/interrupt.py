@@ -67,6 +67,14 @@ def install() -> None:
     sys.unraisablehook = hook
 
 
+def is_interrupt(error: BaseException) -> bool:
+    """Whether ``error`` is an interrupt: a :class:`KeyboardInterrupt`, or the :class:`SystemError` a C extension
+    makes of one raised in its callback (h5py iterating a file's attributes under its lock: "returned a result with
+    an exception set", caused by the interrupt)."""
+    return isinstance(error, KeyboardInterrupt) or (isinstance(error, SystemError)
+                                                     and isinstance(error.__cause__, KeyboardInterrupt))
+
+
 def received() -> bool:
     """Whether a SIGINT or SIGTERM arrived since :func:`install`."""
     return _received

@@ -106,3 +106,14 @@ def test_sigterm_is_an_interrupt_whose_exit_code_is_143(handler):
 
 def test_an_interrupt_without_a_signal_exits_130(handler):
     assert interrupt.exit_code() == 130
+
+
+def test_an_interrupt_a_c_extension_wrapped_is_still_one():
+    def wrapped(cause):
+        error = SystemError("<cyfunction FastRLock.__exit__> returned a result with an exception set")
+        error.__cause__ = cause
+        return error
+
+    assert interrupt.is_interrupt(KeyboardInterrupt()) and interrupt.is_interrupt(wrapped(KeyboardInterrupt()))
+    assert not interrupt.is_interrupt(SystemError("a bug")) and not interrupt.is_interrupt(wrapped(ValueError()))
+    assert not interrupt.is_interrupt(ValueError())

@@ -13,7 +13,9 @@ def main() -> None:
     try:
         interrupt.install()
         app()
-    except KeyboardInterrupt:  # before Typer's own handler runs
+    except (KeyboardInterrupt, SystemError) as error:  # before Typer's own handler runs
+        if not interrupt.is_interrupt(error):
+            raise
         _interrupted()
     except SystemExit as done:
         # Typer turns a Ctrl-C outside the command (while it parses options) into a silent exit 130, and click or a

@@ -64,13 +64,8 @@ def known_errors(command):
             if known is None:
                 raise
             fail(f"{known}; free space or choose a writable --workspace, then rerun the command")
-        except KeyboardInterrupt:
-            interrupt.tell(lambda line: typer.echo(line, err=True))
-            raise typer.Exit(interrupt.exit_code()) from None
-        except SystemError as error:
-            # an interrupt that landed in a C extension's callback (h5py iterating a file's attributes under its
-            # lock) comes back as a SystemError caused by it: still an interrupt, not a traceback
-            if not isinstance(error.__cause__, KeyboardInterrupt):
+        except (KeyboardInterrupt, SystemError) as error:
+            if not interrupt.is_interrupt(error):    # a SystemError of its own: a bug, with its traceback
                 raise
             interrupt.tell(lambda line: typer.echo(line, err=True))
             raise typer.Exit(interrupt.exit_code()) from None
