@@ -195,3 +195,29 @@ def test_slam_evidence_lowers_the_floor_by_the_stored_gaps():
     assert evidence.table(evidence.moved_floor(rows, 0.48), 0.5)[-1] == ("all", "", 5, 3, 2, 0)
     bias = evidence.gap_bias(rows, 0.5)
     assert "over the 4 completions" in bias and "median +0.062 m" in bias and "error above the gap in 75%" in bias
+
+
+def test_slam_forward_backward_reverses_a_drive_and_measures_the_loop():
+    """``slam_forward_backward.py``: the reversed drive takes the frames and poses last first, with timestamps that
+    increase by the same steps; the loop of a trajectory and its exact reverse is the identity, and a backward run
+    that comes short by 0.3 m leaves a gap of 0.3 m."""
+    import numpy as np
+
+    from dcslam.io.drive_frames import DepthFrame, DriveFrames
+
+    spec = importlib.util.spec_from_file_location("slam_forward_backward", BENCHMARKS / "slam_forward_backward.py")
+    fb = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(fb)
+    T = np.tile(np.eye(4), (4, 1, 1))
+    T[:, 2, 3] = [0.0, 1.0, 2.5, 4.0]
+    T[3, :3, :3] = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]
+    frames = [DepthFrame(np.full((2, 3), float(i), np.float32), None) for i in range(4)]
+    drive = DriveFrames("x.h5", "x", np.eye(3), T, np.array([10.0, 10.1, 10.3, 10.4]), False, iter(frames))
+    back = fb.reversed_frames(drive)
+    assert [f.depth[0, 0] for f in back.frames] == [3, 2, 1, 0]
+    assert np.array_equal(back.T_world_cam, T[::-1]) and np.allclose(back.timestamps, [10.0, 10.1, 10.3, 10.4])
+    assert fb.gap(T, T[::-1]) == pytest.approx((0.0, 0.0), abs=1e-12)
+    short = T[::-1].copy()
+    short[-1, 2, 3] += 0.3                          # the backward run ends 0.3 m short of the first frame
+    metres, degrees = fb.gap(T, short)
+    assert metres == pytest.approx(0.3) and degrees == pytest.approx(0.0, abs=1e-9)
