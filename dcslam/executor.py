@@ -94,9 +94,12 @@ def cpu_clock() -> float:
     return time.process_time() + children.ru_utime + children.ru_stime
 
 
-def timed(run: Callable, workspace, config) -> tuple[float, float]:
+def timed(run: Callable, workspace, config, started: Path | None = None) -> tuple[float, float]:
     """Run one stage with ``force=True``; return ``(wall seconds, CPU seconds)`` it took, measured in the process
-    that ran it (what a worker or a job runs)."""
+    that ran it (what a worker or a job runs). ``started``: a file the process writes its pid to first (so that a
+    worker that dies can be matched to its stage)."""
+    if started is not None:
+        started.write_text(str(os.getpid()))
     start, cpu = time.perf_counter(), cpu_clock()
     run(workspace, config, force=True)
     return time.perf_counter() - start, cpu_clock() - cpu
@@ -112,37 +115,101 @@ class LocalExecutor:
         return self.jobs <= 1 or tasks <= 1
 
     def run(self, tasks: list[Task]) -> Iterator[Outcome]:
-        from concurrent.futures import as_completed
+        import tempfile
 
         from dcslam.workers import process_pool
 
         pool = process_pool(self.jobs, len(tasks))
-        futures = {}
-        finished = False
+        futures, workers, finished = {}, [], False
+        marks = Path(tempfile.mkdtemp(prefix="dcslam-workers-"))
         try:
-            futures = {pool.submit(timed, task.run, task.workspace, task.config): task for task in tasks}
-            for future in as_completed(futures):
-                task = futures[future]
-                try:
-                    seconds, cpu = future.result()
-                except DcslamError as error:
-                    yield Outcome(task, error=str(error))
-                else:
-                    yield Outcome(task, seconds=seconds, cpu_seconds=cpu)
-            finished = True
+            futures = {pool.submit(timed, task.run, task.workspace, task.config, marks / f"{i}.pid"): task
+                       for i, task in enumerate(tasks)}
+            workers = list(getattr(pool, "_processes", {}).values())  # ProcessPoolExecutor's own table
+            broken = False
+            for outcome, broken in _as_finished(futures, workers, marks):
+                yield outcome
+            finished = not broken
         finally:
             if finished:
                 pool.shutdown(wait=True)
             else:  # given up: no worker keeps writing outputs nobody will stamp
                 for future in futures:
                     future.cancel()
-                workers = list(getattr(pool, "_processes", {}).values())  # ProcessPoolExecutor's own table
                 pool.shutdown(wait=False, cancel_futures=True)
                 for process in workers:
                     if process.is_alive():
                         process.terminate()
                 for process in workers:
                     process.join(timeout=10)
+            shutil.rmtree(marks, ignore_errors=True)
+
+
+def _as_finished(futures: dict, workers: list, marks: Path) -> Iterator[tuple[Outcome, bool]]:
+    """``(outcome, False)`` for each of ``futures`` (future -> task) as it finishes; when a worker dies, one last
+    ``(outcome of the stage it ran, True)`` (:func:`died`). The workers are polled as well as the pool's manager
+    asked: a worker the pool spawned after its manager last listed them can die unseen by it (CPython 3.11), and the
+    command would wait for the others forever."""
+    from concurrent.futures import FIRST_COMPLETED, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    pending = set(futures)
+    while pending:
+        done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+        for future in done:
+            task = futures[future]
+            try:
+                seconds, cpu = future.result()
+            except DcslamError as error:
+                yield Outcome(task, error=str(error)), False
+            except BrokenProcessPool:
+                unfinished = [f for f in futures if f in pending or f.done() and f.exception() is not None]
+                yield died([futures[f] for f in unfinished], list(futures.values()), workers, marks), True
+                return
+            else:
+                yield Outcome(task, seconds=seconds, cpu_seconds=cpu), False
+        if pending and any(process.exitcode is not None for process in workers):
+            yield died([futures[f] for f in futures if f in pending], list(futures.values()), workers, marks), True
+            return
+
+
+def _exit_code(process, patience: float = 2.0) -> int | None:
+    """``process.exitcode``, waiting up to ``patience`` seconds for it once the process has ended: while the pool's
+    manager thread reaps it, this thread's poll finds no child and reads None."""
+    from multiprocessing.connection import wait
+
+    deadline = time.monotonic() + patience
+    while process.exitcode is None and wait([process.sentinel], 0) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return process.exitcode
+
+
+def died(stopped: list[Task], tasks: list[Task], workers: list, marks: Path) -> Outcome:
+    """The outcome of a pool whose worker died (killed, out of memory, a crash in native code): the failed task is
+    the one whose worker (by the pid it wrote to ``marks``, ``<index in tasks>.pid``) ended other than by the
+    pool's own SIGTERM, else the first of ``stopped`` (the tasks left unfinished); its error says how the worker
+    ended and names the others stopped with it."""
+    import signal
+
+    codes = {process.pid: _exit_code(process) for process in workers}
+    by_pid = {}
+    for i, task in enumerate(tasks):
+        mark = marks / f"{i}.pid"
+        text = mark.read_text().strip() if mark.is_file() else ""
+        if text.isdigit():
+            by_pid[int(text)] = task
+    dead = [(pid, code) for pid, code in codes.items() if code not in (None, -signal.SIGTERM) and pid in by_pid]
+    task = by_pid[dead[0][0]] if dead else stopped[0]
+    code = dead[0][1] if dead else None
+    how = ("ended without a result" if code is None else
+           f"was killed by {signal.Signals(-code).name}" if code < 0 and -code in signal.valid_signals() else
+           f"exited with status {code}")
+    if code == -signal.SIGKILL:
+        how += " (what the out-of-memory killer sends: give it more memory or run fewer --jobs)"
+    others = [t.name for t in stopped if t is not task]
+    beside = f"; stopped with it: {', '.join(others)}" if others else ""
+    where = "its worker process" if dead else "a worker process running it or a stage beside it"
+    return Outcome(task, error=f"{where} {how}{beside}")
 
 
 @dataclass(frozen=True)

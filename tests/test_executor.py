@@ -196,3 +196,47 @@ def test_run_all_stamps_what_finished_and_names_the_failed_job(tmp_path):
     assert stamps["slam-a"]["complete"] and stamps["slam-a"]["seconds"] == 1.5
     assert not stamps["train-b"]["complete"]  # claims nothing
     assert any(line.startswith("[run]  slam-a: slam") and line.endswith("(job)") for line in lines), lines
+
+
+def _killed_or_waits(ws, config, *, force=False):
+    """A stage for the worker-death test: ``frames`` 0 kills its own worker (SIGKILL, as the out-of-memory killer
+    does) once the other has started (``out`` holds a pid); otherwise it writes its pid to ``out`` and waits."""
+    import signal
+
+    if config.frames == 0:
+        while not config.out.exists() or not config.out.read_text():
+            time.sleep(0.02)
+        os.kill(os.getpid(), signal.SIGKILL)
+    config.out.write_text(str(os.getpid()))
+    time.sleep(600)
+
+
+def test_a_worker_killed_mid_stage_fails_that_stage_in_one_line_and_stops_the_other(tmp_path):
+    """A worker that dies (here SIGKILL) is an outcome naming its stage, how it ended and the stage stopped beside
+    it, not a BrokenProcessPool; the other worker is not left running."""
+    ws = Workspace(tmp_path)
+    waiting = tmp_path / "waiting.pid"
+    tasks = [Task("waits", _killed_or_waits, SlamStageConfig(frames=1, out=waiting), ws),
+             Task("killed", _killed_or_waits, SlamStageConfig(frames=0, out=waiting), ws)]
+    outcomes = list(LocalExecutor(jobs=2).run(tasks))
+    assert len(outcomes) == 1 and outcomes[0].task.name == "killed" and not outcomes[0].ok
+    assert outcomes[0].error == ("its worker process was killed by SIGKILL (what the out-of-memory killer sends: give "
+                                 "it more memory or run fewer --jobs); stopped with it: waits")
+    with pytest.raises(ProcessLookupError):
+        os.kill(int(waiting.read_text()), 0)
+
+
+def test_run_all_names_the_stage_whose_worker_died(tmp_path):
+    """Through the pipeline: one line naming the stage and how its worker ended; neither stage stamped complete."""
+    ws = Workspace(tmp_path)
+    waiting = tmp_path / "waiting.pid"
+    stages = [Stage("slam-waits", _killed_or_waits, SlamStageConfig(frames=1, out=waiting), outputs=lambda: [waiting],
+                    kind="slam"),
+              Stage("slam-killed", _killed_or_waits, SlamStageConfig(frames=0, out=waiting), outputs=lambda: [waiting],
+                    kind="slam")]
+    with pytest.raises(DcslamError) as failed:
+        Pipeline(ws, log=lambda line: None).run_all(stages, jobs=2)
+    assert str(failed.value).startswith("stage slam-killed failed (its worker process was killed by SIGKILL")
+    assert "stopped with it: slam-waits); fix it and rerun" in str(failed.value)
+    for name in ("slam-waits", "slam-killed"):
+        assert not json.loads((tmp_path / ".reproduce" / f"{name}.json").read_text())["complete"]
