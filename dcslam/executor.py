@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Protocol
 
 from dcslam.errors import DcslamError
+from dcslam.workers import cpu_clock
 
 KINDS = ("train", "predict", "filter", "slam", "score", "other")
 
@@ -84,14 +85,6 @@ class Executor(Protocol):
 
     def run(self, tasks: list[Task]) -> Iterator[Outcome]:
         """Start every task; yield each one's outcome as it finishes. Closing the iterator early stops the rest."""
-
-
-def cpu_clock() -> float:
-    """CPU seconds (user + system) of this process and of its children that have ended, so far."""
-    import resource
-
-    children = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return time.process_time() + children.ru_utime + children.ru_stime
 
 
 def timed(run: Callable, workspace, config, started: Path | None = None) -> tuple[float, float]:

@@ -64,3 +64,37 @@ def cores_shared() -> bool:
     """Whether this process is one of several pool workers, which between them keep every core busy: work that
     would run on a second thread to save wall time (e.g. ``dcslam slam``'s prefetch) only slows its siblings."""
     return os.environ.get(SHARED_CORES) == "1"
+
+
+def cpu_clock() -> float:
+    """CPU seconds (user + system) of this process and of its children that have ended, so far."""
+    import resource
+    import time
+
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
+
+
+class OwnLoad:
+    """This process's share of the kernel's 1-minute load average, from the moment it is made: the CPU seconds per
+    second of its threads and its ended children (``cpu``), averaged as the kernel averages the load, exponentially
+    over a minute (``clock``: seconds; both given in tests). The load average alone counts the command's own earlier
+    work as another process's: after one drive's main run, prefetch thread and companion worker, a second core looks
+    busy that is not."""
+
+    def __init__(self, clock=None, cpu=None):
+        import time
+
+        self.clock, self.cpu = clock or time.monotonic, cpu or cpu_clock
+        self.at, self.used, self.average = self.clock(), self.cpu(), 0.0
+
+    def read(self) -> float:
+        """The share now (busy threads, averaged)."""
+        import math
+
+        now, used = self.clock(), self.cpu()
+        if now > self.at:
+            keep = math.exp(-(now - self.at) / 60.0)
+            self.average = self.average * keep + (used - self.used) / (now - self.at) * (1.0 - keep)
+            self.at, self.used = now, used
+        return self.average

@@ -166,7 +166,7 @@ class Pipeline:
         self._claim(stage)
         options = " ".join(f"{k}={v}" for k, v in changed(stage.config).items())
         self.log(f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} {options}".rstrip())
-        from dcslam.executor import cpu_clock
+        from dcslam.workers import cpu_clock
 
         start, cpu = time.perf_counter(), cpu_clock()
         try:

@@ -21,6 +21,7 @@ from dcslam.errors import DcslamError
 from dcslam.slam.config import SlamSettings
 from dcslam.slam.drive import ConfidenceUse, DriveRun, check_timestamps, run_drive
 from dcslam.stages.config import option
+from dcslam.workers import OwnLoad
 from dcslam.workspace import Workspace
 
 
@@ -358,20 +359,25 @@ def _companion_result(companion, args: tuple) -> DriveRun:
 #: quiet machine, docs/benchmarks.md "The companion check beside the main run": even at 60 full-size frames).
 BESIDE_MIN_PIXELS = 60 * 375 * 1242
 
+#: This command's share of the load average since the module was loaded (its start): what its earlier drives put
+#: there is no other process's work.
+OWN_LOAD = OwnLoad()
+
 
 def companion_beside(config: SlamStageConfig, pixels: int) -> bool:
     """Whether the companion run over ``pixels`` (frames x height x width) goes to a second process beside the main
     run: on the CPU, when this process is no pool worker whose siblings keep every core busy
     (:func:`dcslam.workers.cores_shared`), a core is free besides the main run's torch threads (the load average
-    of the last minute below ``cores - threads - 0.5``: on a busy machine the worker only competes, measured 25 s
-    serial against 31-36 s beside at load 5.5 on 2 cores) and the run is long enough to pay for the worker's start
-    (:data:`BESIDE_MIN_PIXELS`)."""
+    of the last minute, less this command's own share of it (:data:`OWN_LOAD`), below ``cores - threads - 0.5``:
+    on a busy machine the worker only competes, measured 25 s serial against 31-36 s beside at load 5.5 on 2 cores)
+    and the run is long enough to pay for the worker's start (:data:`BESIDE_MIN_PIXELS`)."""
     import torch
 
     from dcslam.workers import cores_shared
 
     threads = config.threads or torch.get_num_threads()
-    free = (os.cpu_count() or 1) - threads - os.getloadavg()[0]
+    others = max(0.0, os.getloadavg()[0] - OWN_LOAD.read())
+    free = (os.cpu_count() or 1) - threads - others
     return config.device == "cpu" and not cores_shared() and free > 0.5 and pixels >= BESIDE_MIN_PIXELS
 
 

@@ -118,6 +118,7 @@ def test_a_companion_worker_that_dies_leaves_the_companion_to_this_process(scale
 
 def test_the_companion_waits_for_the_main_run_where_no_core_is_free_or_the_run_is_short(monkeypatch):
     config, long = slam.SlamStageConfig(threads=1), slam.BESIDE_MIN_PIXELS
+    monkeypatch.setattr(slam.OWN_LOAD, "read", lambda: 0.0)  # this test process's own load set aside
     monkeypatch.setattr("os.cpu_count", lambda: 2)
     monkeypatch.setattr("os.getloadavg", lambda: (0.2, 0.2, 0.2))
     monkeypatch.delenv("DCSLAM_SHARED_CORES", raising=False)
@@ -133,6 +134,11 @@ def test_the_companion_waits_for_the_main_run_where_no_core_is_free_or_the_run_i
     monkeypatch.setattr("os.getloadavg", lambda: (0.2, 0.2, 0.2))
     monkeypatch.setattr("os.cpu_count", lambda: 1)
     assert not slam.companion_beside(config, long)
+    monkeypatch.setattr("os.cpu_count", lambda: 2)
+    monkeypatch.setattr("os.getloadavg", lambda: (1.3, 1.3, 1.3))
+    assert not slam.companion_beside(config, long)          # another process keeps the second core busy
+    monkeypatch.setattr(slam.OWN_LOAD, "read", lambda: 1.0)
+    assert slam.companion_beside(config, long)              # ... unless the load is this command's own earlier work
 
 
 def test_the_stage_tells_measured_depth_from_a_completion(scaled, tmp_path, monkeypatch):
