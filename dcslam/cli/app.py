@@ -40,11 +40,13 @@ def fail(message: str) -> None:
 
 def known_errors(command):
     """Turn :class:`~dcslam.errors.DcslamError` (and a write the machine refused: a full disk, a read-only
-    filesystem) into one line on stderr and exit code 1, Ctrl-C into exit 130 (SIGTERM into 143), with a line
-    saying what the command kept and how to go on (:func:`dcslam.interrupt.keep`)."""
+    filesystem; a worker process that died) into one line on stderr and exit code 1, Ctrl-C into exit 130 (SIGTERM
+    into 143), with a line saying what the command kept and how to go on (:func:`dcslam.interrupt.keep`)."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
+        from concurrent.futures import BrokenExecutor
+
         from dcslam import interrupt
         from dcslam.errors import DcslamError
 
@@ -64,6 +66,10 @@ def known_errors(command):
             if known is None:
                 raise
             fail(f"{known}; free space or choose a writable --workspace, then rerun the command")
+        except BrokenExecutor:
+            # a pool worker the system killed (most often for memory) or that crashed in native code
+            fail("a worker process of this command died (killed by the system, most often for want of memory, or a "
+                 "crash); rerun it with fewer --jobs or more memory")
         except (KeyboardInterrupt, SystemError) as error:
             if not interrupt.is_interrupt(error):    # a SystemError of its own: a bug, with its traceback
                 raise

@@ -57,3 +57,22 @@ def test_synth_indoor_never_writes_beside_data_it_did_not_generate(cli, tmp_path
                                  "2", "--scale", "0.1")
     assert result.exit_code == 1 and "rgbd_dataset_freiburg1_xyz" in result.stderr and "--force" in result.stderr
     assert [p.name for p in (tmp_path / "tum").iterdir()] == ["rgbd_dataset_freiburg1_xyz"]
+
+
+def test_a_dead_worker_is_one_line_and_publishes_nothing(cli, tmp_path, monkeypatch):
+    """A drive worker the system killed (``--jobs 2``; the pool then raises BrokenProcessPool): exit 1, one line, no
+    generated root left half-written."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    from dcslam.synth.street import generate
+
+    def killed(*args, **kwargs):
+        raise BrokenProcessPool("A process in the process pool was terminated abruptly")
+
+    monkeypatch.setattr(generate, "_write_drives", killed)
+    result = cli("synth", "--out", tmp_path / "k", "--drives", 2, "--frames", 11, "--jobs", 2)
+    assert result.exit_code == 1 and "Traceback" not in result.stderr
+    assert result.stderr.strip().splitlines() == [
+        "error: a worker process of this command died (killed by the system, most often for want of memory, or a "
+        "crash); rerun it with fewer --jobs or more memory"]
+    assert not (tmp_path / "k").exists()
