@@ -141,8 +141,8 @@ class LocalExecutor:
 def _as_finished(futures: dict, workers: list, marks: Path) -> Iterator[tuple[Outcome, bool]]:
     """``(outcome, False)`` for each of ``futures`` (future -> task) as it finishes; when a worker dies, one last
     ``(outcome of the stage it ran, True)`` (:func:`died`). The workers are polled as well as the pool's manager
-    asked: a worker the pool spawned after its manager last listed them can die unseen by it (CPython 3.11), and the
-    command would wait for the others forever."""
+    asked: a worker the pool spawned after its manager last listed them can die unseen by it (CPython 3.11) until
+    another worker returns a result, and the command would wait until then (forever, when no other is left)."""
     from concurrent.futures import FIRST_COMPLETED, wait
     from concurrent.futures.process import BrokenProcessPool
 
