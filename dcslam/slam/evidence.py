@@ -37,10 +37,8 @@ class EvidenceRules:
         how far its own trajectory may be from the truth.
     floor_m: the smallest bound: two honest odometries on different depth differ by a few centimetres per metre
         driven whatever their covariances say, and a bound of centimetres would flag them. 0.48, 2 cm under the
-        0.5 m the verdict asks about: the gap scatters around the run's error (10th to 90th percentile about -0.05
-        to +0.09 m near 0.5 m), so a floor of exactly 0.5 m missed 7 of 24 runs ending 0.50-0.55 m off; over
-        eight development workspaces 0.48 m caught 6 of their 10 misses for 4 more false flags, on two seeds judged
-        after it 1 miss for none (docs/slam.md, "The prediction bound and a 0.48 m floor").
+        0.5 m the verdict asks about: a margin for a gap that scatters around the run's own error (what it caught
+        and what it cost: docs/slam.md, "The prediction bound and a 0.48 m floor").
     """
 
     sigmas: float = 3.0

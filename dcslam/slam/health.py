@@ -273,15 +273,19 @@ def _step_covariance(report, rules: HealthRules, holds: dict) -> np.ndarray | No
         if np.linalg.cond(inner) < 1e12:
             C = C - CV @ np.linalg.solve(inner, CV.T)
         return C
-    prior = _prior_sigma(report, rules)
-    for v in degenerate_directions(report, rules):
-        C[:3, :3] += prior ** 2 * np.outer(v, v)
+    _add_prediction(C, report, rules)
     return C
 
 
-def _prior_sigma(report, rules: HealthRules) -> float:
-    """The constant-velocity prediction's standard deviation (m) at a step: the first ICP step has no velocity."""
-    return rules.first_prior_sigma_m if report.index == 1 else rules.prior_sigma_m
+def _add_prediction(C: np.ndarray, report, rules: HealthRules) -> bool:
+    """Add to the (6, 6) twist covariance ``C``, in place, the constant-velocity prediction's variance along each
+    translation direction the step left degenerate (:func:`degenerate_directions`; the first ICP step has no
+    velocity, so ``first_prior_sigma_m`` there); whether there was one."""
+    prior = rules.first_prior_sigma_m if report.index == 1 else rules.prior_sigma_m
+    directions = degenerate_directions(report, rules)
+    for v in directions:
+        C[:3, :3] += prior ** 2 * np.outer(v, v)
+    return bool(directions)
 
 
 def degenerate_directions(report, rules: HealthRules) -> list[np.ndarray]:
@@ -305,11 +309,8 @@ def _prediction_covariances(reports, rules: HealthRules, holds: dict) -> list[tu
     for r in reports:
         if r.index == 0 or r.verdict == "rejected" or r.index in holds:
             continue
-        directions = degenerate_directions(r, rules)
-        if directions:
-            C = np.zeros((6, 6))
-            for v in directions:
-                C[:3, :3] += _prior_sigma(r, rules) ** 2 * np.outer(v, v)
+        C = np.zeros((6, 6))
+        if _add_prediction(C, r, rules):
             out.append((r, C))
     return out
 

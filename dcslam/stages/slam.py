@@ -21,7 +21,7 @@ from dcslam.errors import DcslamError
 from dcslam.slam.config import SlamSettings
 from dcslam.slam.drive import ConfidenceUse, DriveRun, check_timestamps, run_drive
 from dcslam.stages.config import option
-from dcslam.workers import OwnLoad
+from dcslam.workers import OwnLoad, cores_shared
 from dcslam.workspace import Workspace
 
 
@@ -372,8 +372,6 @@ def companion_beside(config: SlamStageConfig, pixels: int) -> bool:
     on a busy machine the worker only competes, measured 25 s serial against 31-36 s beside at load 5.5 on 2 cores)
     and the run is long enough to pay for the worker's start (:data:`BESIDE_MIN_PIXELS`)."""
     import torch
-
-    from dcslam.workers import cores_shared
 
     threads = config.threads or torch.get_num_threads()
     others = max(0.0, os.getloadavg()[0] - OWN_LOAD.read())
