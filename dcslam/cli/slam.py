@@ -18,7 +18,11 @@ def report(results: list[slam.SlamDriveResult]) -> None:
         used = s.get("sources", {})
         sources = f", ICP sources {used['kind']}" if used.get("mode") == "measured" else ""
         said = evidence_line(h)
-        if not h["suspect"] and said:  # completed depth no companion vouches for is not simply ok
+        camera = h.get("camera") or {}
+        if not h["suspect"] and camera.get("verdict") == "agrees":
+            overruled = f"; overruled: {'; '.join(h['overruled'])}" if h.get("overruled") else ""
+            verdict = f"ok, ends within {camera['gap_m']:.2f} m of the camera's trajectory{overruled}"
+        elif not h["suspect"] and said:  # completed depth no companion vouches for is not simply ok
             verdict = f"ok, {said}" if h["evidence"]["verdict"] in ("agrees", "own") else f"UNVERIFIED ({said})"
         summary(f"{r.drive}: {s['frames']} frames, {s['points']} points, {s['seconds_per_frame']:.2f} s/frame, "
                 f"final drift {s['translation_error_m']['final']:.3f} m{sources}, steps {h['accepted']} accepted / "

@@ -4,7 +4,9 @@ trajectory: the one reader that every table uses to decide whether a run failed.
 The summary holds ``rejected_steps`` (a list, one entry per step the odometry refused) and ``health``
 (:func:`dcslam.slam.health.summarise`: ``suspect``, ``reasons``, counts of accepted / degraded / rejected steps).
 A run is flagged when its health says suspect (rejected or degraded steps, the drift bound) or when it rejected a
-step. A summary without ``health`` (written before the verdicts existed) is judged by its rejected steps alone.
+step, unless the camera vouched for it (``health.camera``, ``dcslam slam --camera``: its trajectory measured from
+the images ends within 0.5 m of the run's, which no rejected step changes). A summary without ``health`` (written
+before the verdicts existed) is judged by its rejected steps alone.
 """
 from __future__ import annotations
 
@@ -53,9 +55,10 @@ def run_verdict(record: dict, where: str = "SLAM summary") -> RunVerdict:
         raise DcslamError(f"{where}: 'health' has no true/false 'suspect'; rerun `dcslam slam --force`")
     reasons = tuple(str(r) for r in health.get("reasons", []))
     rejected = max(int(health.get("rejected", 0)), len(rejected_steps))
-    if rejected and not health["suspect"]:
+    vouched = isinstance(health.get("camera"), dict) and health["camera"].get("verdict") == "agrees"
+    if rejected and not health["suspect"] and not vouched:
         reasons += (f"{rejected} steps rejected",)
-    return RunVerdict(suspect=health["suspect"] or rejected > 0, reasons=reasons, rejected=rejected,
+    return RunVerdict(suspect=health["suspect"] or (rejected > 0 and not vouched), reasons=reasons, rejected=rejected,
                       degraded=int(health.get("degraded", 0)))
 
 

@@ -60,6 +60,7 @@ class DriveRun:
     health_rules: object = None  # the HealthRules the steps were judged by (None: the defaults); the run is too
     sources: dict = field(default_factory=lambda: {"mode": "depth"})  # the ICP sources used: mode, measured kind
     evidence: dict | None = None  # dcslam.slam.evidence.judge / unavailable (None: not asked, as before it existed)
+    camera: dict | None = None  # dcslam.slam.camera.judge_camera, with the measured kind (None: not asked)
 
     def __post_init__(self) -> None:
         from dcslam.geometry.rotations import nearest_rotation
@@ -70,7 +71,8 @@ class DriveRun:
         self.T_world_cam = T
 
     def health(self) -> dict:
-        """The run's health (:func:`dcslam.slam.health.summarise`), merged with its evidence verdict if it has one."""
+        """The run's health (:func:`dcslam.slam.health.summarise`), merged with its evidence verdict and then its
+        camera verdict, where it has them."""
         from dcslam.slam.health import HealthRules, summarise
 
         health = summarise(self.reports, self.health_rules or HealthRules(), self.frame_interval_s())
@@ -78,6 +80,10 @@ class DriveRun:
             from dcslam.slam.evidence import merge
 
             health = merge(health, self.evidence)
+        if self.camera is not None:
+            from dcslam.slam.camera import merge_camera
+
+            health = merge_camera(health, self.camera)
         return health
 
     def frame_interval_s(self) -> float | None:

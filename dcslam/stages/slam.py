@@ -71,6 +71,11 @@ class SlamStageConfig(SlamSettings):
         "measured LiDAR pixels behind it and flag the run when it ends further from that companion (its height and "
         "tilt corrected by the road it saw) than the companion's own uncertainty allows; none: no companion (the "
         "summary says that no evidence bounds the drift). A sparse input is its own evidence."))
+    camera: bool = option(False, help=(
+        "Also measure each step again from the drive's colour images (the measured LiDAR depth behind the input "
+        "warped from frame to frame) and judge the run by that camera trajectory: suspect when it ends more than "
+        "0.5 m from it, vouched for (the other reasons overruled) when within. Uses data beyond the depth; about "
+        "0.1-0.2 CPU-s a full-size frame."))
     record: bool = option(False, help=(
         "Also write a Rerun recording <out>/<drive>.rrd per drive: per frame the camera image, input depth, points, "
         "ICP sources, map and step verdict, and the trajectories; open it with `dcslam view`. Needs rerun-sdk "
@@ -214,12 +219,35 @@ def slam_drive(path: Path, source: str | Path, measured: str | None, config: Sla
                                        on_step=None if recorder is None else recorder.step)
             drive_run.name = path.stem
             drive_run.evidence = evidence(drive_run)
+        if config.camera:
+            drive_run.camera = camera_evidence(path, source, measured, drive_run)
         written = write_outputs(drive_run, out_dir, force, made_from)
         if recorder is not None:
             recorder.finish(drive_run, companions[0] if companions else None)
     if config.record:
         written["recording"] = recording
     return SlamDriveResult(path.stem, drive_run.summary(), written)
+
+
+def camera_evidence(drive_path: Path, source: str | Path, sources_kind: str | None, run: DriveRun) -> dict:
+    """The camera's verdict on ``run`` (:func:`dcslam.slam.camera.judge_camera`): its steps measured again from the
+    drive's images with the measured depth behind ``source`` (``sources_kind`` when the ICP took its sources from
+    one; :func:`dcslam.io.drive.measured_kind` else), ``measured_kind`` recorded; ``unmeasured`` with the reason
+    when no measured kind can be named or the drive lacks it."""
+    from dcslam.io.drive import DriveFile, measured_kind
+    from dcslam.progress import Bar
+    from dcslam.slam.camera import judge_camera, witness
+
+    kind = sources_kind or measured_kind(source)
+    with DriveFile(drive_path) as drive:
+        if kind is None or kind not in drive.kinds:
+            why = f"{source} does not say which measured depth it was made from" if kind is None else \
+                f"{drive_path.name} holds no {kind} depth"
+            return {"verdict": "unmeasured", "suspect": False, "reason": None, "measured_kind": kind, "note": why}
+        steps = max(len(run.T_world_cam) - 1, 0)
+        with Bar(f"{drive_path.stem} camera {kind}", steps) as bar:
+            camera, measured = witness(drive, kind, run.T_world_cam, progress=bar.advance)
+    return {**judge_camera(run.T_world_cam, camera, measured), "measured_kind": kind}
 
 
 def measured_sources(config: SlamStageConfig, source: str | Path, drive_path: Path) -> str | None:

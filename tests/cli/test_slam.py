@@ -163,3 +163,37 @@ def test_the_global_map_can_be_switched_off(cli, workspace, tmp_path):
         assert record["settings"]["keep_global_map"] is (flag == "--keep-global-map")
         sizes[flag] = len(read_ply(out / "street_0001.ply")[0])
     assert 0 < sizes["--no-keep-global-map"] < sizes["--keep-global-map"]
+
+
+def test_camera_abstains_on_blank_images_and_leaves_the_verdict(cli, workspace, tmp_path):
+    """This drive's images are flat grey: no return lies on texture, so the camera measures no step, says so, and
+    the run keeps the verdict of its own rules."""
+    result = cli("slam", "--depth", "sparse", "--camera", "-w", workspace, "--out", tmp_path / "o")
+    assert result.exit_code == 0, result.output
+    health = json.loads((tmp_path / "o" / "street_0001.json").read_text())["health"]
+    camera = health["camera"]
+    assert camera["verdict"] == "unmeasured" and camera["steps_measured"] == 0 and camera["steps"] == N - 1
+    assert camera["measured_kind"] == "sparse" and "overruled" not in health and "the camera" not in result.output
+
+
+def test_camera_judges_a_generated_drive_and_the_tables_follow(cli, tmp_path):
+    """A textured generated drive at 8 beams: the camera measures every step, its verdict is the run's distance
+    from the camera's trajectory against 0.5 m, and the tables' reader (run_verdict) follows it."""
+    from dcslam.io.slam_summary import read_verdict
+    from tests.fixtures.street import write_generated_drive
+
+    name = "2011_09_26_drive_7303_sync"
+    (tmp_path / "drives").mkdir()
+    write_generated_drive(tmp_path / "drives" / f"{name}.h5", seed=7303, frames=8, beams=8)
+    (tmp_path / "drives" / "splits.json").write_text(json.dumps({"train": [], "val": [], "test": [name]}))
+    result = cli("slam", "--depth", "sparse@8", "--camera", "--threads", "1", "-w", tmp_path)
+    assert result.exit_code == 0, result.output
+    summary = json.loads((tmp_path / "slam" / "sparse@8" / f"{name}.json").read_text())
+    camera, health = summary["health"]["camera"], summary["health"]
+    assert camera["steps_measured"] == camera["steps"] == 7 and camera["measured_kind"] == "sparse@8"
+    assert camera["verdict"] == ("departs" if camera["gap_m"] > 0.5 else "agrees")
+    # the camera's trajectory ends within centimetres of the truth (6 cm here, at half size), so its gap is the
+    # run's error within them
+    assert camera["gap_m"] == pytest.approx(summary["translation_error_m"]["final"], abs=0.1)
+    assert health["suspect"] == (camera["verdict"] == "departs")
+    assert read_verdict(tmp_path / "slam" / "sparse@8" / f"{name}.json").suspect == health["suspect"]

@@ -125,6 +125,15 @@ class TestMalformedSummaries:
                                "health": {"suspect": False, "reasons": []}})
         assert verdict.suspect and verdict.rejected == 1 and verdict.reasons == ("1 steps rejected",)
 
+    def test_rejected_steps_do_not_flag_a_run_the_camera_vouched_for(self):
+        """``dcslam slam --camera``: a camera that agrees overrules the rejected steps (they stay counted); one that
+        departs, or measured nothing, leaves them flagging the run."""
+        rejected = [{"frame": 2, "reason": "few points"}]
+        for verdict, suspect in (("agrees", False), ("departs", True), ("unmeasured", True)):
+            health = {"suspect": verdict == "departs", "reasons": [], "camera": {"verdict": verdict}}
+            got = run_verdict({"rejected_steps": rejected, "health": health})
+            assert got.suspect is suspect and got.rejected == 1, verdict
+
     def test_a_summary_without_health_is_judged_by_its_rejected_steps(self):
         assert not run_verdict({"rejected_steps": []}).suspect
         assert run_verdict({"rejected_steps": [{"frame": 1}]}).suspect
