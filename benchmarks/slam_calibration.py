@@ -74,16 +74,17 @@ def complete(ws: Path, beams: list[int]) -> list[str]:
     return layers
 
 
-def slam(ws: Path, inputs: list[str], frames: int) -> None:
-    """``dcslam slam`` at the defaults (``--evidence auto``) over the first ``frames`` frames of every test drive
-    for each input, into ``slam/<layer>/``; an input whose summaries are all there is skipped."""
+def slam(ws: Path, inputs: list[str], frames: int, extra: tuple[str, ...] = ()) -> None:
+    """``dcslam slam`` at the defaults (``--evidence auto``, and ``extra``: ``--camera``) over the first ``frames``
+    frames of every test drive for each input, into ``slam/<layer>/``; an input whose summaries are all there is
+    skipped."""
     tests = json.loads((ws / "drives" / "splits.json").read_text())["test"]
     for depth in inputs:
         layer = depth.split("/", 1)[-1]
         if all((ws / "slam" / layer / f"{d}.json").exists() for d in tests):
             continue
         dcslam(ws, "slam", "--depth", depth, "--frames", str(frames), "--threads", "1", "--device", "cpu",
-               "--evidence", "auto", "--force")
+               "--evidence", "auto", *extra, "--force")
 
 
 def main(argv=None) -> int:
@@ -97,6 +98,7 @@ def main(argv=None) -> int:
     parser.add_argument("--beams", default="64,16,8")
     parser.add_argument("--slam-frames", type=int, default=30)
     parser.add_argument("--no-learned", action="store_true", help="IP-Basic only: no SparseConvNet")
+    parser.add_argument("--camera", action="store_true", help="dcslam slam --camera: the camera judges each run")
     args = parser.parse_args(argv)
     beams = [int(b) for b in args.beams.split(",")]
     ws = args.workspace
@@ -105,7 +107,8 @@ def main(argv=None) -> int:
     layers = complete(ws, beams)
     if args.no_learned:
         layers = [x for x in layers if not x.startswith("sparse-conv")]
-    slam(ws, [kind(b) for b in beams] + ["dense", "exact"] + [f"predicted/{x}" for x in layers], args.slam_frames)
+    slam(ws, [kind(b) for b in beams] + ["dense", "exact"] + [f"predicted/{x}" for x in layers], args.slam_frames,
+         ("--camera",) if args.camera else ())
     return subprocess.run([sys.executable, str(Path(__file__).with_name("slam_evidence.py")), str(ws), "--flags"],
                           check=False).returncode
 

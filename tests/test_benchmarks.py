@@ -221,3 +221,38 @@ def test_slam_forward_backward_reverses_a_drive_and_measures_the_loop():
     short[-1, 2, 3] += 0.3                          # the backward run ends 0.3 m short of the first frame
     metres, degrees = fb.gap(T, short)
     assert metres == pytest.approx(0.3) and degrees == pytest.approx(0.0, abs=1e-9)
+
+
+def test_slam_camera_measures_a_stored_run_beside_its_truth(tmp_path, capsys):
+    """``slam_camera.py`` on a workspace as ``slam_calibration.py`` leaves it: a real 8-beam SLAM run of a
+    generated drive, written by dcslam; the row holds the run's stored error and verdict, and the camera's figure,
+    whose trajectory ends near the truth and whose gap is the run's error within the camera's own."""
+    import json
+
+
+    from dcslam.slam.config import SlamSettings, build_slam
+    from dcslam.stages.slam import run_drive_file, write_outputs
+    from tests.fixtures.street import write_generated_drive
+
+    spec = importlib.util.spec_from_file_location("slam_camera", BENCHMARKS / "slam_camera.py")
+    cam = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cam)
+    ws, name = tmp_path / "calib-7302", "2011_09_26_drive_7302_sync"
+    (ws / "drives").mkdir(parents=True)
+    path = write_generated_drive(ws / "drives" / f"{name}.h5", seed=7302, frames=8, beams=8)
+    (ws / "drives" / "splits.json").write_text(json.dumps({"train": [], "val": [], "test": [name]}))
+    run = run_drive_file(path, "sparse@8", build_slam(SlamSettings()), colour=False)
+    write_outputs(run, ws / "slam" / "sparse@8")
+    assert cam.tasks([ws], ["sparse", "sparse@8"]) == [(ws, "sparse@8", name)]
+    row = cam.measure(ws, "sparse@8", name)
+    stored = json.loads((ws / "slam" / "sparse@8" / f"{name}.json").read_text())
+    assert row["final_m"] == pytest.approx(stored["translation_error_m"]["final"], abs=1e-6)
+    assert row["flagged"] == stored["health"]["suspect"] and row["steps_measured"] == 7
+    assert row["camera_final_m"] < 0.05
+    assert abs(row["gap_m"] - row["final_m"]) <= row["camera_final_m"] + 1e-6    # the triangle inequality's bound
+    assert row["measured"] == "sparse@8" and row["verdict"] in ("agrees", "departs")
+    assert row["camera_rule"] == (row["verdict"] == "departs")        # the camera's verdict decides, either way
+    cam.separation([row], 0.5)
+    cam.by_input([row], 0.5)
+    out = capsys.readouterr().out
+    assert "runs end more than 0.5 m off" in out and "| sparse@8 | 1 |" in out
