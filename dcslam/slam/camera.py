@@ -47,7 +47,8 @@ class CameraStep:
     """A step measured by the camera: ``T`` (4, 4) float64 maps frame k's camera coordinates to frame k+1's;
     ``covariance`` (6, 6) the first-order covariance of the twist (translation first), s^2 (J^T W J)^-1 at the
     finest level; ``returns`` how many returns weighed on texture there; ``measured`` False when too few did, or
-    their system was singular (``T`` is then the step it started from, ``covariance`` NaN)."""
+    their system was singular, or the pose not finite (``T`` is then the step it started from, ``covariance``
+    NaN)."""
 
     T: np.ndarray
     covariance: np.ndarray
@@ -148,7 +149,8 @@ def camera_step(pyramid_from: list, pyramid_to: list, depth_from: np.ndarray, K:
             T = se3_exp(step) @ T
             if float(step.abs().max()) < STOP:
                 break
-    if system is None or system[3] < MIN_RETURNS or float(torch.linalg.eigvalsh(system[0])[0]) <= 0:
+    if (system is None or system[3] < MIN_RETURNS or not bool(torch.isfinite(T).all())
+            or float(torch.linalg.eigvalsh(system[0])[0]) <= 0):
         return CameraStep(np.asarray(T_start, np.float64), np.full((6, 6), np.nan), 0 if system is None else
                           system[3], False)
     A, _, s2, n = system
