@@ -31,10 +31,13 @@ def kind(beams: int) -> str:
 
 
 def dcslam(ws: Path, *args: str) -> None:
-    """One dcslam command in this interpreter's environment, on workspace ``ws``; raises when it fails."""
+    """One dcslam command in this interpreter's environment, on workspace ``ws``; a command that fails (it has said
+    why in its own line) ends the script in one more line, exit 1: a rerun goes on from what is there."""
     command = [sys.executable, "-m", "dcslam", *args, "-w", str(ws)]
     print("$", " ".join(command[2:]), flush=True)
-    subprocess.run(command, check=True)
+    done = subprocess.run(command, check=False)
+    if done.returncode:
+        raise SystemExit(f"`dcslam {args[0]}` failed (exit {done.returncode}); run this script again to go on")
 
 
 def prepare(ws: Path, drives: int, frames: int, seed: int, train: int, val: int, beams: list[int]) -> list[str]:
