@@ -113,3 +113,16 @@ def test_the_camera_overrules_the_other_reasons_when_it_agrees_and_adds_its_own_
     unmeasured = {"verdict": "unmeasured", "suspect": False, "reason": None}
     assert merge_camera(health, unmeasured)["reasons"] == health["reasons"]
     assert merge_camera(health, unmeasured)["suspect"]
+
+
+def test_an_agreeing_camera_does_not_overrule_the_road_or_the_companion():
+    """The camera starts from the run's own steps, so it outweighs their checks, not the independent witnesses."""
+    road = "the road says the run rose 3.26 m (vertical, camera y), past 0.5 m from frame 26"
+    companion = "ends 2.44 m from the sparse@8 companion (road-corrected), past the bound from frame 28"
+    steps = "2 consecutive steps degraded"
+    health = {"suspect": True, "reasons": [steps, road, companion],
+              "evidence": {"verdict": "departs", "suspect": True, "reason": companion}}
+    merged = merge_camera(health, {"verdict": "agrees", "suspect": False, "reason": None})
+    assert merged["suspect"] and merged["reasons"] == [road, companion] and merged["overruled"] == [steps]
+    agreeing = {**health, "reasons": [steps], "evidence": {"verdict": "agrees", "suspect": False, "reason": None}}
+    assert not merge_camera(agreeing, {"verdict": "agrees", "suspect": False, "reason": None})["suspect"]
