@@ -74,8 +74,8 @@ class SlamStageConfig(SlamSettings):
     camera: bool = option(False, help=(
         "Also measure each step again from the drive's colour images (the measured LiDAR depth behind the input "
         "warped from frame to frame) and judge the run by that camera trajectory: suspect when it ends more than "
-        "0.5 m from it, vouched for (the other reasons overruled) when within. Uses data beyond the depth; about "
-        "0.1-0.2 CPU-s a full-size frame."))
+        "0.5 m from it; when within, its own steps' reasons are overruled (the road's and the companion's stay). Uses "
+        "data beyond the depth; about 0.1-0.2 CPU-s a full-size frame."))
     record: bool = option(False, help=(
         "Also write a Rerun recording <out>/<drive>.rrd per drive: per frame the camera image, input depth, points, "
         "ICP sources, map and step verdict, and the trajectories; open it with `dcslam view`. Needs rerun-sdk "

@@ -176,6 +176,18 @@ def test_camera_abstains_on_blank_images_and_leaves_the_verdict(cli, workspace, 
     assert camera["measured_kind"] == "sparse" and "overruled" not in health and "the camera" not in result.output
 
 
+def test_camera_cannot_judge_a_layer_that_does_not_say_what_it_was_made_from(cli, workspace, tmp_path):
+    from dcslam.io.drive import DriveFile
+
+    with DriveFile(workspace / "drives" / "street_0001.h5") as drive:
+        depth = np.stack([drive.depth("dense", i) for i in range(N)])
+    layer = write_layer(tmp_path / "foreign.h5", Layer(depth, "street_0001", "another tool"))
+    result = cli("slam", "--depth", layer, "--camera", "--evidence", "none", "-w", workspace, "--out", tmp_path / "o")
+    assert result.exit_code == 0, result.output
+    camera = json.loads((tmp_path / "o" / "street_0001.json").read_text())["health"]["camera"]
+    assert camera["verdict"] == "unmeasured" and "does not say which measured depth" in camera["note"]
+
+
 def test_camera_judges_a_generated_drive_and_the_tables_follow(cli, tmp_path):
     """A textured generated drive at 8 beams: the camera measures every step, its verdict is the run's distance
     from the camera's trajectory against 0.5 m, and the tables' reader (run_verdict) follows it."""
