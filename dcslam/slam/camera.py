@@ -3,8 +3,9 @@
 Sparse LiDAR depth has no companion run (it *is* the measurement), and its step checks see what every 8-beam scan
 shares. The camera sees the same motion through other physics: frame k's measured returns, carried into frame k+1
 by a relative pose, must land on pixels of frame k+1 as bright as the ones they came from. Starting from the run's
-own step, Gauss-Newton on that photometric error over an image pyramid, each return weighted by Tukey's biweight
-(a moving car weighs nothing), finds the pose the images agree with (:func:`camera_step`); composed step by step
+own first step and then from its own previous one (constant velocity: a run gone off cannot take it along),
+Gauss-Newton on that photometric error over an image pyramid, each return weighted by Tukey's biweight (a moving
+car weighs nothing), finds the pose the images agree with (:func:`camera_step`); composed step by step
 (:func:`camera_trajectory`) they give the camera's trajectory, and the distance of the run's positions from it
 (:func:`camera_gap`) estimates the run's error. The depth is the measured one, never a completion (whose error is
 what is judged): the LiDAR's returns of frame k, metric, so the camera's trajectory has the drive's scale.
@@ -205,18 +206,22 @@ def _camera_sigma(camera: np.ndarray, steps: list[CameraStep]) -> float:
 
 def witness(drive, measured: str, T_world_cam: np.ndarray, first_frame: int = 0,
             progress=None) -> tuple[np.ndarray, list[CameraStep]]:
-    """The camera's trajectory over a run of ``drive`` (a :class:`dcslam.io.drive.DriveFile`) from ``first_frame``,
-    each step started from the run's own (``T_world_cam`` (N, 4, 4), one pose a frame) and measured with the
-    drive's ``measured`` depth (``sparse``, ``sparse@8``...: the LiDAR's returns, never a completion). ``progress``,
-    when given, is called once a step. Returns (camera trajectory (N, 4, 4), N - 1 steps)."""
+    """The camera's trajectory over a run of ``drive`` (a :class:`dcslam.io.drive.DriveFile`) from
+    ``first_frame`` (``T_world_cam`` (N, 4, 4), one pose a frame): each step started from the camera's own step
+    before it (from the run's own for the first, or after a step it could not measure) and measured with the
+    drive's ``measured`` depth (``sparse``, ``sparse@8``...: the LiDAR's returns, never a completion).
+    ``progress``, when given, is called once a step. Returns (camera trajectory (N, 4, 4), N - 1 steps)."""
     T = np.asarray(T_world_cam, np.float64)
     K = np.asarray(drive.K, np.float64)
     before = grey_pyramid(drive.rgb(first_frame))
     depth = drive.depth(measured, first_frame)
-    steps = []
+    steps: list[CameraStep] = []
     for k in range(1, len(T)):
         now = grey_pyramid(drive.rgb(first_frame + k))
-        steps.append(camera_step(before, now, depth, K, np.linalg.solve(T[k], T[k - 1])))
+        # the camera's own previous step (constant velocity) where it measured one, so that a run gone off cannot
+        # take it along; the run's step for the first, which has no velocity yet
+        start = steps[-1].T if steps and steps[-1].measured else np.linalg.solve(T[k], T[k - 1])
+        steps.append(camera_step(before, now, depth, K, start))
         before, depth = now, drive.depth(measured, first_frame + k)
         if progress is not None:
             progress()

@@ -126,3 +126,17 @@ def test_an_agreeing_camera_does_not_overrule_the_road_or_the_companion():
     assert merged["suspect"] and merged["reasons"] == [road, companion] and merged["overruled"] == [steps]
     agreeing = {**health, "reasons": [steps], "evidence": {"verdict": "agrees", "suspect": False, "reason": None}}
     assert not merge_camera(agreeing, {"verdict": "agrees", "suspect": False, "reason": None})["suspect"]
+
+
+def test_a_run_that_jumps_does_not_take_the_camera_along(drive):
+    """A run whose third step dropped 1 m: each camera step after the first starts from the camera's own previous
+    one, so the camera stays on the truth and its gap is the drop. (Started from the run's own steps, as it was
+    first built, the camera ended 0.64 m off here: taken along.)"""
+    T = truth(drive)
+    run = T.copy()
+    run[3:, :3, 3] += T[3, :3, :3] @ np.array([0.0, 1.0, 0.0])        # 1 m down frame 3's camera y
+    camera, steps = witness(drive, "sparse@8", run)
+    assert np.linalg.norm(camera[-1, :3, 3] - T[-1, :3, 3]) < 0.05
+    figure = judge_camera(run, camera, steps)
+    assert figure["gap_m"] == pytest.approx(1.0, abs=0.05) and figure["from_frame"] == 3
+    assert figure["direction"] == "vertical (camera y)"
