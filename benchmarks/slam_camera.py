@@ -22,17 +22,16 @@ import numpy as np
 KINDS = ("sparse", "sparse@16", "sparse@8")
 
 
-def measured_of(kind: str, health: dict) -> str:
-    """The measured depth kind behind a stored run's input: its own for a sparse kind, the companion's for a
-    completion (its summary names it), ``sparse`` for dense and exact depth."""
-    from dcslam.io.drive import is_depth_kind, measured_kind
+def measured_of(summary: dict) -> str:
+    """The measured depth kind behind a stored run's input, as ``dcslam slam --camera`` names it: the ICP sources'
+    kind with ``--sources measured``, else :func:`dcslam.io.drive.measured_kind` of the source its summary records
+    (a sparse kind its own, ``sparse`` for dense and exact, a layer the input it was predicted from)."""
+    from dcslam.io.drive import measured_kind
 
-    if is_depth_kind(kind):
-        return measured_kind(kind)
-    companion = (health.get("evidence") or {}).get("companion")
-    if not companion:
-        raise SystemExit(f"{kind}: its summary names no companion; the measured depth behind it is unknown")
-    return companion
+    kind = summary.get("sources", {}).get("kind") or measured_kind(summary["settings"]["source"])
+    if kind is None:
+        raise SystemExit(f"{summary['settings']['source']}: does not say which measured depth it was made from")
+    return kind
 
 
 def measure(ws: Path, kind: str, drive: str) -> dict:
@@ -50,7 +49,7 @@ def measure(ws: Path, kind: str, drive: str) -> dict:
     torch.set_num_threads(1)
     summary = json.loads((ws / "slam" / kind / f"{drive}.json").read_text())
     health = summary["health"]
-    measured = measured_of(kind, health)
+    measured = measured_of(summary)
     stamps, T = read_tum(ws / "slam" / kind / f"{drive}.txt")
     with DriveFile(ws / "drives" / f"{drive}.h5") as d:
         first = int(np.argmin(np.abs(d.timestamps - stamps[0])))
@@ -76,15 +75,12 @@ def separation(rows: list[dict], truth: float, road_m: float = 0.5) -> None:
           f"{sum(r['camera_rule'] for r in good)}")
     print("| camera gap threshold m | bad / good flagged by the gap | rule or gap | road or gap |\n"
           "| --- | --- | --- | --- |")
+    others = {"alone": lambda r: False, "rule": lambda r: r["flagged"],
+              "road": lambda r: (r["road_m"] or 0.0) > road_m}
     for t in (0.3, 0.4, 0.45, 0.5, 0.6, 0.75):
-        def by(rs, other):
-            return sum((r["gap_m"] > t) or other(r) for r in rs)
-        alone, rule = (lambda r: False), (lambda r: r["flagged"])
-
-        def road(r):
-            return (r["road_m"] or 0.0) > road_m
-        print(f"| {t:g} | {by(bad, alone)} / {by(good, alone)} | {by(bad, rule)} / {by(good, rule)} "
-              f"| {by(bad, road)} / {by(good, road)} |")
+        cells = [" / ".join(str(sum((r["gap_m"] > t) or other(r) for r in rs)) for rs in (bad, good))
+                 for other in others.values()]
+        print(f"| {t:g} | " + " | ".join(cells) + " |")
 
 
 def by_input(rows: list[dict], truth: float) -> None:

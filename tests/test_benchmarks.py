@@ -241,7 +241,7 @@ def test_slam_camera_measures_a_stored_run_beside_its_truth(tmp_path, capsys):
     (ws / "drives").mkdir(parents=True)
     path = write_generated_drive(ws / "drives" / f"{name}.h5", seed=7302, frames=8, beams=8)
     (ws / "drives" / "splits.json").write_text(json.dumps({"train": [], "val": [], "test": [name]}))
-    run = run_drive_file(path, "sparse@8", build_slam(SlamSettings()), colour=False)
+    run = run_drive_file(path, "sparse@8", build_slam(SlamSettings()), colour=False, settings={"source": "sparse@8"})
     write_outputs(run, ws / "slam" / "sparse@8")
     assert cam.tasks([ws], ["sparse", "sparse@8"]) == [(ws, "sparse@8", name)]
     row = cam.measure(ws, "sparse@8", name)

@@ -85,10 +85,13 @@ def _sample(images: tuple[torch.Tensor, ...], u: torch.Tensor, v: torch.Tensor) 
 
 def _returns(depth: np.ndarray, K: np.ndarray) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Frame k's measured returns within MAX_DEPTH_M: camera points (n, 3) float64 and their pixels u, v (n,)."""
+    from dcslam.geometry.camera import backproject_pixels
+
     v, u = np.nonzero((depth > 0) & (depth < MAX_DEPTH_M))
-    z = depth[v, u].astype(np.float64)
-    points = np.stack([(u - K[0, 2]) / K[0, 0] * z, (v - K[1, 2]) / K[1, 1] * z, z], 1)
-    return torch.from_numpy(points), torch.from_numpy(u.astype(np.float64)), torch.from_numpy(v.astype(np.float64))
+    z = torch.from_numpy(depth[v, u].astype(np.float64))
+    pixels = torch.from_numpy(v * depth.shape[1] + u)
+    points = backproject_pixels(z, pixels, torch.from_numpy(np.asarray(K, np.float64)), depth.shape[1])
+    return points, torch.from_numpy(u.astype(np.float64)), torch.from_numpy(v.astype(np.float64))
 
 
 def _level_camera(K: np.ndarray, level: int) -> tuple[float, float, float, float]:
