@@ -24,6 +24,9 @@ def report(results: list[slam.SlamDriveResult]) -> None:
             verdict = f"ok, ends within {camera['gap_m']:.2f} m of the camera's trajectory{overruled}"
         elif not h["suspect"] and said:  # completed depth no companion vouches for is not simply ok
             verdict = f"ok, {said}" if h["evidence"]["verdict"] in ("agrees", "own") else f"UNVERIFIED ({said})"
+        if camera.get("verdict") == "unmeasured":  # asked for and silent: say so, or it reads as if it agreed
+            why = camera.get("note") or f"{camera['steps_measured']} of {camera['steps']} steps measured from images"
+            verdict += f"; the camera abstained: {why}"
         summary(f"{r.drive}: {s['frames']} frames, {s['points']} points, {s['seconds_per_frame']:.2f} s/frame, "
                 f"final drift {s['translation_error_m']['final']:.3f} m{sources}, steps {h['accepted']} accepted / "
                 f"{h['degraded']} degraded / {h['rejected']} rejected, {verdict} -> {r.written['trajectory'].parent}")

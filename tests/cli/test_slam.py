@@ -167,13 +167,14 @@ def test_the_global_map_can_be_switched_off(cli, workspace, tmp_path):
 
 def test_camera_abstains_on_blank_images_and_leaves_the_verdict(cli, workspace, tmp_path):
     """This drive's images are flat grey: no return lies on texture, so the camera measures no step, says so, and
-    the run keeps the verdict of its own rules."""
+    the run keeps the verdict of its own rules, and its line says the camera abstained."""
     result = cli("slam", "--depth", "sparse", "--camera", "-w", workspace, "--out", tmp_path / "o")
     assert result.exit_code == 0, result.output
     health = json.loads((tmp_path / "o" / "street_0001.json").read_text())["health"]
     camera = health["camera"]
     assert camera["verdict"] == "unmeasured" and camera["steps_measured"] == 0 and camera["steps"] == N - 1
-    assert camera["measured_kind"] == "sparse" and "overruled" not in health and "the camera" not in result.output
+    assert camera["measured_kind"] == "sparse" and "overruled" not in health
+    assert f"the camera abstained: 0 of {N - 1} steps measured from images" in result.output
 
 
 def test_camera_cannot_judge_a_layer_that_does_not_say_what_it_was_made_from(cli, workspace, tmp_path):
@@ -186,6 +187,7 @@ def test_camera_cannot_judge_a_layer_that_does_not_say_what_it_was_made_from(cli
     assert result.exit_code == 0, result.output
     camera = json.loads((tmp_path / "o" / "street_0001.json").read_text())["health"]["camera"]
     assert camera["verdict"] == "unmeasured" and "does not say which measured depth" in camera["note"]
+    assert f"the camera abstained: {layer} does not say which measured depth" in " ".join(result.output.split())
 
 
 def test_camera_judges_a_generated_drive_and_the_tables_follow(cli, tmp_path):
