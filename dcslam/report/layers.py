@@ -224,8 +224,9 @@ def slam_trajectory(ws: Workspace, layer: str, drive: str, root: Path | None = N
 def slam_settings(ws: Workspace, layer: str, drive: str, root: Path | None = None) -> dict:
     """The settings of the SLAM run behind ``slam/<layer>/<drive>.txt`` (:data:`RUN_SETTINGS`, from the summary
     ``<drive>.json`` beside it; ``frames`` is the number asked for, 0 = all: a drive shorter than that runs fewer,
-    which its pose count shows), plus ``suspect``: the run's verdict (:func:`dcslam.io.slam_summary.run_verdict`:
-    it rejected steps, or its health flagged it for degraded steps or its drift bound). Empty when the summary is
+    which its pose count shows), ``camera``: True where the camera judged the run too (absent otherwise), plus
+    ``suspect``: the run's verdict (:func:`dcslam.io.slam_summary.run_verdict`: it rejected steps, or its health
+    flagged it for degraded steps or its drift bound, or the camera). Empty when the summary is
     missing (a trajectory made elsewhere). ``root``: the folder of the layers' SLAM outputs (default ``slam/``)."""
     from dcslam.io.slam_summary import read_summary, run_verdict
 
@@ -243,6 +244,9 @@ def slam_settings(ws: Workspace, layer: str, drive: str, root: Path | None = Non
     sources = record.get("sources") if isinstance(record.get("sources"), dict) else {"mode": "depth"}
     settings.update(sources=sources.get("mode", "depth"), measured=sources.get("kind"))
     out = {k: settings[k] for k in RUN_SETTINGS if k in settings}
+    health = record.get("health")
+    if isinstance(health, dict) and health.get("camera"):  # judged by the camera too (`--camera`): say so
+        out["camera"] = True
     out["suspect"] = run_verdict(record, str(path)).suspect
     return out
 

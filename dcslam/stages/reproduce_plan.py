@@ -2,6 +2,7 @@
 (``dcslam reproduce --print-config`` prints them as TOML)."""
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 from dcslam.stages.experiments import experiment
@@ -11,8 +12,18 @@ from dcslam.workspace import Workspace
 
 
 def profile_of(config):
-    """The profile a :class:`dcslam.stages.reproduce.ReproduceConfig` names, of the experiment it names."""
-    return experiment(config.table).profile(config.profile)
+    """The profile a :class:`dcslam.stages.reproduce.ReproduceConfig` names, of the experiment it names (with the
+    camera's verdict on every SLAM run under ``--camera``: :func:`with_camera`)."""
+    profile = experiment(config.table).profile(config.profile)
+    return with_camera(profile) if config.camera else profile
+
+
+def with_camera(profile):
+    """``profile`` with ``camera`` on in its SLAM settings, named ``<name>+camera`` (its unit costs are not the
+    profile's: the camera's pass costs a SLAM run more); a profile without SLAM settings as it is."""
+    if not hasattr(profile, "slam"):
+        return profile
+    return replace(profile, name=f"{profile.name}+camera", slam={**profile.slam, "camera": True})
 
 
 def seeds_of(config) -> int:

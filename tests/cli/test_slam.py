@@ -132,7 +132,7 @@ def test_confidence_use_is_applied_and_recorded(cli, workspace, confident_layer,
     expected = good_fraction if minimum > 0 else 1.0
     assert abs(used["kept_fraction"] - expected) < 0.02
     settings = slam_settings(Workspace(tmp_path), "noisy", "street_0001")
-    assert settings["confidence"] == use and settings["min_confidence"] == minimum
+    assert settings["confidence"] == use and settings["min_confidence"] == minimum and "camera" not in settings
 
 
 def test_confidence_of_a_layer_without_one(cli, workspace, tmp_path):
@@ -194,6 +194,8 @@ def test_camera_judges_a_generated_drive_and_the_tables_follow(cli, tmp_path):
     """A textured generated drive at 8 beams: the camera measures every step, its verdict is the run's distance
     from the camera's trajectory against 0.5 m, and the tables' reader (run_verdict) follows it."""
     from dcslam.io.slam_summary import read_verdict
+    from dcslam.report.layers import slam_settings
+    from dcslam.workspace import Workspace
     from tests.fixtures.street import write_generated_drive
 
     name = "2011_09_26_drive_7303_sync"
@@ -211,3 +213,5 @@ def test_camera_judges_a_generated_drive_and_the_tables_follow(cli, tmp_path):
     assert camera["gap_m"] == pytest.approx(summary["translation_error_m"]["final"], abs=0.1)
     assert health["suspect"] == (camera["verdict"] == "departs")
     assert read_verdict(tmp_path / "slam" / "sparse@8" / f"{name}.json").suspect == health["suspect"]
+    settings = slam_settings(Workspace(tmp_path), "sparse@8", name)  # the tables say the camera judged it
+    assert settings["camera"] is True and settings["suspect"] == health["suspect"]
