@@ -268,8 +268,9 @@ def merge_camera(health: dict, camera: dict) -> dict:
     verdict folded in: ``camera`` added; ``departs`` makes the run suspect and appends its reason; ``agrees``
     overrules the run's own step reasons (rejected and degraded steps, the drift, hold and prediction bounds: they
     move to ``overruled``), since the camera measured each step with other physics and more precisely; the road's
-    reason and the companion's stay, independent witnesses the camera does not outweigh: it starts from the run's
-    own steps, and a run gone far enough off can take it along (docs/slam.md); ``unmeasured`` changes nothing."""
+    reason and the companion's stay, independent witnesses the camera does not outweigh (overruling them too missed
+    runs at the 0.5 m margin that they had flagged, on seeds generated for the test: docs/slam.md); ``unmeasured``
+    changes nothing."""
     merged = {**health, "reasons": list(health.get("reasons", [])), "camera": camera}
     if camera["verdict"] == "departs":
         merged["suspect"] = True
