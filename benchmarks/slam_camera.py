@@ -1,7 +1,8 @@
 """The camera as a witness of SLAM runs on measured depth (:mod:`dcslam.slam.camera`): for every stored run of a
 calibration workspace (``slam_calibration.py``'s test drives; the runs ``dcslam slam`` wrote under ``slam/KIND/``),
-each step measured again from the drive's colour images with the run's own measured depth, the camera's trajectory
-composed, and its figure (the distance of the run's last position from it) set beside the run's true final error
+each step measured again from the drive's colour images with the run's own measured depth (started, as ``dcslam
+slam --camera`` starts it, from the companion's steps: the stored run of that measured kind stands for the companion
+of another input's run), the camera's trajectory composed, and its figure (the distance of the run's last position from it) set beside the run's true final error
 and the verdict its summary holds (the rule now). Nothing is rerun: the runs and their verdicts are the stored ones.
 
 Prints every run's row and, for thresholds on the camera's gap, how many runs that end more than ``--truth`` metres
@@ -44,7 +45,7 @@ def measure(ws: Path, kind: str, drive: str) -> dict:
     from dcslam.io.drive import DriveFile
     from dcslam.io.slam_summary import run_verdict
     from dcslam.io.tum import read_tum
-    from dcslam.slam.camera import judge_camera, merge_camera, witness
+    from dcslam.slam.camera import camera_trajectory, judge_camera, merge_camera, witness
 
     torch.set_num_threads(1)
     summary = json.loads((ws / "slam" / kind / f"{drive}.json").read_text())
@@ -54,7 +55,12 @@ def measure(ws: Path, kind: str, drive: str) -> dict:
     with DriveFile(ws / "drives" / f"{drive}.h5") as d:
         first = int(np.argmin(np.abs(d.timestamps - stamps[0])))
         truth = np.linalg.inv(d.poses[first]) @ d.poses[first:first + len(T)]
-        camera, steps = witness(d, measured, T, first_frame=first)
+        start = T
+        companion = ws / "slam" / measured / f"{drive}.txt"   # the stored run of the measured kind stands for it
+        if kind != measured and companion.exists() and len(read_tum(companion)[1]) == len(T):
+            start = read_tum(companion)[1]                   # started from the companion's steps, as the stage
+        steps = witness(d, measured, start, first_frame=first)[1]
+        camera = camera_trajectory(T, steps)
     figure = judge_camera(T, camera, steps)
     ruled = run_verdict({**summary, "health": merge_camera(health, figure)})
     return {"workspace": ws.name, "kind": kind, "drive": drive, "measured": measured,

@@ -17,6 +17,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
 
+import numpy as np
+
 from dcslam.errors import DcslamError
 from dcslam.slam.config import SlamSettings
 from dcslam.slam.drive import ConfidenceUse, DriveRun, check_timestamps, run_drive
@@ -219,8 +221,9 @@ def slam_drive(path: Path, source: str | Path, measured: str | None, config: Sla
                                        on_step=None if recorder is None else recorder.step)
             drive_run.name = path.stem
             drive_run.evidence = evidence(drive_run)
-        if config.camera:
-            drive_run.camera = camera_evidence(path, source, measured, drive_run)
+        if config.camera:  # started from the companion's steps where one ran: one camera for every input
+            drive_run.camera = camera_evidence(path, source, measured, drive_run,
+                                               companions[0].T_world_cam if companions else None)
         written = write_outputs(drive_run, out_dir, force, made_from)
         if recorder is not None:
             recorder.finish(drive_run, companions[0] if companions else None)
@@ -229,25 +232,89 @@ def slam_drive(path: Path, source: str | Path, measured: str | None, config: Sla
     return SlamDriveResult(path.stem, drive_run.summary(), written)
 
 
-def camera_evidence(drive_path: Path, source: str | Path, sources_kind: str | None, run: DriveRun) -> dict:
+def camera_evidence(drive_path: Path, source: str | Path, sources_kind: str | None, run: DriveRun,
+                    start: np.ndarray | None = None) -> dict:
     """The camera's verdict on ``run`` (:func:`dcslam.slam.camera.judge_camera`): its steps measured again from the
     drive's images with the measured depth behind ``source`` (``sources_kind`` when the ICP took its sources from
-    one; :func:`dcslam.io.drive.measured_kind` else), ``measured_kind`` recorded; ``unmeasured`` with the reason
-    when no measured kind can be named or the drive lacks it."""
+    one; :func:`dcslam.io.drive.measured_kind` else), each started from the trajectory ``start`` (the companion's;
+    None: the run's own) where the camera has no step of its own, ``measured_kind`` and ``started_from`` recorded;
+    ``unmeasured`` with the reason when no measured kind can be named or the drive lacks it.
+
+    Its steps depend on the drive, the measured kind and ``start`` alone, so they are kept in ``<drives>/.camera/``
+    (:func:`camera_steps`) and every input whose companion is the same run shares them."""
     from dcslam.io.drive import DriveFile, measured_kind
-    from dcslam.progress import Bar
-    from dcslam.slam.camera import judge_camera, witness
+    from dcslam.slam.camera import camera_trajectory, judge_camera
 
     kind = sources_kind or measured_kind(source)
     with DriveFile(drive_path) as drive:
-        if kind is None or kind not in drive.kinds:
-            why = f"{source} does not say which measured depth it was made from" if kind is None else \
-                f"{drive_path.name} holds no {kind} depth"
-            return {"verdict": "unmeasured", "suspect": False, "reason": None, "measured_kind": kind, "note": why}
-        steps = max(len(run.T_world_cam) - 1, 0)
-        with Bar(f"{drive_path.stem} camera {kind}", steps) as bar:
-            camera, measured = witness(drive, kind, run.T_world_cam, progress=bar.advance)
-    return {**judge_camera(run.T_world_cam, camera, measured), "measured_kind": kind}
+        missing = kind is None or kind not in drive.kinds
+    if missing:
+        why = f"{source} does not say which measured depth it was made from" if kind is None else \
+            f"{drive_path.name} holds no {kind} depth"
+        return {"verdict": "unmeasured", "suspect": False, "reason": None, "measured_kind": kind, "note": why}
+    T = run.T_world_cam
+    steps = camera_steps(drive_path, kind, T if start is None else start)
+    return {**judge_camera(T, camera_trajectory(T, steps), steps), "measured_kind": kind,
+            "started_from": "run" if start is None else "companion"}
+
+
+def camera_steps(drive_path: Path, kind: str, start: np.ndarray) -> list:
+    """The camera's steps over ``drive_path`` with measured depth ``kind``, started from the trajectory ``start``
+    (:func:`dcslam.slam.camera.witness`; (N, 4, 4), from the drive's first frame): read from
+    ``<drives>/.camera/<drive>-<key>.npz`` when an earlier run of this code made them from the same drive file, kind
+    and start (the key hashes all four), else measured and kept there (atomically; a folder that cannot be written
+    keeps nothing, an unreadable file is measured again)."""
+    import hashlib
+
+    from dcslam.io.drive import DriveFile
+    from dcslam.progress import Bar
+    from dcslam.slam.camera import witness
+    from dcslam.stages.config import code_version
+
+    start = np.ascontiguousarray(start, np.float64)
+    stat = drive_path.stat()
+    key = hashlib.sha256(f"{code_version()}|{drive_path.name}|{stat.st_size}|{stat.st_mtime_ns}|{kind}".encode()
+                         + start.tobytes()).hexdigest()[:20]
+    kept = drive_path.parent / ".camera" / f"{drive_path.stem}-{key}.npz"
+    steps = read_camera_steps(kept, len(start) - 1)
+    if steps is None:
+        with DriveFile(drive_path) as drive, Bar(f"{drive_path.stem} camera {kind}", len(start) - 1) as bar:
+            steps = witness(drive, kind, start, progress=bar.advance)[1]
+        write_camera_steps(kept, steps)
+    return steps
+
+
+def read_camera_steps(path: Path, n: int) -> list | None:
+    """The ``n`` camera steps kept in ``path`` (:func:`write_camera_steps`), or None when there is no such file or it
+    cannot be read as ``n`` steps (then they are measured again)."""
+    from dcslam.slam.camera import CameraStep
+
+    try:
+        with np.load(path, allow_pickle=False) as f:
+            T, cov, returns, measured = f["T"], f["covariance"], f["returns"], f["measured"]
+    except (OSError, KeyError, ValueError, EOFError):
+        return None
+    if T.shape != (n, 4, 4) or cov.shape != (n, 6, 6) or returns.shape != (n,) or measured.shape != (n,):
+        return None
+    return [CameraStep(T[i], cov[i], int(returns[i]), bool(measured[i])) for i in range(n)]
+
+
+def write_camera_steps(path: Path, steps: list) -> None:
+    """Keep ``steps`` in ``path`` (npz, written atomically); a folder that cannot be written keeps nothing: it is a
+    cache, and the run's verdict does not depend on it."""
+    import io
+
+    from dcslam.io.atomic import write_bytes_atomic
+
+    buffer = io.BytesIO()
+    np.savez(buffer, T=np.stack([s.T for s in steps]) if steps else np.zeros((0, 4, 4)),
+             covariance=np.stack([s.covariance for s in steps]) if steps else np.zeros((0, 6, 6)),
+             returns=np.array([s.returns for s in steps], np.int64), measured=np.array([s.measured for s in steps]))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_bytes_atomic(path, buffer.getvalue())
+    except (OSError, DcslamError):
+        pass
 
 
 def measured_sources(config: SlamStageConfig, source: str | Path, drive_path: Path) -> str | None:

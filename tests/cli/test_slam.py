@@ -215,3 +215,15 @@ def test_camera_judges_a_generated_drive_and_the_tables_follow(cli, tmp_path):
     assert read_verdict(tmp_path / "slam" / "sparse@8" / f"{name}.json").suspect == health["suspect"]
     settings = slam_settings(Workspace(tmp_path), "sparse@8", name)  # the tables say the camera judged it
     assert settings["camera"] is True and settings["suspect"] == health["suspect"]
+    # a completion of the same 8-beam depth: its camera starts from its companion's steps, the 8-beam run's, so it
+    # is the same camera, read from what the first run kept
+    assert camera["started_from"] == "run" and len(list((tmp_path / "drives" / ".camera").glob("*.npz"))) == 1
+    predicted = cli("predict", "--model", "ip-basic-fast", "--input", "sparse@8", "--split", "test", "--out",
+                    tmp_path / "predictions" / "ipb8", "-w", tmp_path)
+    assert predicted.exit_code == 0, predicted.output
+    result = cli("slam", "--depth", tmp_path / "predictions" / "ipb8", "--camera", "--threads", "1", "-w", tmp_path,
+                 "--out", tmp_path / "slam" / "ipb8")
+    assert result.exit_code == 0, result.output
+    completed = json.loads((tmp_path / "slam" / "ipb8" / f"{name}.json").read_text())["health"]["camera"]
+    assert completed["started_from"] == "companion" and completed["measured_kind"] == "sparse@8"
+    assert len(list((tmp_path / "drives" / ".camera").glob("*.npz"))) == 1

@@ -139,3 +139,39 @@ def test_a_street_run_records_scale_one(ws):
     summary = run(ws, SlamStageConfig(odometry="gt", frames=2, voxel_size=0.1, reference_depth=0))[0].summary
     assert summary["effective_settings"] == {"scene_scale": 1.0, "reference_depth": 0.0,
                                              "first_frame_median_depth": None, "voxel_size": 0.1}
+
+
+def test_camera_steps_are_kept_per_drive_kind_and_start_and_measured_again_when_unreadable(tmp_path):
+    """The camera's steps of a drive, measured kind and start trajectory are kept beside the drive and read back as
+    measured; another start is another file; a file that cannot be read as the steps is measured again; a drive
+    folder that cannot be written keeps nothing and changes no step."""
+    from dataclasses import replace
+
+    from dcslam.stages.slam import camera_steps, write_camera_steps
+    from tests.fixtures.street import write_generated_drive
+
+    drive = write_generated_drive(tmp_path / "drives" / "2011_09_26_drive_7302_sync.h5", seed=7302, frames=4, beams=8)
+    start = np.repeat(np.eye(4)[None], 4, 0)
+    start[:, 2, 3] = -np.arange(4) * 0.9           # the camera looks along z; near the generator's speed
+    first = camera_steps(drive, "sparse@8", start)
+    kept = list((drive.parent / ".camera").glob("*.npz"))
+    assert len(kept) == 1 and len(first) == 3 and all(s.measured for s in first)
+    again = camera_steps(drive, "sparse@8", start)
+    assert all(np.array_equal(a.T, b.T) and np.array_equal(a.covariance, b.covariance) and a.returns == b.returns
+               for a, b in zip(first, again))
+    write_camera_steps(kept[0], [replace(s, returns=7) for s in first])   # what is kept is what is read
+    assert [s.returns for s in camera_steps(drive, "sparse@8", start)] == [7, 7, 7]
+    other = start.copy()
+    other[1, 2, 3] -= 0.05
+    camera_steps(drive, "sparse@8", other)
+    assert len(list((drive.parent / ".camera").glob("*.npz"))) == 2
+    kept[0].write_bytes(b"not a camera")
+    mended = camera_steps(drive, "sparse@8", start)
+    assert all(np.array_equal(a.T, b.T) for a, b in zip(first, mended)) and kept[0].stat().st_size > 100
+    for path in (drive.parent / ".camera").glob("*.npz"):
+        path.unlink()
+    (drive.parent / ".camera").rmdir()
+    (drive.parent / ".camera").write_text("a file where the folder would be")   # no folder can be made there
+    unkept = camera_steps(drive, "sparse@8", start)
+    assert (drive.parent / ".camera").read_text() == "a file where the folder would be"
+    assert all(np.array_equal(a.T, b.T) for a, b in zip(first, unkept))
