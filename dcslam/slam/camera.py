@@ -209,10 +209,11 @@ def _camera_sigma(camera: np.ndarray, steps: list[CameraStep]) -> float:
 
 def witness(drive, measured: str, T_world_cam: np.ndarray, first_frame: int = 0,
             progress=None) -> tuple[np.ndarray, list[CameraStep]]:
-    """The camera's trajectory over a run of ``drive`` (a :class:`dcslam.io.drive.DriveFile`) from
-    ``first_frame`` (``T_world_cam`` (N, 4, 4), one pose a frame): each step started from the camera's own step
-    before it (from the run's own for the first, or after a step it could not measure) and measured with the
-    drive's ``measured`` depth (``sparse``, ``sparse@8``...: the LiDAR's returns, never a completion).
+    """The camera's trajectory over ``drive`` (a :class:`dcslam.io.drive.DriveFile`) from ``first_frame``, composed
+    from ``T_world_cam``'s first pose (N, 4, 4), one pose a frame: each step started from the camera's own step
+    before it (from ``T_world_cam``'s step for the first, or after a step it could not measure: the run's, or its
+    companion's) and measured with the drive's ``measured`` depth (``sparse``, ``sparse@8``...: the LiDAR's returns,
+    never a completion).
     ``progress``, when given, is called once a step. Returns (camera trajectory (N, 4, 4), N - 1 steps)."""
     T = np.asarray(T_world_cam, np.float64)
     K = np.asarray(drive.K, np.float64)
