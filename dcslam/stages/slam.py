@@ -266,9 +266,10 @@ def camera_steps(drive_path: Path, kind: str, start: np.ndarray) -> list:
     keeps nothing, an unreadable file is measured again)."""
     import hashlib
 
+    from dcslam.io.camera_steps import read_camera_steps, write_camera_steps
     from dcslam.io.drive import DriveFile
     from dcslam.progress import Bar
-    from dcslam.slam.camera import witness
+    from dcslam.slam.camera import CameraStep, witness
     from dcslam.stages.config import code_version
 
     start = np.ascontiguousarray(start, np.float64)
@@ -276,45 +277,15 @@ def camera_steps(drive_path: Path, kind: str, start: np.ndarray) -> list:
     key = hashlib.sha256(f"{code_version()}|{drive_path.name}|{stat.st_size}|{stat.st_mtime_ns}|{kind}".encode()
                          + start.tobytes()).hexdigest()[:20]
     kept = drive_path.parent / ".camera" / f"{drive_path.stem}-{key}.npz"
-    steps = read_camera_steps(kept, len(start) - 1)
-    if steps is None:
-        with DriveFile(drive_path) as drive, Bar(f"{drive_path.stem} camera {kind}", len(start) - 1) as bar:
-            steps = witness(drive, kind, start, progress=bar.advance)[1]
-        write_camera_steps(kept, steps)
+    read = read_camera_steps(kept, len(start) - 1)
+    if read is not None:
+        return [CameraStep(T, covariance, int(n), bool(ok)) for T, covariance, n, ok in zip(*read)]
+    with DriveFile(drive_path) as drive, Bar(f"{drive_path.stem} camera {kind}", len(start) - 1) as bar:
+        steps = witness(drive, kind, start, progress=bar.advance)[1]
+    if steps:  # a cache: a folder that cannot be written keeps nothing
+        write_camera_steps(kept, np.stack([s.T for s in steps]), np.stack([s.covariance for s in steps]),
+                           np.array([s.returns for s in steps]), np.array([s.measured for s in steps]))
     return steps
-
-
-def read_camera_steps(path: Path, n: int) -> list | None:
-    """The ``n`` camera steps kept in ``path`` (:func:`write_camera_steps`), or None when there is no such file or it
-    cannot be read as ``n`` steps (then they are measured again)."""
-    from dcslam.slam.camera import CameraStep
-
-    try:
-        with np.load(path, allow_pickle=False) as f:
-            T, cov, returns, measured = f["T"], f["covariance"], f["returns"], f["measured"]
-    except (OSError, KeyError, ValueError, EOFError):
-        return None
-    if T.shape != (n, 4, 4) or cov.shape != (n, 6, 6) or returns.shape != (n,) or measured.shape != (n,):
-        return None
-    return [CameraStep(T[i], cov[i], int(returns[i]), bool(measured[i])) for i in range(n)]
-
-
-def write_camera_steps(path: Path, steps: list) -> None:
-    """Keep ``steps`` in ``path`` (npz, written atomically); a folder that cannot be written keeps nothing: it is a
-    cache, and the run's verdict does not depend on it."""
-    import io
-
-    from dcslam.io.atomic import write_bytes_atomic
-
-    buffer = io.BytesIO()
-    np.savez(buffer, T=np.stack([s.T for s in steps]) if steps else np.zeros((0, 4, 4)),
-             covariance=np.stack([s.covariance for s in steps]) if steps else np.zeros((0, 6, 6)),
-             returns=np.array([s.returns for s in steps], np.int64), measured=np.array([s.measured for s in steps]))
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_bytes_atomic(path, buffer.getvalue())
-    except (OSError, DcslamError):
-        pass
 
 
 def measured_sources(config: SlamStageConfig, source: str | Path, drive_path: Path) -> str | None:

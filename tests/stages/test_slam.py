@@ -145,9 +145,8 @@ def test_camera_steps_are_kept_per_drive_kind_and_start_and_measured_again_when_
     """The camera's steps of a drive, measured kind and start trajectory are kept beside the drive and read back as
     measured; another start is another file; a file that cannot be read as the steps is measured again; a drive
     folder that cannot be written keeps nothing and changes no step."""
-    from dataclasses import replace
-
-    from dcslam.stages.slam import camera_steps, write_camera_steps
+    from dcslam.io.camera_steps import write_camera_steps
+    from dcslam.stages.slam import camera_steps
     from tests.fixtures.street import write_generated_drive
 
     drive = write_generated_drive(tmp_path / "drives" / "2011_09_26_drive_7302_sync.h5", seed=7302, frames=4, beams=8)
@@ -159,7 +158,8 @@ def test_camera_steps_are_kept_per_drive_kind_and_start_and_measured_again_when_
     again = camera_steps(drive, "sparse@8", start)
     assert all(np.array_equal(a.T, b.T) and np.array_equal(a.covariance, b.covariance) and a.returns == b.returns
                for a, b in zip(first, again))
-    write_camera_steps(kept[0], [replace(s, returns=7) for s in first])   # what is kept is what is read
+    write_camera_steps(kept[0], np.stack([s.T for s in first]), np.stack([s.covariance for s in first]),
+                       np.full(3, 7), np.ones(3, bool))               # what is kept is what is read
     assert [s.returns for s in camera_steps(drive, "sparse@8", start)] == [7, 7, 7]
     other = start.copy()
     other[1, 2, 3] -= 0.05
