@@ -2,8 +2,9 @@
 calibration workspace (``slam_calibration.py``'s test drives; the runs ``dcslam slam`` wrote under ``slam/KIND/``),
 each step measured again from the drive's colour images with the run's own measured depth (started, as ``dcslam
 slam --camera`` starts it, from the companion's steps: the stored run of that measured kind stands for the companion
-of another input's run), the camera's trajectory composed, and its figure (the distance of the run's last position from it) set beside the run's true final error
-and the verdict its summary holds (the rule now). Nothing is rerun: the runs and their verdicts are the stored ones.
+of another input's run), the camera's trajectory composed, and its figure (the distance of the run's last position
+from it) set beside the run's true final error and the verdict its summary holds (the rule now). Nothing is rerun:
+the runs and their verdicts are the stored ones.
 
 Prints every run's row and, for thresholds on the camera's gap, how many runs that end more than ``--truth`` metres
 off and how many of the others it flags: alone, together with the rule now, and together with the road figure only.
