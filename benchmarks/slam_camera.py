@@ -36,11 +36,23 @@ def measured_of(summary: dict) -> str:
     return kind
 
 
+def before_camera(health: dict) -> dict:
+    """A stored health as the rules without the camera left it: the camera's verdict taken out, its reason dropped
+    and the reasons it overruled put back (:func:`dcslam.slam.camera.merge_camera` undone); as it is when the run
+    was not judged by the camera."""
+    camera = health.get("camera")
+    if not camera:
+        return health
+    reasons = [r for r in health.get("reasons", []) if r != camera.get("reason")] + list(health.get("overruled", []))
+    rest = {k: v for k, v in health.items() if k not in ("camera", "overruled")}
+    return {**rest, "reasons": reasons, "suspect": bool(reasons)}
+
+
 def measure(ws: Path, kind: str, drive: str) -> dict:
     """One stored run (``slam/<kind>/``, a depth kind or a prediction layer's name): its true final error, its
-    stored verdict, the camera's figure and verdict (:func:`dcslam.slam.camera.judge_camera`), the verdict under
-    the camera rule (the stored health merged with it, as ``dcslam slam --camera`` writes it, read as the tables
-    read it) and the camera's own final error."""
+    stored verdict without the camera (:func:`before_camera`), the camera's figure and verdict
+    (:func:`dcslam.slam.camera.judge_camera`), the verdict under the camera rule (that health merged with it, as
+    ``dcslam slam --camera`` writes it, read as the tables read it) and the camera's own final error."""
     import torch
 
     from dcslam.io.drive import DriveFile
@@ -49,8 +61,9 @@ def measure(ws: Path, kind: str, drive: str) -> dict:
     from dcslam.slam.camera import camera_trajectory, judge_camera, merge_camera, witness
 
     torch.set_num_threads(1)
-    summary = json.loads((ws / "slam" / kind / f"{drive}.json").read_text())
-    health = summary["health"]
+    stored = json.loads((ws / "slam" / kind / f"{drive}.json").read_text())
+    health = before_camera(stored["health"])    # a run stored with --camera: judged as without it, then again
+    summary = {**stored, "health": health}
     measured = measured_of(summary)
     stamps, T = read_tum(ws / "slam" / kind / f"{drive}.txt")
     with DriveFile(ws / "drives" / f"{drive}.h5") as d:
@@ -58,8 +71,9 @@ def measure(ws: Path, kind: str, drive: str) -> dict:
         truth = np.linalg.inv(d.poses[first]) @ d.poses[first:first + len(T)]
         start = T
         companion = ws / "slam" / measured / f"{drive}.txt"   # the stored run of the measured kind stands for it
-        if kind != measured and companion.exists() and len(read_tum(companion)[1]) == len(T):
-            start = read_tum(companion)[1]                   # started from the companion's steps, as the stage
+        if kind != measured and companion.exists():
+            theirs = read_tum(companion)[1]
+            start = theirs if len(theirs) == len(T) else T   # started from the companion's steps, as the stage
         steps = witness(d, measured, start, first_frame=first)[1]
         camera = camera_trajectory(T, steps)
     figure = judge_camera(T, camera, steps)

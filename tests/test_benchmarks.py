@@ -252,6 +252,19 @@ def test_slam_camera_measures_a_stored_run_beside_its_truth(tmp_path, capsys):
     assert abs(row["gap_m"] - row["final_m"]) <= row["camera_final_m"] + 1e-6    # the triangle inequality's bound
     assert row["measured"] == "sparse@8" and row["verdict"] in ("agrees", "departs")
     assert row["camera_rule"] == (row["verdict"] == "departs")        # the camera's verdict decides, either way
+    # the same run stored as `dcslam slam --camera` stores it: measured as before (its health read without the camera)
+    from dcslam.slam.camera import merge_camera
+    from dcslam.stages.slam import camera_evidence
+
+    run.camera = camera_evidence(path, "sparse@8", None, run)
+    write_outputs(run, ws / "slam" / "sparse@8", force=True)
+    again = cam.measure(ws, "sparse@8", name)
+    assert {k: again[k] for k in ("flagged", "camera_rule", "gap_m", "reasons")} == \
+        {k: row[k] for k in ("flagged", "camera_rule", "gap_m", "reasons")}
+    health = {"suspect": True, "reasons": ["2 consecutive steps degraded"], "rejected": 0}
+    for figure in ({"verdict": "departs", "suspect": True, "reason": "the camera says the run ends 0.70 m off"},
+                   {"verdict": "agrees", "suspect": False, "reason": None}):
+        assert cam.before_camera(merge_camera(health, figure)) == health
     cam.separation([row], 0.5)
     cam.by_input([row], 0.5)
     out = capsys.readouterr().out
