@@ -2,8 +2,9 @@
 
 Sparse LiDAR depth has no companion run (it *is* the measurement), and its step checks see what every 8-beam scan
 shares. The camera sees the same motion through other physics: frame k's measured returns, carried into frame k+1
-by a relative pose, must land on pixels of frame k+1 as bright as the ones they came from. Starting from the run's
-own first step and then from its own previous one (constant velocity: a run gone off cannot take it along),
+by a relative pose, must land on pixels of frame k+1 as bright as the ones they came from. Starting from the first
+step of the trajectory it is given (the run's, or in ``dcslam slam`` its companion's, so that one camera judges every
+input of a drive) and then from its own previous one (constant velocity: a run gone off cannot take it along),
 Gauss-Newton on that photometric error over an image pyramid, each return weighted by Tukey's biweight (a moving
 car weighs nothing), finds the pose the images agree with (:func:`camera_step`); composed step by step
 (:func:`camera_trajectory`) they give the camera's trajectory, and the distance of the run's positions from it
@@ -130,8 +131,9 @@ def _normal_equations(points, reference, T, pyramid, camera):
 def camera_step(pyramid_from: list, pyramid_to: list, depth_from: np.ndarray, K: np.ndarray,
                 T_start: np.ndarray) -> CameraStep:
     """The relative pose (frame k -> frame k+1 camera) that the images agree with, starting from ``T_start`` (the
-    run's own step): frame k's measured returns (``depth_from``, (H, W) metres, 0 where none) warped into frame k+1,
-    Gauss-Newton on the grey-level error (Tukey-weighted), coarse to fine (:func:`grey_pyramid` of both frames)."""
+    camera's previous step, or the step of the trajectory it started from): frame k's measured returns
+    (``depth_from``, (H, W) metres, 0 where none) warped into frame k+1, Gauss-Newton on the grey-level error
+    (Tukey-weighted), coarse to fine (:func:`grey_pyramid` of both frames)."""
     from dcslam.geometry.se3 import se3_exp
 
     depth_from = np.asarray(depth_from)
@@ -164,8 +166,8 @@ def camera_step(pyramid_from: list, pyramid_to: list, depth_from: np.ndarray, K:
 
 
 def camera_trajectory(T_world_cam: np.ndarray, steps: list[CameraStep]) -> np.ndarray:
-    """The camera's trajectory: its steps composed from the run's first pose. Shape: T_world_cam (N, 4, 4), steps
-    N - 1 (step k from frame k to k+1) -> (N, 4, 4)."""
+    """The camera's trajectory: its steps composed from ``T_world_cam``'s first pose (the judged run's). Shape:
+    T_world_cam (N, 4, 4), steps N - 1 (step k from frame k to k+1) -> (N, 4, 4)."""
     T = np.asarray(T_world_cam, np.float64)
     out = [T[0]]
     for step in steps:

@@ -56,8 +56,9 @@ class ReproduceConfig:
     camera: bool = option(False, flags=("--camera",), help="Judge every SLAM run by the camera too (`dcslam slam "
                           "--camera`: each step measured again from the colour images; a run that ends more than "
                           "0.5 m from the camera's trajectory is suspect, one within it is vouched for), so the "
-                          "tables' failed counts follow it; about 2-5 CPU-s more per 30 full-size frames. The "
-                          "profile is then named <profile>+camera (its own unit costs under --calibrate).")
+                          "tables' failed counts follow it; one camera pass (2-5 CPU-s per 30 full-size frames) per "
+                          "test drive and measured depth judges every input made from it. The profile is then named "
+                          "<profile>+camera (its own unit costs under --calibrate).")
     dry_run: bool = option(False, flags=("--dry-run",), help="Print the stages it would run and their estimated "
                            "cost, then exit without running or writing anything.")
     costs_from: Path | None = option(None, help="Workspace of a finished reproduction whose stage timings give the "
