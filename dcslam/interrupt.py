@@ -67,11 +67,19 @@ def install() -> None:
     sys.unraisablehook = hook
 
 
+#: What a C extension makes of an interrupt raised inside it, the interrupt as its cause: a :class:`SystemError`
+#: from a callback (h5py iterating a file's attributes under its lock: "returned a result with an exception set"),
+#: an :class:`ImportError` from a module's initialisation (a pybind11 module imported lazily, such as SciPy's HiGHS
+#: under ``scipy.stats``: "initialization failed").
+WRAPPED = (SystemError, ImportError)
+#: The exceptions to catch where an interrupt may arrive; :func:`is_interrupt` tells which of them are one.
+CAUGHT = (KeyboardInterrupt, *WRAPPED)
+
+
 def is_interrupt(error: BaseException) -> bool:
-    """Whether ``error`` is an interrupt: a :class:`KeyboardInterrupt`, or the :class:`SystemError` a C extension
-    makes of one raised in its callback (h5py iterating a file's attributes under its lock: "returned a result with
-    an exception set", caused by the interrupt)."""
-    return isinstance(error, KeyboardInterrupt) or (isinstance(error, SystemError)
+    """Whether ``error`` is an interrupt: a :class:`KeyboardInterrupt`, or one a C extension wrapped (:data:`WRAPPED`,
+    caused by the interrupt)."""
+    return isinstance(error, KeyboardInterrupt) or (isinstance(error, WRAPPED)
                                                      and isinstance(error.__cause__, KeyboardInterrupt))
 
 

@@ -117,3 +117,7 @@ def test_an_interrupt_a_c_extension_wrapped_is_still_one():
     assert interrupt.is_interrupt(KeyboardInterrupt()) and interrupt.is_interrupt(wrapped(KeyboardInterrupt()))
     assert not interrupt.is_interrupt(SystemError("a bug")) and not interrupt.is_interrupt(wrapped(ValueError()))
     assert not interrupt.is_interrupt(ValueError())
+    # a pybind11 module interrupted while it initialises (SciPy's HiGHS under a lazy `import scipy.stats`)
+    failed = ImportError("initialization failed")
+    failed.__cause__ = KeyboardInterrupt()
+    assert interrupt.is_interrupt(failed) and not interrupt.is_interrupt(ImportError("No module named 'x'"))

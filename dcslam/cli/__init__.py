@@ -13,7 +13,7 @@ def main() -> None:
     try:
         interrupt.install()
         app()
-    except (KeyboardInterrupt, SystemError) as error:  # before Typer's own handler runs
+    except interrupt.CAUGHT as error:  # before Typer's own handler runs
         if not interrupt.is_interrupt(error):
             raise
         _interrupted()

@@ -70,8 +70,8 @@ def known_errors(command):
             # a pool worker the system killed (most often for memory) or that crashed in native code
             fail("a worker process of this command died (killed by the system, most often for want of memory, or a "
                  "crash); rerun it with fewer --jobs or more memory")
-        except (KeyboardInterrupt, SystemError) as error:
-            if not interrupt.is_interrupt(error):    # a SystemError of its own: a bug, with its traceback
+        except interrupt.CAUGHT as error:
+            if not interrupt.is_interrupt(error):    # a SystemError or ImportError of its own: with its traceback
                 raise
             interrupt.tell(lambda line: typer.echo(line, err=True))
             raise typer.Exit(interrupt.exit_code()) from None

@@ -161,33 +161,38 @@ def test_interrupted_conversion(cli, tmp_path, monkeypatch):
     assert _files(tmp_path / "drives") == []
 
 
-def _wrapped_interrupt() -> SystemError:
-    """What h5py's lock makes of a KeyboardInterrupt raised in its callback: a SystemError caused by it."""
+WRAPPERS = {SystemError: "<cyfunction FastRLock.__exit__> returned a result with an exception set",  # h5py's lock
+            ImportError: "initialization failed"}    # a pybind11 module interrupted while it initialises
+
+
+def _wrapped_interrupt(kind: type) -> Exception:
+    """What a C extension makes of a KeyboardInterrupt raised inside it: a ``kind`` error caused by it."""
     try:
         raise KeyboardInterrupt
     except KeyboardInterrupt as interrupt:
-        error = SystemError("<cyfunction FastRLock.__exit__> returned a result with an exception set")
+        error = kind(WRAPPERS[kind])
         error.__cause__ = interrupt
         return error
 
 
-def test_an_interrupt_a_c_extension_wraps_is_still_an_interrupt(cli, tmp_path, monkeypatch):
+@pytest.mark.parametrize("kind", list(WRAPPERS))
+def test_an_interrupt_a_c_extension_wraps_is_still_an_interrupt(cli, tmp_path, monkeypatch, kind):
     """SIGTERM landing in h5py's attribute callback comes back as a SystemError caused by the KeyboardInterrupt
-    (h5py's lock): the command exits as interrupted, with no traceback and nothing published. Any other
-    SystemError stays an error."""
+    (h5py's lock), and in a C module being imported as an ImportError caused by it: the command exits as
+    interrupted, with no traceback and nothing published. Any other SystemError or ImportError stays an error."""
     from dcslam import interrupt
 
-    root = _interrupt_fourth_read(tmp_path, monkeypatch, _wrapped_interrupt)
+    root = _interrupt_fourth_read(tmp_path, monkeypatch, lambda: _wrapped_interrupt(kind))
     monkeypatch.setattr(interrupt, "_told", False)      # a process tells once; this test's command is its own
     result = cli("prepare-kitti", "--kitti", root, "--out", tmp_path / "drives")
     assert result.exit_code == 130 and "interrupted" in result.stderr and "Traceback" not in result.stderr
     assert _files(tmp_path / "drives") == []
 
     def broken(path):
-        raise SystemError("a bug")
+        raise kind("a bug")
 
     monkeypatch.setattr(kitti, "read_depth_png", broken)
-    with pytest.raises(SystemError, match="a bug"):
+    with pytest.raises(kind, match="a bug"):
         cli("prepare-kitti", "--kitti", root, "--out", tmp_path / "drives2")
 
 
