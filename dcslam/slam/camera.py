@@ -41,6 +41,13 @@ MAX_DEPTH_M = 60.0
 #: A step needs this many returns in view, on texture (a grey-level gradient of at least ``MIN_GRADIENT`` a pixel)
 #: and not weighted out, to be measured; with fewer it is taken as the run estimated it (a blank wall, a night).
 MIN_RETURNS, MIN_GRADIENT = 50, 0.5 / 255
+#: A step is measured only when, at its pose, the grey levels of frame k's returns and of the pixels they warp to in
+#: frame k+1 correlate at least this much (Pearson, over the returns in view at the finest level): images unrelated
+#: to the depth (noise, a camera that saw something else) correlate near 0 at any pose, and Gauss-Newton on them
+#: converges somewhere all the same. Images of the same kind of scene can still correlate (a road image turned upside
+#: down: 0.5), so this catches no relation at all, not a wrong one. Measured steps of the calibration drives (their
+#: lowest 0.40): docs/slam.md.
+MIN_AGREEMENT = 0.2
 _GREY = (0.299, 0.587, 0.114)
 _TAPS = (1 / 16, 4 / 16, 6 / 16, 4 / 16, 1 / 16)
 
@@ -50,8 +57,8 @@ class CameraStep:
     """A step measured by the camera: ``T`` (4, 4) float64 maps frame k's camera coordinates to frame k+1's;
     ``covariance`` (6, 6) the first-order covariance of the twist (translation first), s^2 (J^T W J)^-1 at the
     finest level; ``returns`` how many returns weighed on texture there; ``measured`` False when too few did, or
-    their system was singular, or the pose not finite (``T`` is then the step it started from, ``covariance``
-    NaN)."""
+    their grey levels did not agree (``MIN_AGREEMENT``), or their system was singular, or the pose not finite
+    (``T`` is then the step it started from, ``covariance`` NaN)."""
 
     T: np.ndarray
     covariance: np.ndarray
@@ -104,7 +111,8 @@ def _level_camera(K: np.ndarray, level: int) -> tuple[float, float, float, float
 
 def _normal_equations(points, reference, T, pyramid, camera):
     """One Gauss-Newton system of the photometric error at T: (J^T W J (6, 6), J^T W r (6,), s^2, returns that
-    weigh on texture), or None with fewer than MIN_RETURNS in view. The twist perturbs T on the left, so a point q
+    weigh on texture, the correlation of the returns' grey levels with those they warp to), or None with fewer than
+    MIN_RETURNS in view. The twist perturbs T on the left, so a point q
     moves by v + w x q."""
     fx, fy, cx, cy = camera
     image, du, dv = pyramid
@@ -125,7 +133,14 @@ def _normal_equations(points, reference, T, pyramid, camera):
     Jw = J * w[:, None]
     s2 = float((w * r * r).sum()) / max(float(w.sum()) - 6, 1.0)
     textured = int(((w > 0) & (torch.hypot(gu, gv) >= MIN_GRADIENT)).sum())
-    return Jw.T @ J, Jw.T @ r, s2, textured
+    return Jw.T @ J, Jw.T @ r, s2, textured, _correlation(value, reference[ok])
+
+
+def _correlation(a: torch.Tensor, b: torch.Tensor) -> float:
+    """Pearson's correlation of two (n,) samples; 0 where either is constant."""
+    a, b = a - a.mean(), b - b.mean()
+    norm = float(torch.sqrt((a * a).sum() * (b * b).sum()))
+    return float((a * b).sum()) / norm if norm > 0 else 0.0
 
 
 def camera_step(pyramid_from: list, pyramid_to: list, depth_from: np.ndarray, K: np.ndarray,
@@ -156,11 +171,11 @@ def camera_step(pyramid_from: list, pyramid_to: list, depth_from: np.ndarray, K:
             T = se3_exp(step) @ T
             if float(step.abs().max()) < STOP:
                 break
-    if (system is None or system[3] < MIN_RETURNS or not bool(torch.isfinite(T).all())
+    if (system is None or system[3] < MIN_RETURNS or system[4] < MIN_AGREEMENT or not bool(torch.isfinite(T).all())
             or float(torch.linalg.eigvalsh(system[0])[0]) <= 0):
         return CameraStep(np.asarray(T_start, np.float64), np.full((6, 6), np.nan), 0 if system is None else
                           system[3], False)
-    A, _, s2, n = system
+    A, _, s2, n, _ = system
     covariance = s2 * torch.linalg.pinv(A)
     return CameraStep(T.numpy(), covariance.numpy(), n, True)
 

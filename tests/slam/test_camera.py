@@ -80,6 +80,19 @@ def test_a_step_without_returns_is_left_as_estimated(drive):
     assert camera_gap(T, camera_trajectory(T, [step]), [step])["steps_measured"] == 0
 
 
+def test_images_unrelated_to_the_depth_measure_no_step(drive):
+    """Frame k+1's image replaced by noise: Gauss-Newton converges somewhere, but the grey levels do not agree at any
+    pose (correlation about 0.05), so the step is left as estimated; the true next image agrees (about 0.97)."""
+    T = truth(drive)
+    true_step = np.linalg.solve(T[1], T[0])
+    before, depth = grey_pyramid(drive.rgb(0)), drive.depth("sparse@8", 0)
+    noise = np.random.default_rng(0).integers(0, 255, drive.rgb(1).shape, dtype=np.uint8)
+    step = camera_step(before, grey_pyramid(noise), depth, drive.K, true_step)
+    assert not step.measured
+    np.testing.assert_array_equal(step.T, true_step)
+    assert camera_step(before, grey_pyramid(drive.rgb(1)), depth, drive.K, true_step).measured
+
+
 def test_depth_and_images_of_other_sizes_are_refused(drive):
     pyramid = grey_pyramid(drive.rgb(0))
     with pytest.raises(DcslamError, match="one size"):
