@@ -78,9 +78,9 @@ def complete(ws: Path, beams: list[int]) -> list[str]:
 
 
 def slam(ws: Path, inputs: list[str], frames: int, extra: tuple[str, ...] = ()) -> None:
-    """``dcslam slam`` at the defaults (``--evidence auto``, and ``extra``: ``--camera``) over the first ``frames``
-    frames of every test drive for each input, into ``slam/<layer>/``; an input whose summaries are all there is
-    skipped."""
+    """``dcslam slam`` at the defaults (``--evidence auto``, and ``extra``: ``--camera`` or ``--no-camera``) over the
+    first ``frames`` frames of every test drive for each input, into ``slam/<layer>/``; an input whose summaries are
+    all there is skipped."""
     tests = json.loads((ws / "drives" / "splits.json").read_text())["test"]
     for depth in inputs:
         layer = depth.split("/", 1)[-1]
@@ -101,7 +101,8 @@ def main(argv=None) -> int:
     parser.add_argument("--beams", default="64,16,8")
     parser.add_argument("--slam-frames", type=int, default=30)
     parser.add_argument("--no-learned", action="store_true", help="IP-Basic only: no SparseConvNet")
-    parser.add_argument("--camera", action="store_true", help="dcslam slam --camera: the camera judges each run")
+    parser.add_argument("--camera", action="store_true", help="dcslam slam --camera: the camera judges each run "
+                        "(without it the runs are made with --no-camera, as the calibrations before the camera were)")
     args = parser.parse_args(argv)
     beams = [int(b) for b in args.beams.split(",")]
     ws = args.workspace
@@ -111,7 +112,7 @@ def main(argv=None) -> int:
     if args.no_learned:
         layers = [x for x in layers if not x.startswith("sparse-conv")]
     slam(ws, [kind(b) for b in beams] + ["dense", "exact"] + [f"predicted/{x}" for x in layers], args.slam_frames,
-         ("--camera",) if args.camera else ())
+         ("--camera",) if args.camera else ("--no-camera",))
     return subprocess.run([sys.executable, str(Path(__file__).with_name("slam_evidence.py")), str(ws), "--flags"],
                           check=False).returncode
 

@@ -88,9 +88,9 @@ def judge_completed(path: Path, kind: str, frames: int, folder: Path) -> dict:
             sparse = load_depth(drive, kind)
         write_layer(layer / path.name, Layer(depth=np.stack([completer(d) for d in sparse]).astype(np.float32),
                                              drive=path.stem, made_by=completer.name, config={"input": kind}))
-    result = slam.run(Workspace(folder / "ws"), slam.SlamStageConfig(
-        depth=str(layer), drive=[str(path)], frames=frames, out=folder / "slam" / layer.name, evidence="auto"),
-        force=True)[0]
+    result = slam.run(Workspace(folder / "ws"), slam.SlamStageConfig(   # the depth's evidence: no camera
+        depth=str(layer), drive=[str(path)], frames=frames, out=folder / "slam" / layer.name, evidence="auto",
+        camera=False), force=True)[0]
     health = result.summary["health"]
     return {"drive": path.stem, "kind": f"{completer.name} ({kind})",
             "final_m": result.summary["translation_error_m"]["final"], "flagged": bool(health["suspect"]),

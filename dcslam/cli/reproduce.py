@@ -23,11 +23,11 @@ def _log(line: str) -> None:
 def run(ws, config: reproduce.ReproduceConfig):
     if config.calibrate:  # the unit costs measured here first, so that the plan below is estimated with them
         from dcslam.stages.experiments import experiment
-        from dcslam.stages.reproduce_plan import with_camera
+        from dcslam.stages.reproduce_plan import camera_profile
         from dcslam.stages.reproduce_probe import calibrate
 
         profile = experiment("5.2").profile(config.profile)
-        calibrate(ws, with_camera(profile) if config.camera else profile, log=_log)
+        calibrate(ws, camera_profile(profile, config.camera), log=_log)
     if config.dry_run:  # the plan and its cost on stdout, nothing run or written
         from dcslam.stages.reproduce_cost import plan_text
 

@@ -224,10 +224,11 @@ def slam_trajectory(ws: Workspace, layer: str, drive: str, root: Path | None = N
 def slam_settings(ws: Workspace, layer: str, drive: str, root: Path | None = None) -> dict:
     """The settings of the SLAM run behind ``slam/<layer>/<drive>.txt`` (:data:`RUN_SETTINGS`, from the summary
     ``<drive>.json`` beside it; ``frames`` is the number asked for, 0 = all: a drive shorter than that runs fewer,
-    which its pose count shows), ``camera``: True where the camera judged the run too (absent otherwise), plus
-    ``suspect``: the run's verdict (:func:`dcslam.io.slam_summary.run_verdict`: it rejected steps, or its health
-    flagged it for degraded steps or its drift bound, or the camera). Empty when the summary is
-    missing (a trajectory made elsewhere). ``root``: the folder of the layers' SLAM outputs (default ``slam/``)."""
+    which its pose count shows), ``camera``: True where the camera ran beside it (``--camera``, the default; absent
+    under ``--no-camera``), plus ``suspect``: the run's verdict (:func:`dcslam.io.slam_summary.run_verdict`: it
+    rejected steps, or its health flagged it for degraded steps or its drift bound, or the camera). Empty when the
+    summary is missing (a trajectory made elsewhere). ``root``: the folder of the layers' SLAM outputs (default
+    ``slam/``)."""
     from dcslam.io.slam_summary import read_summary, run_verdict
 
     path = (ws.slam if root is None else root) / layer / f"{drive}.json"
@@ -245,7 +246,7 @@ def slam_settings(ws: Workspace, layer: str, drive: str, root: Path | None = Non
     settings.update(sources=sources.get("mode", "depth"), measured=sources.get("kind"))
     out = {k: settings[k] for k in RUN_SETTINGS if k in settings}
     health = record.get("health")
-    if isinstance(health, dict) and health.get("camera"):  # judged by the camera too (`--camera`): say so
+    if isinstance(health, dict) and health.get("camera"):  # the camera ran beside it (`--camera`): say so
         out["camera"] = True
     out["suspect"] = run_verdict(record, str(path)).suspect
     return out

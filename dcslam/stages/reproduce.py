@@ -53,12 +53,13 @@ class ReproduceConfig:
     seeds: int | None = option(None, min=1, help="Train every trained run with N seeds (seed, seed+1, ...; runs "
                                "<run>, <run>-s1, ...), each predicted, filtered and run through SLAM; the tables "
                                "report the spread over seeds and drives. Default: the profile's (1; study: 3).")
-    camera: bool = option(False, flags=("--camera",), help="Judge every SLAM run by the camera too (`dcslam slam "
-                          "--camera`: each step measured again from the colour images; a run that ends more than "
+    camera: bool = option(True, help="Judge every SLAM run by the camera too (`dcslam slam --camera`, its "
+                          "default: each step measured again from the colour images; a run that ends more than "
                           "0.5 m from the camera's trajectory is suspect, one within it is vouched for), so the "
                           "tables' failed counts follow it; one camera pass (2-5 CPU-s per 30 full-size frames) per "
-                          "test drive and measured depth judges every input made from it. The profile is then named "
-                          "<profile>+camera (its own unit costs under --calibrate).")
+                          "test drive and measured depth judges every input made from it. --no-camera: the depth's "
+                          "own evidence alone (the profile is then named <profile>+no-camera, with its own unit "
+                          "costs under --calibrate).")
     dry_run: bool = option(False, flags=("--dry-run",), help="Print the stages it would run and their estimated "
                            "cost, then exit without running or writing anything.")
     costs_from: Path | None = option(None, help="Workspace of a finished reproduction whose stage timings give the "

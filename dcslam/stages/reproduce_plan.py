@@ -12,18 +12,18 @@ from dcslam.workspace import Workspace
 
 
 def profile_of(config):
-    """The profile a :class:`dcslam.stages.reproduce.ReproduceConfig` names, of the experiment it names (with the
-    camera's verdict on every SLAM run under ``--camera``: :func:`with_camera`)."""
-    profile = experiment(config.table).profile(config.profile)
-    return with_camera(profile) if config.camera else profile
+    """The profile a :class:`dcslam.stages.reproduce.ReproduceConfig` names, of the experiment it names (without the
+    camera's verdict under ``--no-camera``: :func:`camera_profile`)."""
+    return camera_profile(experiment(config.table).profile(config.profile), config.camera)
 
 
-def with_camera(profile):
-    """``profile`` with ``camera`` on in its SLAM settings, named ``<name>+camera`` (its unit costs are not the
-    profile's: the camera's pass costs a SLAM run more); a profile without SLAM settings as it is."""
-    if not hasattr(profile, "slam"):
+def camera_profile(profile, camera: bool):
+    """``profile`` as it is when ``camera`` (the camera judges every SLAM run: ``dcslam slam``'s default), else with
+    ``camera`` off in its SLAM settings and named ``<name>+no-camera`` (its unit costs are not the profile's: a run
+    without the camera's pass costs less); a profile without SLAM settings as it is."""
+    if camera or not hasattr(profile, "slam"):
         return profile
-    return replace(profile, name=f"{profile.name}+camera", slam={**profile.slam, "camera": True})
+    return replace(profile, name=f"{profile.name}+no-camera", slam={**profile.slam, "camera": False})
 
 
 def seeds_of(config) -> int:

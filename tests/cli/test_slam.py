@@ -132,7 +132,7 @@ def test_confidence_use_is_applied_and_recorded(cli, workspace, confident_layer,
     expected = good_fraction if minimum > 0 else 1.0
     assert abs(used["kept_fraction"] - expected) < 0.02
     settings = slam_settings(Workspace(tmp_path), "noisy", "street_0001")
-    assert settings["confidence"] == use and settings["min_confidence"] == minimum and "camera" not in settings
+    assert settings["confidence"] == use and settings["min_confidence"] == minimum and settings["camera"] is True
 
 
 def test_confidence_of_a_layer_without_one(cli, workspace, tmp_path):

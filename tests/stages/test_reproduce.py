@@ -274,7 +274,7 @@ def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(cli, tmp
     assert result.exit_code == 0, result.output
     printed = tomllib.loads(result.stdout)  # still a --config file of reproduce: the stages are comments
     assert printed == {"table": "5.2", "profile": "quick", "seed": 0, "force": False, "jobs": 1, "executor": "local",
-                       "slurm": {}, "camera": False, "dry_run": False, "calibrate": False}
+                       "slurm": {}, "camera": True, "dry_run": False, "calibrate": False}
     assert not ws.exists()  # nothing run, nothing written
     stages = read_stage_configs(result.stdout)
     names = list(stages)
@@ -298,21 +298,22 @@ def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(cli, tmp
 
 
 @pytest.mark.parametrize("table", ["5.2", "beams", "surface"])
-def test_camera_judges_every_slam_run_of_the_experiment_and_names_the_profile(cli, tmp_path, table):
-    """``--camera`` turns the camera on in every SLAM stage and in nothing else; the plan names the profile
-    ``<profile>+camera`` and says its unit costs are another profile's until ``--calibrate`` measures them."""
+def test_camera_judges_every_slam_run_by_default_and_no_camera_names_the_profile(cli, tmp_path, table):
+    """The camera is on in every SLAM stage by default; ``--no-camera`` turns it off there and in nothing else, and
+    the plan then names the profile ``<profile>+no-camera`` and says its unit costs are another profile's until
+    ``--calibrate`` measures them."""
     ws = tmp_path / "ws"
     base = read_stage_configs(cli("reproduce", "--table", table, "--print-config", "--workspace", ws).stdout)
-    result = cli("reproduce", "--table", table, "--camera", "--print-config", "--workspace", ws)
+    result = cli("reproduce", "--table", table, "--no-camera", "--print-config", "--workspace", ws)
     assert result.exit_code == 0, result.output
     stages = read_stage_configs(result.stdout)
     assert list(stages) == list(base) and not ws.exists()
     slam = [n for n in stages if n.startswith("slam-")]
-    assert slam and all(stages[n]["camera"] is True and base[n]["camera"] is False for n in slam)
+    assert slam and all(stages[n]["camera"] is False and base[n]["camera"] is True for n in slam)
     assert all(stages[n] == base[n] for n in stages if n not in slam)
-    plan = cli("reproduce", "--table", table, "--camera", "--dry-run", "--workspace", ws)
+    plan = cli("reproduce", "--table", table, "--no-camera", "--dry-run", "--workspace", ws)
     assert plan.exit_code == 0, plan.output
-    assert "--profile quick+camera:" in plan.stdout and "not quick+camera's" in plan.stdout
+    assert "--profile quick+no-camera:" in plan.stdout and "not quick+no-camera's" in plan.stdout
 
 
 def test_two_seeds_at_smoke_scale_write_the_seed_and_interval_columns(cli, tmp_path, monkeypatch):

@@ -10,7 +10,9 @@ from dcslam.stages.experiments import experiment
 from dcslam.stages.experiments.surface import PROFILES, SurfaceProfile
 from tests.fixtures import depth as depth_fixtures
 
-ARGS = ["reproduce", "--table", "surface", "--profile", "smoke"]
+#: Without the camera: the tiny drives' images are their depth in grey, so the camera measures every step and would
+#: vouch for the 2-frame sparse and exact runs that the table's robust columns need flagged here.
+ARGS = ["reproduce", "--table", "surface", "--profile", "smoke", "--no-camera"]
 NETS = ("SparseConvNet on planefit", "SparseConvNet on planefit, sure")
 DEPTH_ROWS = ("sparse", "IP-Basic", "scanline", "planefit", *NETS)
 MEASURED_ROWS = tuple(f"{label}, measured sources" for label in ("IP-Basic", "scanline", "planefit", *NETS, "exact"))

@@ -79,7 +79,8 @@ def test_a_sparse_input_is_its_own_evidence_and_a_foreign_layer_has_none(scaled,
     assert evidence["verdict"] == "unavailable" and not unknown.summary["health"]["suspect"]
     report([own, unknown])
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0].split(", ")[-1].startswith("ok ->")
+    # the fixture's colours are noise, unrelated to its depth: the camera measures no step and says so
+    assert lines[0].split(", ")[-1].startswith("ok; the camera abstained: 0 of 7 steps measured from images ->")
     assert "UNVERIFIED (no evidence bounds the drift (" in lines[1] and "does not say which measured depth" in lines[1]
 
 
