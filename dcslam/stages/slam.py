@@ -78,8 +78,9 @@ class SlamStageConfig(SlamSettings):
         "warped from frame to frame) and judge the run by that camera trajectory: suspect when it ends more than "
         "0.5 m from it; when within, its own steps' reasons are overruled (the road's and the companion's stay). Uses "
         "data beyond the depth; one pass (about 0.1-0.2 CPU-s a full-size frame) per drive and measured depth, kept "
-        "in <drives>/.camera/ and shared by every input made from that depth. It abstains, and says so, on drives "
-        "without images. --no-camera: the depth's own evidence alone."))
+        "in <drives>/.camera/ and shared by every input made from that depth. It abstains, and says so, where the "
+        "images cannot measure the steps (blank, or unrelated to the depth). --no-camera: the depth's own evidence "
+        "alone."))
     record: bool = option(False, help=(
         "Also write a Rerun recording <out>/<drive>.rrd per drive: per frame the camera image, input depth, points, "
         "ICP sources, map and step verdict, and the trajectories; open it with `dcslam view`. Needs rerun-sdk "
