@@ -225,14 +225,16 @@ def read_costs(path: Path, profile: str) -> UnitCosts | None:
 
 
 def shipped_costs(profile: str = "quick", path: Path = SHIPPED_COSTS) -> UnitCosts:
-    """The unit costs shipped with dcslam for ``profile``; for a profile it has none for, quick's (else its first
-    profile's; the source then says they were measured at another profile's settings)."""
+    """The unit costs shipped with dcslam for ``profile``; for a profile it has none for, quick's with the same
+    camera setting (``quick+no-camera`` for ``study+no-camera``), else quick's, else its first profile's; the source
+    then says they were measured at another profile's settings."""
     costs = read_costs(path, profile)
     if costs is not None:
         return costs
     try:
         profiles = list(json.loads(Path(path).read_text())["profiles"])
-        other = "quick" if "quick" in profiles else profiles[0]
+        suffix = "+no-camera" if profile.endswith("+no-camera") else ""
+        other = next((p for p in (f"quick{suffix}", "quick") if p in profiles), profiles[0])
     except (OSError, json.JSONDecodeError, KeyError, TypeError, IndexError) as exc:
         raise DcslamError(f"{path}: cannot read the unit costs ({exc}); reinstall dcslam or pass --costs-from") \
             from None
