@@ -300,8 +300,8 @@ def test_print_config_lists_every_stage_config_as_toml_and_runs_nothing(cli, tmp
 @pytest.mark.parametrize("table", ["5.2", "beams", "surface"])
 def test_camera_judges_every_slam_run_by_default_and_no_camera_names_the_profile(cli, tmp_path, table):
     """The camera is on in every SLAM stage by default; ``--no-camera`` turns it off there and in nothing else, and
-    the plan then names the profile ``<profile>+no-camera`` and says its unit costs are another profile's until
-    ``--calibrate`` measures them."""
+    the plan then names the profile ``<profile>+no-camera`` and estimates it with the unit costs measured without
+    the camera (shipped for quick), not with those of the profile that runs it."""
     ws = tmp_path / "ws"
     base = read_stage_configs(cli("reproduce", "--table", table, "--print-config", "--workspace", ws).stdout)
     result = cli("reproduce", "--table", table, "--no-camera", "--print-config", "--workspace", ws)
@@ -313,7 +313,8 @@ def test_camera_judges_every_slam_run_by_default_and_no_camera_names_the_profile
     assert all(stages[n] == base[n] for n in stages if n not in slam)
     plan = cli("reproduce", "--table", table, "--no-camera", "--dry-run", "--workspace", ws)
     assert plan.exit_code == 0, plan.output
-    assert "--profile quick+no-camera:" in plan.stdout and "not quick+no-camera's" in plan.stdout
+    assert "--profile quick+no-camera:" in plan.stdout
+    assert "--calibrate --profile quick+no-camera on" in plan.stdout and "not quick+no-camera's" not in plan.stdout
 
 
 def test_two_seeds_at_smoke_scale_write_the_seed_and_interval_columns(cli, tmp_path, monkeypatch):
