@@ -7,15 +7,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from dcslam.errors import DcslamError
 from dcslam.eval.depth import DepthErrors
-from dcslam.eval.surface import SurfaceErrors
 from dcslam.eval.trajectory import (EVO_MAX_TIME_DIFF_S, Association, TrajectoryScores, associate_timestamps,
                                     score_trajectory)
 from dcslam.workspace import LayerRef, Workspace, drive_file, find_layer, resolve_layer, select_drives
+
+if TYPE_CHECKING:  # the surface errors need torch (~2 s to import): scoring trajectories alone does not import it
+    from dcslam.eval.surface import SurfaceErrors
 
 __all__ = ["LayerRef", "TrajectoryPair", "drive_file", "find_layer", "load_pair", "resolve_layer",
            "score_layer_depth", "score_layer_surface", "score_layer_trajectories", "select_drives", "slam_outputs",

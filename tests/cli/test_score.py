@@ -176,6 +176,21 @@ def test_score_trajectory_layer_and_files(cli, ws):
     assert result.exit_code == 0 and float(read_csv(ws / "t.csv")[0]["ate_rmse"]) == pytest.approx(np.sqrt(5 / 3))
 
 
+def test_score_trajectory_runs_without_torch(ws):
+    """Scoring trajectories is NumPy's work: the command (a fresh process, as users start it) writes its CSV without
+    importing torch, whose import alone costs 2-3 s of CPU."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom dcslam.cli import main\nsys.argv = ['dcslam', *sys.argv[1:]]\ntry:\n    main()\n"
+            "except SystemExit as e:\n    assert not e.code, e.code\nprint('torch' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code, "score", "trajectory", "-w", str(ws), "--layer", "dense"],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "False"
+    assert read_csv(ws / "results" / "trajectory_dense.csv")[0]["trajectory"] == "d0"
+
+
 def test_score_trajectory_associates_within_the_time_tolerance(cli, ws, tmp_path):
     """Poses are paired as evo pairs them: nearest timestamp within --max-time-diff (default 10 ms); only the
     paired poses are scored and the pairing is reported."""

@@ -171,8 +171,12 @@ def test_a_job_that_can_never_start_is_a_failure_not_a_wait(runs, tmp_path):
 
 
 def test_sigterm_cancels_the_jobs_and_the_rerun_submits_only_what_is_missing(runs, tmp_path):
-    """Table 5.1 with two training seeds on Slurm: SIGTERM among the trainings cancels the jobs; the rerun submits
-    what is missing and gives the table of a local run (the fixture's local workspace, moved, with its second seed)."""
+    """Table 5.1 with two training seeds on Slurm, in a copy of the fixture's Slurm workspace (the first seed up to
+    date there: the second seed's trainings and predictions are the jobs): SIGTERM among the trainings cancels the
+    jobs; the rerun submits what is missing and gives the table of a local run (the fixture's local workspace,
+    copied, with its second seed)."""
+    shutil.copytree(runs["slurm"], tmp_path, dirs_exist_ok=True)
+    copied = stamps(tmp_path)
     args = [*runs["common"], "--table", "5.1", *SEEDS, "--executor", "slurm", "--config", runs["config"], "-w",
             tmp_path]
     err = tmp_path.parent / f"{tmp_path.name}.stderr"
@@ -195,7 +199,8 @@ def test_sigterm_cancels_the_jobs_and_the_rerun_submits_only_what_is_missing(run
     assert log.strip().splitlines()[-1].startswith(MESSAGE) and "Traceback" not in log, log
     assert queued() == []  # cancelled, and gone from the queue before reproduce exited
     assert submitted and "[slurm] cancelled" in log
-    made = stamps(tmp_path)
+    made = {name: stamp for name, stamp in stamps(tmp_path).items() if copied.get(name) != stamp}  # this run's
+    assert submitted and all(name.endswith("-s1") for name, _ in submitted)  # the first seed's were up to date
     cancelled = [name for name, _ in submitted if not made[name]["complete"]]
     assert cancelled, made  # the interrupt fell among the trainings
     for name, stamp in made.items():  # what claims completion was made
