@@ -99,20 +99,29 @@ def timed(run: Callable, workspace, config, started: Path | None = None) -> tupl
 
 
 class LocalExecutor:
-    """``jobs`` spawned worker processes of one thread each (:func:`dcslam.workers.process_pool`)."""
+    """``jobs`` spawned worker processes of one thread each (:func:`dcslam.workers.process_pool`). ``keep``: the
+    workers of a :meth:`run` that finished stay up for the next one until :meth:`close` (a new worker imports torch
+    again: 2-3 CPU-s); a run that gave up ends them all the same."""
 
-    def __init__(self, jobs: int = 1):
-        self.jobs = jobs
+    def __init__(self, jobs: int = 1, keep: bool = False):
+        self.jobs, self.keep = jobs, keep
+        self._pool = None  # the kept pool, between runs
 
     def in_process(self, tasks: int) -> bool:
         return self.jobs <= 1 or tasks <= 1
+
+    def close(self) -> None:
+        """End the kept workers (they are idle: no run is under way)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
 
     def run(self, tasks: list[Task]) -> Iterator[Outcome]:
         import tempfile
 
         from dcslam.workers import process_pool
 
-        pool = process_pool(self.jobs, len(tasks))
+        pool, self._pool = self._pool or process_pool(self.jobs, self.jobs if self.keep else len(tasks)), None
         futures, workers, finished = {}, [], False
         marks = Path(tempfile.mkdtemp(prefix="dcslam-workers-"))
         try:
@@ -124,7 +133,9 @@ class LocalExecutor:
                 yield outcome
             finished = not broken
         finally:
-            if finished:
+            if finished and self.keep:
+                self._pool = pool
+            elif finished:
                 pool.shutdown(wait=True)
             else:  # given up: no worker keeps writing outputs nobody will stamp
                 for future in futures:

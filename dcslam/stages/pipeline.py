@@ -100,6 +100,19 @@ class Pipeline:
         self.state = workspace.root / ".reproduce"
         self.log = log
         self.timings: dict[str, float] = {}
+        self._workers: dict[int, object] = {}  # jobs -> the LocalExecutor whose workers run_all keeps up
+
+    def __enter__(self) -> Pipeline:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """End the local workers that :meth:`run_all` kept up between its calls (as a ``with`` block does)."""
+        for executor in self._workers.values():
+            executor.close()
+        self._workers.clear()
 
     def _stamp(self, stage: Stage) -> Path:
         return self.state / f"{stage.name}.json"
@@ -163,6 +176,7 @@ class Pipeline:
         if self.up_to_date(stage):
             self.log(f"[skip] {stage.name}: up to date")
             return None
+        self.close()  # no idle worker while this process works: a Ctrl-C meant for it would end them with a traceback
         self._claim(stage)
         options = " ".join(f"{k}={v}" for k, v in changed(stage.config).items())
         self.log(f"[run]  {stage.name}: {stage.run.__module__.rsplit('.', 1)[-1]} {options}".rstrip())
@@ -207,9 +221,11 @@ class Pipeline:
                 self.log(f"[skip] {stage.name}: up to date")
             else:
                 todo.append(stage)
-        executor = self.executor or LocalExecutor(jobs)
         if not todo:
             return
+        # local workers are kept up between calls (the next round of stages reuses them, without importing torch
+        # again) until an in-process stage runs or the pipeline closes
+        executor = self.executor or self._workers.setdefault(jobs, LocalExecutor(jobs, keep=True))
         if executor.in_process(len(todo)):
             for stage in todo:
                 self.run(stage)

@@ -119,8 +119,8 @@ def reproduce(workspace: Workspace, profile, table: str = "5.2", kitti_root: Pat
 
         interrupt.keep(f"the stages that finished are kept in {workspace.root} (stamped in .reproduce/); rerun the "
                        "same command to go on from there (the stage that was running starts again)", final=True)
-        pipe = Pipeline(workspace, log, force=force, executor=executor)
-        return _experiment(table).compose(pipe, profile, kitti_root, seed, jobs, seeds)
+        with Pipeline(workspace, log, force=force, executor=executor) as pipe:
+            return _experiment(table).compose(pipe, profile, kitti_root, seed, jobs, seeds)
 
 
 def make_executor(ws: Workspace, config: ReproduceConfig, log: Callable[[str], None] = lambda line: None):

@@ -228,6 +228,56 @@ def test_independent_slam_stages_run_in_worker_processes(tmp_path):
     assert not json.loads((tmp_path / ".reproduce" / "fail.json").read_text())["complete"]  # claims nothing
 
 
+def test_rounds_of_run_all_reuse_the_workers_until_a_stage_runs_here_a_round_fails_or_it_closes(tmp_path):
+    """Each new worker imports torch again (2-3 CPU-s), so run_all keeps its workers up for the next round; a stage
+    run in this process (an idle worker would take a Ctrl-C meant for it), a failed round and the end of the
+    ``with`` block end them."""
+    ws = Workspace(tmp_path)
+
+    def round_of(tag: str, frames: int = 1) -> tuple[list, list]:
+        outs = [tmp_path / f"{tag}{i}.txt" for i in range(2)]
+        return outs, [Stage(f"{tag}-{i}", _pid, SlamStageConfig(frames=frames, out=out), outputs=lambda out=out: [out])
+                      for i, out in enumerate(outs)]
+
+    def pids(outs: list) -> set[int]:
+        return {int(out.read_text()) for out in outs}
+
+    def alive(pid: int) -> bool:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+
+    with Pipeline(ws) as pipe:
+        first, stages = round_of("a")
+        pipe.run_all(stages, jobs=2)
+        assert os.getpid() not in pids(first) and all(alive(pid) for pid in pids(first))  # idle, kept
+        second, stages = round_of("b")
+        pipe.run_all(stages, jobs=2)
+        kept = pids(first) | pids(second)
+        assert len(kept) <= 2 and all(alive(pid) for pid in kept)  # the same two workers at most, still up
+        outs, stages = round_of("c")
+        pipe.run(stages[0])
+        assert pids(outs[:1]) == {os.getpid()} and not any(alive(pid) for pid in kept)
+        third, stages = round_of("d", frames=99)  # fails in its workers
+        with pytest.raises(DcslamError, match="no luck"):
+            pipe.run_all(stages, jobs=2)
+        fourth, stages = round_of("e")
+        pipe.run_all(stages, jobs=2)
+        assert not pids(fourth) & kept
+        last = pids(fourth)
+        assert all(alive(pid) for pid in last)
+    assert not any(alive(pid) for pid in last)
+
+
+def _pid(ws, config, *, force=False):
+    """A stage that writes the pid of the process it runs in (frames 99: fails); module level, for a worker."""
+    if config.frames == 99:
+        raise DcslamError("no luck")
+    config.out.write_text(str(os.getpid()))
+
+
 def test_stamps_record_the_cpu_seconds_of_the_process_that_ran_the_stage(tmp_path):
     """A stage that computes for 0.3 s and one that sleeps 0.3 s, in this process and in worker processes: both
     stamps record ~0.3 wall seconds, only the first ~0.3 CPU seconds (measured where the stage ran)."""
