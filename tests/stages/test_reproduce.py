@@ -260,22 +260,24 @@ def test_rounds_of_run_all_reuse_the_workers_until_a_stage_runs_here_a_round_fai
         outs, stages = round_of("c")
         pipe.run(stages[0])
         assert pids(outs[:1]) == {os.getpid()} and not any(alive(pid) for pid in kept)
-        third, stages = round_of("d", frames=99)  # fails in its workers
+        failed, stages = round_of("d", frames=99)  # fails in its workers
         with pytest.raises(DcslamError, match="no luck"):
             pipe.run_all(stages, jobs=2)
+        ended = {int(out.read_text()) for out in failed if out.exists()}
+        assert ended and not any(alive(pid) for pid in ended)
         fourth, stages = round_of("e")
         pipe.run_all(stages, jobs=2)
-        assert not pids(fourth) & kept
+        assert not pids(fourth) & (kept | ended)
         last = pids(fourth)
         assert all(alive(pid) for pid in last)
     assert not any(alive(pid) for pid in last)
 
 
 def _pid(ws, config, *, force=False):
-    """A stage that writes the pid of the process it runs in (frames 99: fails); module level, for a worker."""
+    """A stage that writes the pid of the process it runs in (frames 99: then fails); module level, for a worker."""
+    config.out.write_text(str(os.getpid()))
     if config.frames == 99:
         raise DcslamError("no luck")
-    config.out.write_text(str(os.getpid()))
 
 
 def test_stamps_record_the_cpu_seconds_of_the_process_that_ran_the_stage(tmp_path):
