@@ -101,7 +101,7 @@ def timed(run: Callable, workspace, config, started: Path | None = None) -> tupl
 class LocalExecutor:
     """``jobs`` spawned worker processes of one thread each (:func:`dcslam.workers.process_pool`). ``keep``: the
     workers of a :meth:`run` that finished stay up for the next one until :meth:`close` (a new worker imports torch
-    again: 2-3 CPU-s); a run that gave up ends them all the same."""
+    again: 2-3 CPU-s), unless one of them died meanwhile; a run that gave up ends them all the same."""
 
     def __init__(self, jobs: int = 1, keep: bool = False):
         self.jobs, self.keep = jobs, keep
@@ -121,7 +121,12 @@ class LocalExecutor:
 
         from dcslam.workers import process_pool
 
-        pool, self._pool = self._pool or process_pool(self.jobs, self.jobs if self.keep else len(tasks)), None
+        pool, self._pool = self._pool, None
+        if pool is not None and (getattr(pool, "_broken", False) or  # a kept worker died while idle: start afresh
+                                 any(p.exitcode is not None for p in getattr(pool, "_processes", {}).values())):
+            pool.shutdown(wait=False, cancel_futures=True)
+            pool = None
+        pool = pool or process_pool(self.jobs, self.jobs if self.keep else len(tasks))
         futures, workers, finished = {}, [], False
         marks = Path(tempfile.mkdtemp(prefix="dcslam-workers-"))
         try:
