@@ -116,17 +116,22 @@ class LocalExecutor:
             self._pool.shutdown(wait=True)
             self._pool = None
 
+    def _take_kept(self):
+        """The kept pool, taken (a run that gives up must not leave it kept); None when there is none or one of its
+        workers died while idle (the pool is then broken: ended here, the run starts afresh)."""
+        pool, self._pool = self._pool, None
+        if pool is not None and (getattr(pool, "_broken", False) or
+                                 any(p.exitcode is not None for p in getattr(pool, "_processes", {}).values())):
+            pool.shutdown(wait=False, cancel_futures=True)
+            return None
+        return pool
+
     def run(self, tasks: list[Task]) -> Iterator[Outcome]:
         import tempfile
 
         from dcslam.workers import process_pool
 
-        pool, self._pool = self._pool, None
-        if pool is not None and (getattr(pool, "_broken", False) or  # a kept worker died while idle: start afresh
-                                 any(p.exitcode is not None for p in getattr(pool, "_processes", {}).values())):
-            pool.shutdown(wait=False, cancel_futures=True)
-            pool = None
-        pool = pool or process_pool(self.jobs, self.jobs if self.keep else len(tasks))
+        pool = self._take_kept() or process_pool(self.jobs, self.jobs if self.keep else len(tasks))
         futures, workers, finished = {}, [], False
         marks = Path(tempfile.mkdtemp(prefix="dcslam-workers-"))
         try:

@@ -233,6 +233,8 @@ def test_rounds_of_run_all_reuse_the_workers_until_a_stage_runs_here_a_round_fai
     """Each new worker imports torch again (2-3 CPU-s), so run_all keeps its workers up for the next round; a stage
     run in this process (an idle worker would take a Ctrl-C meant for it), a failed round and the end of the
     ``with`` block end them."""
+    from dcslam.locks import _alive as alive  # a process that runs here (a zombie does not)
+
     ws = Workspace(tmp_path)
 
     def round_of(tag: str, frames: int = 1) -> tuple[list, list]:
@@ -242,13 +244,6 @@ def test_rounds_of_run_all_reuse_the_workers_until_a_stage_runs_here_a_round_fai
 
     def pids(outs: list) -> set[int]:
         return {int(out.read_text()) for out in outs}
-
-    def alive(pid: int) -> bool:
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return False
-        return True
 
     with Pipeline(ws) as pipe:
         first, stages = round_of("a")
