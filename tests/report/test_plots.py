@@ -65,6 +65,30 @@ def test_depth_examples_name_each_row_once_and_give_every_panel_a_colour_bar(tmp
     plt.close(fig)
 
 
+def test_depth_examples_pick_nearest_pixels_before_the_colour_map_and_draw_the_same_figure(tmp_path, monkeypatch):
+    """Panels larger than they are shown are resampled in data (picked, then colour-mapped): the saved figure is
+    pixel for pixel the one resampling the colour-mapped image would save, holes (NaN) included."""
+    from PIL import Image
+
+    rng = np.random.default_rng(3)
+    gt = np.where(rng.random((150, 500)) < 0.3, rng.uniform(2, 60, (150, 500)), 0.0)
+    sparse = np.where(rng.random(gt.shape) < 0.05, gt, 0.0)
+    rows = [("a", sparse, gt + rng.normal(0, 1, gt.shape), gt), ("b", sparse, np.abs(gt - 1), gt)]
+    figures = []
+    plt = plots.pyplot()
+    monkeypatch.setattr(plt, "close", figures.append)
+    plots.plot_depth_examples(tmp_path / "data.png", rows)
+    images = [image for ax in figures[0].axes for image in ax.images]
+    assert len(images) == 8 and {image.get_interpolation_stage() for image in images} == {"data"}
+    for image in images:
+        image.set_interpolation_stage("rgba")
+    figures[0].savefig(tmp_path / "rgba.png", dpi=100, format="png", bbox_inches="tight")
+    data, rgba = (np.asarray(Image.open(tmp_path / f"{name}.png")) for name in ("data", "rgba"))
+    assert data.shape == rgba.shape and np.array_equal(data, rgba)
+    monkeypatch.undo()
+    plt.close(figures[0])
+
+
 def test_trajectory_styles_never_repeat_and_a_static_trajectory_is_marked(tmp_path):
     T_gt = np.tile(np.eye(4), (20, 1, 1))
     T_gt[:, 2, 3] = np.arange(20.0)  # 19 m straight ahead
