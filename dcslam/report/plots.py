@@ -135,6 +135,9 @@ def plot_depth_examples(path: Path | str, rows: list[tuple[str, np.ndarray, np.n
     return Path(path)
 
 
+CURVES_MARGINS = {"left": 0.075, "right": 0.99, "bottom": 0.15, "top": 0.86, "wspace": 0.32}  # of the figure
+
+
 def plot_training_curves(path: Path | str, metrics_path: Path | str) -> Path:
     """A training run's curves from its ``metrics.jsonl``, one quantity family per panel (so no legend covers
     another's curves): the training loss per step; the validation RMSE and MAE (mm); the validation MSE (m², the
@@ -143,7 +146,10 @@ def plot_training_curves(path: Path | str, metrics_path: Path | str) -> Path:
     rows = [json.loads(line) for line in Path(metrics_path).read_text().splitlines() if line.strip()]
     train = [(r["step"], r["loss"]) for r in rows if r["kind"] == "train"]
     val = [r for r in rows if r["kind"] == "val"]
-    fig, axes = plt.subplots(1, 4, figsize=(16, 3.6))
+    # fixed margins, not tight_layout: its extra draw of the figure was 40 % of the time of a call, paid after every
+    # epoch of every training; they fit the longest ticks the formats below give, offsets and titles (a test draws
+    # extreme values)
+    fig, axes = plt.subplots(1, 4, figsize=(16, 3.6), gridspec_kw=CURVES_MARGINS)
     if train:
         axes[0].plot(*zip(*train), lw=0.8, label="training loss")
     axes[0].set(xlabel="step", ylabel="loss", yscale="log", title="training loss")
@@ -157,13 +163,13 @@ def plot_training_curves(path: Path | str, metrics_path: Path | str) -> Path:
             if points:
                 ax.plot(*zip(*points), style, label=label)
         ax.set(xlabel="step", ylabel=unit, title=title)
+        ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 4))  # short ticks: 0.00012 is 1.2 with 1e-4 above
         if ax.lines:
             ax.legend(loc="best", fontsize=8)
     if train:
         axes[0].legend(loc="best", fontsize=8)
     for ax in axes:
         ax.title.set_fontsize(9)
-    fig.tight_layout()
     with atomic_output(path, force=True) as tmp:
         fig.savefig(tmp, dpi=100, format="png")
     plt.close(fig)

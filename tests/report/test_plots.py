@@ -3,6 +3,7 @@ input and share one error colour range."""
 import json
 
 import numpy as np
+import pytest
 
 from dcslam.report import plots
 
@@ -24,6 +25,31 @@ def test_training_curves_plot_validation_mse_in_its_own_panel(tmp_path, monkeypa
     assert list(axes[2].lines[0].get_ydata()) == [0.5, 0.4]
     monkeypatch.undo()
     plt.close(figures[0])
+
+
+@pytest.mark.parametrize("loss, val", [
+    ((0.0196, 0.0208), {"rmse_mm": 123456.7, "mae_mm": 0.5, "mse": 1.23456e-5, "chamfer": 99999.9}),  # offset, 1e-5
+    ((19.6, 20.8), {"rmse_mm": 6125.5, "mae_mm": 2331.2, "mse": 37.5, "chamfer": 3.5}),  # 2.08 x 10^1 ticks
+    ((1e3, 1e-7), {"rmse_mm": 0.01, "mae_mm": 0.001, "mse": 1e9, "chamfer": 0.0001234}),
+])
+def test_training_curves_keep_every_label_inside_the_figure_and_off_the_other_panels(tmp_path, monkeypatch, loss,
+                                                                                    val):
+    """The panels sit at fixed margins (no tight_layout pass): long tick labels, offsets and titles still fit."""
+    rows = [{"kind": "train", "step": s, "loss": loss[0] + (loss[1] - loss[0]) * s / 12} for s in range(13)]
+    rows += [{"kind": "val", "step": 12, **val}]
+    metrics = tmp_path / "metrics.jsonl"
+    metrics.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    figures = []
+    plt = plots.pyplot()
+    monkeypatch.setattr(plt, "close", figures.append)
+    plots.plot_training_curves(tmp_path / "curves.png", metrics)
+    fig = figures[0]
+    renderer = fig.canvas.get_renderer()
+    boxes = [ax.get_tightbbox(renderer) for ax in fig.axes]  # ticks, labels, offset text, title, legend
+    assert all(0 <= b.x0 and b.x1 <= fig.bbox.width and 0 <= b.y0 and b.y1 <= fig.bbox.height for b in boxes)
+    assert all(left.x1 < right.x0 for left, right in zip(boxes, boxes[1:]))
+    monkeypatch.undo()
+    plt.close(fig)
 
 
 def test_depth_examples_dilate_the_input_and_share_the_error_range(tmp_path, monkeypatch):
