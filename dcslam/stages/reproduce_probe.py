@@ -10,11 +10,12 @@ annotated dense and predicted depth and over a whole drive, and the tables; twic
 :data:`PROBE_SIZES` frames with depth (training and SLAM on as many frames; the larger sample runs SLAM on one more
 completion, so that the tables score more runs), each in a temporary workspace, with one torch thread. The larger sample
 runs first and generates the drives; the smaller prepares the first frames of the same drives (synth, about half of a
-sample's CPU, runs once). The trainings are measured on a second run, as the first training of a process also sets torch
-up. Each stage's stamp records its CPU seconds; the two samples of each kind give its fixed part per stage (``stage_s``)
-and its part per unit (``unit_s``) by a line through the two (:func:`fit`; synth: per generated frame), written for the
-profile into ``<workspace>/.reproduce/calibration.json`` (``reproduce_costs.json``'s layout), which the estimate then
-uses.
+sample's CPU, runs once). The larger sample's first training is measured on a second run, as the first training of a
+process also sets torch up (2 CPU-s on the smoke profile; every other training measured twice gave the same within
+noise). Each stage's stamp records its CPU seconds; the two samples of each kind give its fixed part per stage
+(``stage_s``) and its part per unit (``unit_s``) by a line through the two (:func:`fit`; synth: per generated frame),
+written for the profile into ``<workspace>/.reproduce/calibration.json`` (``reproduce_costs.json``'s layout), which
+the estimate then uses.
 """
 from __future__ import annotations
 
@@ -92,10 +93,11 @@ def _wanted(profile, layers: tuple[str, ...]) -> Callable[[str], bool]:
 
 def sample(profile, frames: int, layers: tuple[str, ...], root: Path,
            log: Callable[[str], None] = lambda line: None,
-           kitti: Path | None = None) -> dict[str, tuple[float, float, int]]:
+           kitti: Path | None = None, first: bool = False) -> dict[str, tuple[float, float, int]]:
     """Run one probe sample of ``profile`` (:func:`probe_profile` of ``frames``; SLAM of ``layers``) in the empty
     folder ``root``; ``{kind: (CPU seconds, units, stages)}`` its stamps measured (:func:`measure`). ``kitti``: the
-    generated drives of a larger sample, of which it prepares the first ``frames`` frames with depth (no synth)."""
+    generated drives of a larger sample, of which it prepares the first ``frames`` frames with depth (no synth);
+    ``first``: the process's first sample, whose first training is measured again."""
     from dcslam.stages import predict
     from dcslam.stages.experiments.table_5_2 import compose
     from dcslam.stages.slam import torch_threads
@@ -111,8 +113,9 @@ def sample(profile, frames: int, layers: tuple[str, ...], root: Path,
                            outputs=lambda made=made: [made], kind="predict"))
         for name in FILL_PROBES:
             _fill_network(pipe, small, name)
-        for stage in [s for s in pipe.ran if s.name.startswith("train-")]:  # measured again: the first training of
-            (ws.root / ".reproduce" / f"{stage.name}.json").unlink()      # a process also sets torch up (~1 s)
+        trainings = [s for s in pipe.ran if s.name.startswith("train-")]
+        for stage in trainings[:1] if first else []:  # measured again: the first training of a process also sets
+            (ws.root / ".reproduce" / f"{stage.name}.json").unlink()  # torch up
             pipe.run(stage)
     return measure(root)
 
@@ -197,7 +200,7 @@ def calibrate(ws: Workspace, profile, log: Callable[[str], None] = lambda line: 
     # the larger sample first: the smaller one prepares the first frames of its generated drives
     with tempfile.TemporaryDirectory(prefix="dcslam-probe-") as folder:
         log(f"[calibrate] probe sample of {PROBE_SIZES[1]} frames with depth per drive")
-        large = sample(profile, PROBE_SIZES[1], PROBE_SLAM[1], Path(folder) / "large", log)
+        large = sample(profile, PROBE_SIZES[1], PROBE_SLAM[1], Path(folder) / "large", log, first=True)
         log(f"[calibrate] probe sample of {PROBE_SIZES[0]} frames with depth per drive (the same drives)")
         small = sample(profile, PROBE_SIZES[0], PROBE_SLAM[0], Path(folder) / "small", log,
                        kitti=Path(folder) / "large" / "kitti")
