@@ -56,8 +56,8 @@ def _read_record(fd: int) -> dict:
     return record if isinstance(record, dict) else {}
 
 
-def _alive(pid) -> bool:
-    """Whether process ``pid`` runs on this machine (a zombie does not)."""
+def process_alive(pid) -> bool:
+    """Whether process ``pid`` runs on this machine (a zombie does not): its locks and temporary files are kept."""
     try:
         pid = int(pid)
         os.kill(pid, 0)
@@ -162,7 +162,7 @@ def _take_exclusive(lock: Path, what: str, path: Path, note: Callable[[str], Non
                 continue
             record = _read_record(fd)
             os.close(fd)
-            if not record or record.get("host") != socket.gethostname() or _alive(record.get("pid")):
+            if not record or record.get("host") != socket.gethostname() or process_alive(record.get("pid")):
                 raise _refusal(what, path, record) from None
             note(_stale_note(what, path, record))
             lock.unlink(missing_ok=True)
@@ -243,7 +243,7 @@ def holder(path: Path | str) -> dict | None:
         except BlockingIOError:
             return record or {"pid": "?"}
         except OSError:  # no flock here: the recorded process decides
-            held = record.get("host") not in (None, socket.gethostname()) or _alive(record.get("pid"))
+            held = record.get("host") not in (None, socket.gethostname()) or process_alive(record.get("pid"))
             return record if held else None
         return None
     finally:

@@ -12,21 +12,11 @@ from pathlib import Path
 
 from dcslam.errors import DcslamError, write_error
 from dcslam.interrupt import check
+from dcslam.locks import process_alive
 
 
 def _temporary_name(path: Path) -> Path:
     return path.with_name(f".{path.name}.tmp-{os.getpid()}")
-
-
-def _alive(pid: str) -> bool:
-    """Whether a process of this id runs on this machine (a temporary name of a live writer is not removed)."""
-    try:
-        os.kill(int(pid), 0)
-    except (ValueError, ProcessLookupError):
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def remove_stale_temporaries(path: Path | str, sets: bool = False) -> None:
@@ -39,7 +29,7 @@ def remove_stale_temporaries(path: Path | str, sets: bool = False) -> None:
         return
     for leftover in path.parent.glob(f".{path.name}.tmp-*"):
         pid = leftover.name.rpartition(".tmp-")[2]
-        if pid == str(os.getpid()) or not _alive(pid):
+        if pid == str(os.getpid()) or not process_alive(pid):
             leftover.unlink(missing_ok=True)
     for pattern in (f".{path.name}.set-*", f"..{path.name}.set-*.tmp-*") if sets else ():
         for leftover in path.parent.glob(pattern):

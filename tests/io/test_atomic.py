@@ -92,3 +92,26 @@ def test_every_kind_of_temporary_a_killed_writer_left_is_removed_by_the_next_wri
     with atomic_output(tmp_path / "e.txt") as tmp:
         tmp.write_text("e")
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["d.h5", "e.txt", live.name])
+
+
+def test_a_writer_that_died_but_was_not_yet_reaped_leaves_a_temporary_the_next_write_removes(tmp_path):
+    """A zombie (ended, its parent has not waited for it yet) answers signal 0 but writes nothing any more."""
+    import subprocess
+    import sys
+    import time
+
+    from dcslam.locks import process_alive
+
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    try:
+        deadline = time.monotonic() + 30
+        while process_alive(child.pid) and time.monotonic() < deadline:  # ended, never waited for: a zombie
+            time.sleep(0.05)
+        os.kill(child.pid, 0)  # the pid is still taken
+        left = tmp_path / f".f.txt.tmp-{child.pid}"
+        left.write_text("left by a writer that died")
+        with atomic_output(tmp_path / "f.txt") as tmp:
+            tmp.write_text("f")
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["f.txt"]
+    finally:
+        child.wait()

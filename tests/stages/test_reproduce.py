@@ -233,7 +233,7 @@ def test_rounds_of_run_all_reuse_the_workers_until_a_stage_runs_here_a_round_fai
     """Each new worker imports torch again (2-3 CPU-s), so run_all keeps its workers up for the next round; a stage
     run in this process (an idle worker would take a Ctrl-C meant for it), a failed round and the end of the
     ``with`` block end them."""
-    from dcslam.locks import _alive as alive  # a process that runs here (a zombie does not)
+    from dcslam.locks import process_alive as alive  # a process that runs here (a zombie does not)
 
     ws = Workspace(tmp_path)
 
