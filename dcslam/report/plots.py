@@ -146,7 +146,7 @@ def plot_training_curves(path: Path | str, metrics_path: Path | str) -> Path:
     rows = [json.loads(line) for line in Path(metrics_path).read_text().splitlines() if line.strip()]
     train = [(r["step"], r["loss"]) for r in rows if r["kind"] == "train"]
     val = [r for r in rows if r["kind"] == "val"]
-    # fixed margins, not tight_layout: its extra draw of the figure was 40 % of the time of a call, paid after every
+    # fixed margins, not tight_layout: its extra draw of the figure took a quarter of a call's time, paid after every
     # epoch of every training; they fit the longest ticks the formats below give, offsets and titles (a test draws
     # extreme values)
     fig, axes = plt.subplots(1, 4, figsize=(16, 3.6), gridspec_kw=CURVES_MARGINS)
