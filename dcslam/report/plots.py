@@ -151,7 +151,8 @@ def plot_training_curves(path: Path | str, metrics_path: Path | str) -> Path:
     # extreme values)
     fig, axes = plt.subplots(1, 4, figsize=(16, 3.6), gridspec_kw=CURVES_MARGINS)
     if train:
-        axes[0].plot(*zip(*train), lw=0.8, label="training loss")
+        # a lone step (a one-step smoke training) is a line of no length: drawn as a dot
+        axes[0].plot(*zip(*train), lw=0.8, label="training loss", marker="o" if len(train) == 1 else None)
     axes[0].set(xlabel="step", ylabel="loss", yscale="log", title="training loss")
     steps = [r["step"] for r in val]
     panels = [(axes[1], (("rmse_mm", "val RMSE", "o-"), ("mae_mm", "val MAE", "s-")), "mm", "validation depth errors"),

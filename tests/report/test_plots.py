@@ -23,8 +23,13 @@ def test_training_curves_plot_validation_mse_in_its_own_panel(tmp_path, monkeypa
     labels = [[line.get_label() for line in ax.lines] for ax in axes]
     assert labels == [["training loss"], ["val RMSE", "val MAE"], ["val MSE"], ["val chamfer"]]
     assert list(axes[2].lines[0].get_ydata()) == [0.5, 0.4]
+    assert axes[0].lines[0].get_marker() in (None, "None", "")  # a curve of several steps: a line
+    metrics.write_text(json.dumps(rows[0]) + "\n")  # one training step: a dot, not a line of no length
+    plots.plot_training_curves(tmp_path / "one.png", metrics)
+    assert figures[1].axes[0].lines[0].get_marker() == "o"
     monkeypatch.undo()
     plt.close(figures[0])
+    plt.close(figures[1])
 
 
 @pytest.mark.parametrize("loss, val", [
