@@ -114,9 +114,9 @@ def sample(profile, frames: int, layers: tuple[str, ...], root: Path,
         for name in FILL_PROBES:
             _fill_network(pipe, small, name)
         trainings = [s for s in pipe.ran if s.name.startswith("train-")]
-        for stage in trainings[:1] if first else []:  # measured again: the first training of a process also sets
-            (ws.root / ".reproduce" / f"{stage.name}.json").unlink()  # torch up
-            pipe.run(stage)
+        if first and trainings:  # measured again: the first training of a process also sets torch up
+            (ws.root / ".reproduce" / f"{trainings[0].name}.json").unlink()
+            pipe.run(trainings[0])
     return measure(root)
 
 
