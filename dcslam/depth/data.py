@@ -5,11 +5,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
 from dcslam.errors import DcslamError
+
+if TYPE_CHECKING:
+    import torch
 
 
 def check_view(scale: float, crop: int) -> int:
@@ -139,6 +142,8 @@ class DriveFrames:
         return self.mix[(position + epoch) % len(self.mix)] if self.mix else self.input
 
     def load(self, positions, epoch: int = 0) -> Batch:
+        import torch  # here, not at the top: the module's numpy helpers serve torch-free classical predictions
+
         frames = [self.indices[p] for p in positions]
         sparse = np.stack([self._view(self.drive.depth(self.input_of(p, epoch), self.indices[p])) for p in positions])
         dense = np.stack([self._view(self.drive.depth(self.target, i)) for i in frames])

@@ -1,3 +1,5 @@
+import json
+import os
 
 import pytest
 import torch
@@ -57,3 +59,29 @@ def test_predict_errors(cli, ws):
     assert cli("predict", "-w", ws, "--model", "unet").exit_code == 2  # unknown choices are usage errors
     assert cli("predict", "-w", ws, "--model", "ip-basic", "--split", "nope").exit_code == 2
     assert not (ws / "predictions").exists()
+
+
+def test_classical_completion_its_filters_and_devkit_pngs_run_without_torch(ws, tmp_path):
+    """Classical completers, filters and the devkit PNGs are NumPy's and OpenCV's work: commands started as users
+    start them (one fresh process, here running each in turn) write their layers without importing torch, whose
+    import alone costs 2-3 s of CPU, more than IP-Basic takes for a drive."""
+    import subprocess
+    import sys
+
+    from dcslam.depth.models import CLASSICAL
+
+    commands = [["predict", "--model", name] for name in CLASSICAL]
+    commands += [["filter", "--depth", "predicted", "--run", "planefit", "--filter", "edges", "--filter", "outlier"],
+                 ["export", "--depth", "predicted/scanline", "--out", str(tmp_path / "png")],
+                 ["import", "--src", str(tmp_path / "png"), "--name", "scanline-again"]]
+    code = ("import json, sys\nfrom dcslam.cli import main\ncommands, ws = json.loads(sys.argv[1]), sys.argv[2]\n"
+            "for args in commands:\n    sys.argv = ['dcslam', *args, '-w', ws]\n    try:\n        main()\n"
+            "    except SystemExit as e:\n        assert not e.code, (args, e.code)\nprint('torch' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code, json.dumps(commands), str(ws)], capture_output=True,
+                          text=True, env={**os.environ, "DCSLAM_PROGRESS": "0"})
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip().splitlines()[-1] == "False"
+    for name in (*CLASSICAL, "scanline-again"):
+        assert read_layer(ws / "predictions" / name / "drive_d.h5").depth.shape[-2:] == DriveFile(
+            ws / "drives" / "drive_d.h5").shape[-2:], name
+    assert (ws / "filtered" / "planefit+edges+outlier" / "drive_d.h5").is_file()
