@@ -20,11 +20,11 @@ CONFIDENCE = 0.95
 def t_quantile(confidence: float, dof: int) -> float:
     """Two-sided Student-t quantile: the half-width factor of a ``confidence`` interval with ``dof`` degrees of
     freedom (e.g. 12.706 for 0.95 and 1, 2.776 for 0.95 and 4)."""
-    from scipy.stats import t
+    from scipy.special import stdtrit  # what scipy.stats.t.ppf computes, without importing scipy.stats (1.5 CPU-s)
 
     if dof < 1:
         raise DcslamError(f"a t-interval needs at least 1 degree of freedom, got {dof}")
-    return float(t.ppf(0.5 + confidence / 2, dof))
+    return float(stdtrit(dof, 0.5 + confidence / 2))
 
 
 @dataclass(frozen=True)

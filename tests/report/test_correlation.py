@@ -2,10 +2,19 @@ import math
 
 import numpy as np
 import pytest
-from scipy.stats import spearmanr
+from scipy.stats import rankdata, spearmanr
 
 from dcslam.errors import DcslamError
-from dcslam.report.correlation import paired, rank_correlation, spearman_rho
+from dcslam.report.correlation import _ranks, paired, rank_correlation, spearman_rho
+
+
+def test_ranks_are_scipys_average_ranks_row_by_row_ties_included():
+    rng = np.random.default_rng(5)
+    for shape, values in (((6,), 2), ((9,), 100), ((4, 7), 3), ((300, 25), 6), ((30, 11), 10**9)):
+        x = rng.integers(0, values, size=shape).astype(np.float64)
+        assert np.array_equal(_ranks(x), rankdata(x, method="average", axis=-1)), (shape, values)
+    assert _ranks(np.array([2.0, 2.0, 2.0])).tolist() == [2.0, 2.0, 2.0]
+    assert _ranks(np.array([0.3, -1.0, 0.3, 7.0, -1.0])).tolist() == [3.5, 1.5, 3.5, 5.0, 1.5]
 
 
 def test_rho_is_scipys_on_known_data():

@@ -17,6 +17,14 @@ def test_t_quantiles_match_printed_tables():
         t_quantile(0.95, 0)
 
 
+def test_t_quantiles_are_scipy_stats_ones():
+    from scipy.stats import t
+
+    for confidence in (0.5, 0.9, 0.95, 0.99):
+        for dof in (1, 2, 3, 5, 8, 13, 30, 100):
+            assert t_quantile(confidence, dof) == float(t.ppf(0.5 + confidence / 2, dof)), (confidence, dof)
+
+
 def test_spread_of_four_drives_by_hand():
     s = spread([1.0, 2.0, 3.0, 4.0], failures=1)
     assert (s.n, s.mean, s.median, s.failures) == (4, 2.5, 2.5, 1)
