@@ -10,7 +10,11 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from tests.fixtures.depth import write_workspace
+
+pytestmark = pytest.mark.slow  # each test runs a command into its work, then to its end: 19-26 s on a loaded machine
 
 # Heavy modules are imported before "ready" is printed, so the signal falls in the command's own work.
 LAUNCH = ("import sys, dcslam.cli, torch, h5py, numpy, scipy; sys.argv[0] = 'dcslam'; print('ready', flush=True); "
