@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dcslam.synth.shapes import BOX, CYLINDER, ELLIPSOID, Shape
+from dcslam.synth.shapes import BOX, CYLINDER, ELLIPSOID, Shape, corners_in
 from dcslam.synth.terrain import Terrain
 
 _EDGES = [(i, j) for i in range(8) for j in range(i + 1, 8) if (i ^ j) in (1, 2, 4)]
@@ -42,6 +42,29 @@ class CameraGrid:
         c0, c1 = max(int(np.floor(u.min())) - 1, 0), min(int(np.ceil(u.max())) + 2, self.width)
         r0, r1 = max(int(np.floor(v.min())) - 1, 0), min(int(np.ceil(v.max())) + 2, self.height)
         return [(r0, r1, c0, c1)] if r0 < r1 and c0 < c1 else []
+
+    def rects_of(self, corners: np.ndarray) -> list[list[tuple[int, int, int, int]]]:
+        """:meth:`rects` of each box of ``corners`` (S, 8, 3), the boxes wholly in front of the near plane (most of
+        them) at once: the per-box calls were a tenth of a generated frame's time."""
+        z = corners[..., 2]
+        front = z > self.near
+        out: list[list[tuple[int, int, int, int]]] = [[] for _ in range(len(corners))]
+        whole = front.all(1)
+        if whole.any():
+            inside = corners[whole]
+            u = self.K[0, 0] * inside[..., 0] / inside[..., 2] + self.K[0, 2]
+            v = self.K[1, 1] * inside[..., 1] / inside[..., 2] + self.K[1, 2]
+            c0 = np.maximum(np.floor(u.min(1)).astype(np.int64) - 1, 0)
+            c1 = np.minimum(np.ceil(u.max(1)).astype(np.int64) + 2, self.width)
+            r0 = np.maximum(np.floor(v.min(1)).astype(np.int64) - 1, 0)
+            r1 = np.minimum(np.ceil(v.max(1)).astype(np.int64) + 2, self.height)
+            for k, a, b, c, d in zip(np.flatnonzero(whole).tolist(), r0.tolist(), r1.tolist(), c0.tolist(),
+                                     c1.tolist()):
+                if a < b and c < d:
+                    out[k] = [(a, b, c, d)]
+        for k in np.flatnonzero(front.any(1) & ~whole).tolist():  # across the near plane: clipped edges
+            out[k] = self.rects(corners[k])
+        return out
 
 
 class LidarGrid:
@@ -99,6 +122,48 @@ class LidarGrid:
         if c1 <= self.columns:
             return [(r0, r1, c0, c1)]
         return [(r0, r1, c0, self.columns), (r0, r1, 0, c1 - self.columns)]
+
+    def rects_of(self, corners: np.ndarray) -> list[list[tuple[int, int, int, int]]]:
+        """:meth:`rects` of each box of ``corners`` (S, 8, 3), every box at once (the same bounds: the per-box calls
+        were a tenth of a generated frame's time)."""
+        if not len(corners):
+            return []
+        xy = corners[..., :2]
+        z_hi, z_lo = corners[..., 2].max(1), corners[..., 2].min(1)
+        mean = xy.mean(1)
+        az_c = np.arctan2(mean[:, 1], mean[:, 0])
+        rel = np.angle(np.exp(1j * (np.arctan2(xy[..., 1], xy[..., 0]) - az_c[:, None])))
+        outside = rel.max(1) - rel.min(1) < np.pi - 1e-3
+        rho_max = np.linalg.norm(xy, axis=2).max(1)
+        a, b = xy[:, [i for i, _ in _EDGES]], xy[:, [j for _, j in _EDGES]]
+        ab = b - a
+        u = np.clip(-np.einsum("sij,sij->si", a, ab) / np.maximum(np.einsum("sij,sij->si", ab, ab), 1e-12), 0, 1)
+        rho_min = np.linalg.norm(a + u[..., None] * ab, axis=2).min(1)
+        el_hi = np.where(outside, np.arctan2(z_hi, np.where(z_hi > 0, rho_min, rho_max)),
+                         np.where(z_hi > 0, np.pi / 2, np.arctan2(z_hi, rho_max)))
+        el_lo = np.where(outside, np.arctan2(z_lo, np.where(z_lo > 0, rho_max, rho_min)),
+                         np.where(z_lo < 0, -np.pi / 2, np.arctan2(z_lo, rho_max)))
+        margin = 2e-3
+        rows = (self.elevation <= el_hi[:, None] + margin) & (self.elevation >= el_lo[:, None] - margin)
+        r0 = rows.argmax(1)
+        r1 = rows.shape[1] - rows[:, ::-1].argmax(1)
+        lo = az_c + rel.min(1) - self._step
+        first = np.floor((lo + np.pi) / self._step).astype(np.int64)
+        last = np.ceil((az_c + rel.max(1) + self._step + np.pi) / self._step).astype(np.int64) + 1
+        out: list[list[tuple[int, int, int, int]]] = []
+        for k in range(len(corners)):
+            if not rows[k, r0[k]]:
+                out.append([])
+                continue
+            a0, a1 = int(r0[k]), int(r1[k])
+            if not outside[k] or last[k] - first[k] >= self.columns:
+                out.append([(a0, a1, 0, self.columns)])
+                continue
+            c0 = int(first[k]) % self.columns
+            c1 = c0 + int(last[k] - first[k])
+            out.append([(a0, a1, c0, c1)] if c1 <= self.columns else
+                       [(a0, a1, c0, self.columns), (a0, a1, 0, c1 - self.columns)])
+        return out
 
 
 def intersect(shape: Shape, o: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -203,9 +268,7 @@ def cast(grid, T_world_sensor: np.ndarray, shapes: list[Shape], terrain: Terrain
     t_best = intersect_terrain(terrain, o_world, d_world, max_t).reshape(rows, cols)
     index = np.where(np.isfinite(t_best), GROUND, NO_HIT).astype(np.int32)
     T_sensor_world = np.linalg.inv(T_world_sensor)
-    for k, shape in enumerate(shapes):
-        corners = shape.corners() @ T_sensor_world[:3, :3].T + T_sensor_world[:3, 3]
-        rects = grid.rects(corners)
+    for k, (shape, rects) in enumerate(zip(shapes, grid.rects_of(corners_in(shapes, T_sensor_world)))):
         if not rects:
             continue
         M = (shape.R_world_obj.T @ R_ws).astype(np.float32)  # sensor → object rotation

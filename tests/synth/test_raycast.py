@@ -89,3 +89,27 @@ def test_ray_rectangles_are_conservative(grid_kind):
     best[best * grid.lengths.ravel() > 100.0] = np.inf
     np.testing.assert_allclose(t_fast.ravel(), best, rtol=1e-4)  # float32 products in another order
     assert np.sum(index >= 0) > 50 and np.any(index == NO_HIT)
+
+
+@pytest.mark.parametrize("grid_kind", ["camera", "lidar"])
+def test_rectangles_of_all_boxes_at_once_are_those_of_each_box(grid_kind):
+    """rects_of (every box at once) gives each box the rectangles rects gives it, for boxes in front of the sensor,
+    behind it, across the camera's near plane, around the LiDAR and across its azimuth seam (±180°)."""
+    from dcslam.synth.shapes import corners_in
+
+    grid = (CameraGrid(np.array([[60.0, 0, 48], [0, -60.0, 32], [0, 0, 1]]), 96, 64) if grid_kind == "camera"
+            else make_lidar_grid(0.5))
+    rng = np.random.default_rng(11)
+    shapes = [shape(int(rng.integers(3)), rng.uniform(-20, 20, 3), rng.uniform(0.05, 8, 3), yaw=rng.uniform(-3, 3),
+                    pitch=rng.uniform(-1, 1)) for _ in range(400)]
+    shapes += [shape(BOX, [0, 0, 0], [2, 2, 2]), shape(BOX, [-5, 0.01, 0], [1, 1, 1]),   # around; on the seam
+               shape(BOX, [0, 0, 0.3], [1, 1, 0.2]), shape(BOX, [0, 0, -0.3], [1, 1, 0.2])]  # straddling the plane
+    T_sensor_world = np.linalg.inv(np.eye(4))
+    corners = corners_in(shapes, T_sensor_world)
+    each = [grid.rects(s.corners() @ T_sensor_world[:3, :3].T + T_sensor_world[:3, 3]) for s in shapes]
+    np.testing.assert_allclose(corners, [s.corners() for s in shapes], rtol=0, atol=1e-12)
+    assert grid.rects_of(corners) == each
+    assert sum(len(r) == 0 for r in each) > 20 and sum(len(r) > 0 for r in each) > 100  # both kinds of box occur
+    if grid_kind == "lidar":
+        assert any(len(r) == 2 for r in each) and any(r and r[0][3] - r[0][2] == grid.columns for r in each)
+    assert grid.rects_of(corners[:0]) == []
