@@ -244,7 +244,7 @@ def intersect_terrain(terrain: Terrain, o: np.ndarray, d: np.ndarray, max_t: np.
         f = height_above + tv * dv[:, 2] - h
         slope = dv[:, 2] - gx * dv[:, 0] - gy * dv[:, 1]
         tv = np.clip(tv - f / np.minimum(slope, np.float32(-1e-6)), 0, limit)
-    h, _, _ = terrain.around(o[0], o[1], tv * dv[:, 0], tv * dv[:, 1])
+    h = terrain.around(o[0], o[1], tv * dv[:, 0], tv * dv[:, 1], gradient=False)
     residual = np.abs(height_above + tv * dv[:, 2] - h)
     ok = (residual < 5e-3) & (tv > 0) & (tv < max_t[valid])
     out = np.full(len(d), np.inf, dtype=np.float32)

@@ -28,13 +28,16 @@ class Terrain:
         arg = x[..., None] * self.wave[:, 0] + y[..., None] * self.wave[:, 1] + self.phase
         return np.sin(arg) @ self.amplitude
 
-    def around(self, x0: float, y0: float, dx: np.ndarray, dy: np.ndarray):
+    def around(self, x0: float, y0: float, dx: np.ndarray, dy: np.ndarray, gradient: bool = True):
         """Height and gradient (h, dh/dx, dh/dy), each (n,) float32, at offsets dx, dy (n,) float32 from the point
-        (x0, y0): float32 arithmetic around a float64 origin, for speed on many rays."""
+        (x0, y0): float32 arithmetic around a float64 origin, for speed on many rays. ``gradient=False``: the
+        height alone (the same numbers), without the cosines."""
         phase = (self.phase + self.wave @ np.array([x0, y0])).astype(np.float32)
         arg = dx[:, None] * self.wave[:, 0].astype(np.float32) + dy[:, None] * self.wave[:, 1].astype(np.float32)
         arg += phase
         amplitude = self.amplitude.astype(np.float32)
+        if not gradient:
+            return np.sin(arg) @ amplitude
         c = np.cos(arg) * amplitude
         return (np.sin(arg) @ amplitude, c @ self.wave[:, 0].astype(np.float32),
                 c @ self.wave[:, 1].astype(np.float32))
