@@ -264,9 +264,10 @@ def camera_evidence(drive_path: Path, source: str | Path, sources_kind: str | No
 def camera_steps(drive_path: Path, kind: str, start: np.ndarray) -> list:
     """The camera's steps over ``drive_path`` with measured depth ``kind``, started from the trajectory ``start``
     (:func:`dcslam.slam.camera.witness`; (N, 4, 4), from the drive's first frame): read from
-    ``<drives>/.camera/<drive>-<key>.npz`` when an earlier run of this code made them from the same drive file, kind
-    and start (the key hashes all four), else measured and kept there (atomically; a folder that cannot be written
-    keeps nothing, an unreadable file is measured again)."""
+    ``<drives>/.camera/<drive>-<state>-<key>.npz`` when an earlier run of this code made them from the same drive
+    file, kind and start (``state`` hashes the code and the drive file, the key all four), else measured and kept
+    there (atomically; a folder that cannot be written keeps nothing, an unreadable file is measured again). Keeping
+    one removes the drive's files of another state (other code, a drive file since rewritten): no run reads them."""
     import hashlib
 
     from dcslam.io.camera_steps import read_camera_steps, write_camera_steps
@@ -277,9 +278,10 @@ def camera_steps(drive_path: Path, kind: str, start: np.ndarray) -> list:
 
     start = np.ascontiguousarray(start, np.float64)
     stat = drive_path.stat()
-    key = hashlib.sha256(f"{code_version()}|{drive_path.name}|{stat.st_size}|{stat.st_mtime_ns}|{kind}".encode()
-                         + start.tobytes()).hexdigest()[:20]
-    kept = drive_path.parent / ".camera" / f"{drive_path.stem}-{key}.npz"
+    state = f"{code_version()}|{drive_path.name}|{stat.st_size}|{stat.st_mtime_ns}"
+    key = hashlib.sha256(f"{state}|{kind}".encode() + start.tobytes()).hexdigest()[:20]
+    state = hashlib.sha256(state.encode()).hexdigest()[:8]
+    kept = drive_path.parent / ".camera" / f"{drive_path.stem}-{state}-{key}.npz"
     read = read_camera_steps(kept, len(start) - 1)
     if read is not None:
         return [CameraStep(T, covariance, int(n), bool(ok)) for T, covariance, n, ok in zip(*read)]
@@ -288,7 +290,23 @@ def camera_steps(drive_path: Path, kind: str, start: np.ndarray) -> list:
     if steps:  # a cache: a folder that cannot be written keeps nothing
         write_camera_steps(kept, np.stack([s.T for s in steps]), np.stack([s.covariance for s in steps]),
                            np.array([s.returns for s in steps]), np.array([s.measured for s in steps]))
+        if kept.exists():
+            _forget_other_states(kept.parent, drive_path.stem, state)
     return steps
+
+
+def _forget_other_states(folder: Path, stem: str, state: str) -> None:
+    """Remove the kept camera steps of drive ``stem`` made from another ``state`` (and those named before states
+    were), leaving every other drive's and this state's."""
+    import glob
+    import re
+
+    pattern = re.compile(rf"{re.escape(stem)}-(?:([0-9a-f]{{8}})-)?[0-9a-f]{{20}}\.npz")
+    for path in folder.glob(f"{glob.escape(stem)}-*.npz"):
+        match = pattern.fullmatch(path.name)
+        if match and match.group(1) != state:
+            with contextlib.suppress(OSError):  # gone already, or a folder that cannot be written
+                path.unlink()
 
 
 def measured_sources(config: SlamStageConfig, source: str | Path, drive_path: Path) -> str | None:

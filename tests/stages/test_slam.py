@@ -1,5 +1,6 @@
 """The slam stage: run() on a tiny workspace returns per-drive summaries and writes the configuration it ran."""
 import json
+import os
 
 import numpy as np
 import pytest
@@ -143,8 +144,9 @@ def test_a_street_run_records_scale_one(ws):
 
 def test_camera_steps_are_kept_per_drive_kind_and_start_and_measured_again_when_unreadable(tmp_path):
     """The camera's steps of a drive, measured kind and start trajectory are kept beside the drive and read back as
-    measured; another start is another file; a file that cannot be read as the steps is measured again; a drive
-    folder that cannot be written keeps nothing and changes no step."""
+    measured; another start is another file; a file that cannot be read as the steps is measured again; once the
+    drive file is rewritten, keeping new steps removes the drive's older files (not another drive's); a drive folder
+    that cannot be written keeps nothing and changes no step."""
     from dcslam.io.camera_steps import write_camera_steps
     from dcslam.stages.slam import camera_steps
     from tests.fixtures.street import write_generated_drive
@@ -168,6 +170,13 @@ def test_camera_steps_are_kept_per_drive_kind_and_start_and_measured_again_when_
     kept[0].write_bytes(b"not a camera")
     mended = camera_steps(drive, "sparse@8", start)
     assert all(np.array_equal(a.T, b.T) for a, b in zip(first, mended)) and kept[0].stat().st_size > 100
+    neighbour = drive.parent / ".camera" / f"{drive.stem}-b-0123abcd-{'0' * 20}.npz"  # drive <stem>-b's
+    neighbour.write_bytes(b"kept")
+    os.utime(drive, ns=(drive.stat().st_atime_ns, drive.stat().st_mtime_ns + 10**9))  # the drive file rewritten
+    before = {p.name for p in (drive.parent / ".camera").glob("*.npz")}
+    camera_steps(drive, "sparse@8", start)
+    after = {p.name for p in (drive.parent / ".camera").glob("*.npz")}
+    assert len(before) == 3 and len(after - before) == 1 and after & before == {neighbour.name}  # the other two: gone
     for path in (drive.parent / ".camera").glob("*.npz"):
         path.unlink()
     (drive.parent / ".camera").rmdir()
