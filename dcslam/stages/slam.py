@@ -278,9 +278,9 @@ def camera_steps(drive_path: Path, kind: str, start: np.ndarray) -> list:
 
     start = np.ascontiguousarray(start, np.float64)
     stat = drive_path.stat()
-    state = f"{code_version()}|{drive_path.name}|{stat.st_size}|{stat.st_mtime_ns}"
-    key = hashlib.sha256(f"{state}|{kind}".encode() + start.tobytes()).hexdigest()[:20]
-    state = hashlib.sha256(state.encode()).hexdigest()[:8]
+    made_from = f"{code_version()}|{drive_path.name}|{stat.st_size}|{stat.st_mtime_ns}"  # the code and the drive file
+    key = hashlib.sha256(f"{made_from}|{kind}".encode() + start.tobytes()).hexdigest()[:20]
+    state = hashlib.sha256(made_from.encode()).hexdigest()[:8]
     kept = drive_path.parent / ".camera" / f"{drive_path.stem}-{state}-{key}.npz"
     read = read_camera_steps(kept, len(start) - 1)
     if read is not None:

@@ -83,49 +83,14 @@ class LidarGrid:
                              -1).astype(np.float32)
         self.lengths = np.ones(self.dirs.shape[:2], dtype=np.float32)
 
-    def rects(self, corners: np.ndarray) -> list[tuple[int, int, int, int]]:
-        """Corners (8, 3) of a box in the LiDAR frame → grid rectangles that the box may cover.
-
-        Seen from outside its footprint, a convex box spans the azimuths of its corners, and its elevations are
-        bounded using the nearest and farthest horizontal distances of its footprint.
-        """
-        xy = corners[:, :2]
-        z_hi, z_lo = corners[:, 2].max(), corners[:, 2].min()
-        az_c = np.arctan2(*xy.mean(0)[::-1])
-        rel = np.angle(np.exp(1j * (np.arctan2(xy[:, 1], xy[:, 0]) - az_c)))
-        outside = rel.max() - rel.min() < np.pi - 1e-3
-        rho_max = float(np.linalg.norm(xy, axis=1).max())
-        if outside:
-            a, b = xy[[i for i, _ in _EDGES]], xy[[j for _, j in _EDGES]]
-            ab = b - a
-            u = np.clip(-np.einsum("ij,ij->i", a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12), 0, 1)
-            rho_min = float(np.linalg.norm(a + u[:, None] * ab, axis=1).min())
-            el_hi = np.arctan2(z_hi, rho_min if z_hi > 0 else rho_max)
-            el_lo = np.arctan2(z_lo, rho_max if z_lo > 0 else rho_min)
-        else:
-            el_hi = np.pi / 2 if z_hi > 0 else np.arctan2(z_hi, rho_max)
-            el_lo = -np.pi / 2 if z_lo < 0 else np.arctan2(z_lo, rho_max)
-        margin = 2e-3
-        rows = np.flatnonzero((self.elevation <= el_hi + margin) & (self.elevation >= el_lo - margin))
-        if len(rows) == 0:
-            return []
-        r0, r1 = int(rows[0]), int(rows[-1]) + 1
-        if not outside:
-            return [(r0, r1, 0, self.columns)]
-        lo = az_c + rel.min() - self._step
-        c0 = int(np.floor((lo + np.pi) / self._step))
-        c1 = int(np.ceil((az_c + rel.max() + self._step + np.pi) / self._step)) + 1
-        if c1 - c0 >= self.columns:
-            return [(r0, r1, 0, self.columns)]
-        c0 %= self.columns
-        c1 = c0 + (c1 - int(np.floor((lo + np.pi) / self._step)))
-        if c1 <= self.columns:
-            return [(r0, r1, c0, c1)]
-        return [(r0, r1, c0, self.columns), (r0, r1, 0, c1 - self.columns)]
-
     def rects_of(self, corners: np.ndarray) -> list[list[tuple[int, int, int, int]]]:
-        """:meth:`rects` of each box of ``corners`` (S, 8, 3), every box at once (the same bounds: the per-box calls
-        were a tenth of a generated frame's time)."""
+        """Grid rectangles that each box of ``corners`` (S, 8, 3), in the LiDAR frame, may cover, every box at once
+        (a call per box was a tenth of a generated frame's time).
+
+        Seen from outside its footprint, a convex box spans the azimuths of its corners (one rectangle, or two across
+        the ±180° seam), and its elevations are bounded using the nearest and farthest horizontal distances of its
+        footprint; a box around the sensor spans every azimuth.
+        """
         if not len(corners):
             return []
         xy = corners[..., :2]
@@ -244,7 +209,7 @@ def intersect_terrain(terrain: Terrain, o: np.ndarray, d: np.ndarray, max_t: np.
         f = height_above + tv * dv[:, 2] - h
         slope = dv[:, 2] - gx * dv[:, 0] - gy * dv[:, 1]
         tv = np.clip(tv - f / np.minimum(slope, np.float32(-1e-6)), 0, limit)
-    h = terrain.around(o[0], o[1], tv * dv[:, 0], tv * dv[:, 1], gradient=False)
+    h = terrain.height_around(o[0], o[1], tv * dv[:, 0], tv * dv[:, 1])
     residual = np.abs(height_above + tv * dv[:, 2] - h)
     ok = (residual < 5e-3) & (tv > 0) & (tv < max_t[valid])
     out = np.full(len(d), np.inf, dtype=np.float32)

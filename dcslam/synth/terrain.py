@@ -28,19 +28,25 @@ class Terrain:
         arg = x[..., None] * self.wave[:, 0] + y[..., None] * self.wave[:, 1] + self.phase
         return np.sin(arg) @ self.amplitude
 
-    def around(self, x0: float, y0: float, dx: np.ndarray, dy: np.ndarray, gradient: bool = True):
-        """Height and gradient (h, dh/dx, dh/dy), each (n,) float32, at offsets dx, dy (n,) float32 from the point
-        (x0, y0): float32 arithmetic around a float64 origin, for speed on many rays. ``gradient=False``: the
-        height alone (the same numbers), without the cosines."""
+    def _args_around(self, x0: float, y0: float, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+        """The sinusoids' arguments (n, K) float32 at offsets dx, dy (n,) float32 from the point (x0, y0)."""
         phase = (self.phase + self.wave @ np.array([x0, y0])).astype(np.float32)
         arg = dx[:, None] * self.wave[:, 0].astype(np.float32) + dy[:, None] * self.wave[:, 1].astype(np.float32)
         arg += phase
+        return arg
+
+    def around(self, x0: float, y0: float, dx: np.ndarray, dy: np.ndarray):
+        """Height and gradient (h, dh/dx, dh/dy), each (n,) float32, at offsets dx, dy (n,) float32 from the point
+        (x0, y0): float32 arithmetic around a float64 origin, for speed on many rays."""
+        arg = self._args_around(x0, y0, dx, dy)
         amplitude = self.amplitude.astype(np.float32)
-        if not gradient:
-            return np.sin(arg) @ amplitude
         c = np.cos(arg) * amplitude
         return (np.sin(arg) @ amplitude, c @ self.wave[:, 0].astype(np.float32),
                 c @ self.wave[:, 1].astype(np.float32))
+
+    def height_around(self, x0: float, y0: float, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+        """The height of :meth:`around` alone (the same numbers), without the cosines of its gradient."""
+        return np.sin(self._args_around(x0, y0, dx, dy)) @ self.amplitude.astype(np.float32)
 
     def gradient(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(dh/dx, dh/dy) at points x, y (...)."""

@@ -91,25 +91,50 @@ def test_ray_rectangles_are_conservative(grid_kind):
     assert np.sum(index >= 0) > 50 and np.any(index == NO_HIT)
 
 
-@pytest.mark.parametrize("grid_kind", ["camera", "lidar"])
-def test_rectangles_of_all_boxes_at_once_are_those_of_each_box(grid_kind):
-    """rects_of (every box at once) gives each box the rectangles rects gives it, for boxes in front of the sensor,
-    behind it, across the camera's near plane, around the LiDAR and across its azimuth seam (±180°)."""
+def test_camera_rectangles_of_all_boxes_at_once_are_those_of_each_box():
+    """The camera's rects_of (the boxes wholly in front of it at once) gives each box the rectangle rects gives it,
+    for boxes in front of the camera, behind it and across its near plane (a negative fy, as the indoor rooms')."""
     from dcslam.synth.shapes import corners_in
 
-    grid = (CameraGrid(np.array([[60.0, 0, 48], [0, -60.0, 32], [0, 0, 1]]), 96, 64) if grid_kind == "camera"
-            else make_lidar_grid(0.5))
+    grid = CameraGrid(np.array([[60.0, 0, 48], [0, -60.0, 32], [0, 0, 1]]), 96, 64)
     rng = np.random.default_rng(11)
     shapes = [shape(int(rng.integers(3)), rng.uniform(-20, 20, 3), rng.uniform(0.05, 8, 3), yaw=rng.uniform(-3, 3),
                     pitch=rng.uniform(-1, 1)) for _ in range(400)]
-    shapes += [shape(BOX, [0, 0, 0], [2, 2, 2]), shape(BOX, [-5, 0.01, 0], [1, 1, 1]),   # around; on the seam
-               shape(BOX, [0, 0, 0.3], [1, 1, 0.2]), shape(BOX, [0, 0, -0.3], [1, 1, 0.2])]  # straddling the plane
-    T_sensor_world = np.linalg.inv(np.eye(4))
-    corners = corners_in(shapes, T_sensor_world)
-    each = [grid.rects(s.corners() @ T_sensor_world[:3, :3].T + T_sensor_world[:3, 3]) for s in shapes]
+    shapes += [shape(BOX, [0, 0, 0.3], [1, 1, 0.2]), shape(BOX, [0, 0, -0.3], [1, 1, 0.2])]  # across the plane
+    corners = corners_in(shapes, np.eye(4))
     np.testing.assert_allclose(corners, [s.corners() for s in shapes], rtol=0, atol=1e-12)
-    assert grid.rects_of(corners) == each
-    assert sum(len(r) == 0 for r in each) > 20 and sum(len(r) > 0 for r in each) > 100  # both kinds of box occur
-    if grid_kind == "lidar":
-        assert any(len(r) == 2 for r in each) and any(r and r[0][3] - r[0][2] == grid.columns for r in each)
+    front = corners[..., 2] > grid.near
+    assert front.all(1).sum() > 100 and (front.any(1) & ~front.all(1)).sum() > 50 and (~front.any(1)).sum() > 100
+    assert grid.rects_of(corners) == [grid.rects(c) for c in corners]
     assert grid.rects_of(corners[:0]) == []
+
+
+def test_lidar_rectangles_hold_every_ray_that_hits_each_box_and_little_else():
+    """Every LiDAR ray that hits a box (brute force over the whole grid) lies in one of the box's rectangles, for
+    boxes around the sensor, across the ±180° azimuth seam, above, below and all around it; a box away from the
+    sensor gets a small part of the grid."""
+    from dcslam.synth.shapes import corners_in
+
+    grid = make_lidar_grid(0.5)
+    rng = np.random.default_rng(11)
+    shapes = []
+    for _ in range(150):
+        kind, half = int(rng.integers(3)), rng.uniform(0.05, 4, 3)
+        half[1] = half[0] if kind == CYLINDER else half[1]  # a cylinder's radius, twice
+        shapes.append(shape(kind, rng.uniform(-20, 20, 3), half, yaw=rng.uniform(-3, 3), pitch=rng.uniform(-1, 1)))
+    shapes += [shape(BOX, [0, 0, 0], [2, 2, 2]), shape(BOX, [-5, 0.01, 0], [1, 1, 1]),  # around it; on the seam
+               shape(BOX, [-5, -0.01, 3], [1, 1, 0.5])]
+    rects = grid.rects_of(corners_in(shapes, np.eye(4)))
+    dirs = grid.dirs.reshape(-1, 3)
+    full = grid.dirs.shape[0] * grid.columns
+    for s, boxes in zip(shapes, rects):
+        hit = np.isfinite(intersect(s, s.R_world_obj.T @ -s.center, dirs @ s.R_world_obj.astype(np.float32)))
+        covered = np.zeros(grid.dirs.shape[:2], bool)
+        for r0, r1, c0, c1 in boxes:
+            covered[r0:r1, c0:c1] = True
+        assert not (hit.reshape(covered.shape) & ~covered).any(), s
+        if np.linalg.norm(s.center) > 3 * s.radius:
+            assert covered.sum() < 0.25 * full, s
+    assert any(len(r) == 2 for r in rects[-2:]) and rects[-3] == [(0, grid.dirs.shape[0], 0, grid.columns)]
+    assert sum(len(r) == 0 for r in rects) > 10  # boxes above or below every beam
+    assert grid.rects_of(np.zeros((0, 8, 3))) == []

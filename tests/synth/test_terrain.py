@@ -13,5 +13,5 @@ def test_around_agrees_with_the_float64_field_and_its_height_alone_is_the_same_n
     x, y = x0 + dx.astype(np.float64), y0 + dy.astype(np.float64)
     np.testing.assert_allclose(h, terrain.height(x, y), atol=2e-4)
     np.testing.assert_allclose(np.stack([gx, gy]), np.stack(terrain.gradient(x, y)), atol=2e-6)
-    alone = terrain.around(x0, y0, dx, dy, gradient=False)
+    alone = terrain.height_around(x0, y0, dx, dy)
     assert alone.dtype == np.float32 and np.array_equal(alone, h)  # the same bits: the ray cast's final check
