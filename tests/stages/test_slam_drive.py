@@ -16,10 +16,17 @@ def _write_drive(path, frames=N):
     return write_analytic_street(path, frames, H, W)
 
 
-def test_prefetched_frames_give_the_poses_of_a_plain_loop(tmp_path):
+def test_prefetched_frames_give_the_poses_of_a_plain_loop(tmp_path, monkeypatch):
     """run_drive_file prepares the next frame on a second thread: the poses, the map and the step reports are those of
     SLAM.step over the same frames, bit for bit."""
     from dcslam.io.drive import DriveFile, load_depth
+    from dcslam.slam import drive as slam_drive
+    from dcslam.workers import SHARED_CORES
+
+    monkeypatch.delenv(SHARED_CORES, raising=False)  # as a command run on its own: with the prefetch thread
+    threads = []
+    prefetcher = slam_drive.prefetcher
+    monkeypatch.setattr(slam_drive, "prefetcher", lambda enabled: threads.append(enabled) or prefetcher(enabled))
 
     path = tmp_path / "street.h5"
     K, poses = _write_drive(path, frames=5)
@@ -39,6 +46,7 @@ def test_prefetched_frames_give_the_poses_of_a_plain_loop(tmp_path):
         assert np.array_equal(run.T_world_cam[:, :3, 3], expected[:, :3, 3]), depth
         assert [r.iterations for r in run.reports] == [r.iterations for r in slam.reports]
         assert len(run.map) == len(slam.mapper.global_map())
+    assert threads == [True, True]
 
 
 def test_a_run_without_colour_has_the_poses_and_geometry_of_one_with_it(tmp_path):
