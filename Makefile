@@ -52,11 +52,13 @@ $(STAMP): pyproject.toml
 # DCSLAM_SHARED_CORES=1 (with workers): the pytest workers keep every core busy, as dcslam's own pool workers do, so
 # SLAM runs no prefetch thread beside its frame loop (it would take its CPU from the other worker) and the companion
 # check runs after the main run; the tests of those two paths turn it off for themselves.
+# PYTHONDONTWRITEBYTECODE= (empty: unset): pytest keeps the test modules it rewrote for its assertion messages, which
+# each worker otherwise rewrites again on every run (9 CPU-s a worker; a fresh clone still pays it once).
 PYTEST_ARGS  ?=
 TEST_JOBS    ?= auto
 TEST_THREADS ?= 1
 TEST_ENV      = OMP_NUM_THREADS=$(TEST_THREADS) OPENBLAS_NUM_THREADS=$(TEST_THREADS) MKL_NUM_THREADS=$(TEST_THREADS) \
-                $(if $(filter 0,$(TEST_JOBS)),,DCSLAM_SHARED_CORES=1)
+                PYTHONDONTWRITEBYTECODE= $(if $(filter 0,$(TEST_JOBS)),,DCSLAM_SHARED_CORES=1)
 test: setup
 	$(PY) -m ruff check dcslam tests benchmarks examples
 	$(PY) -m compileall -q -j 0 dcslam tests benchmarks examples >/dev/null
