@@ -2,13 +2,14 @@ import math
 
 import numpy as np
 import pytest
-from scipy.stats import rankdata, spearmanr
 
 from dcslam.errors import DcslamError
 from dcslam.report.correlation import _ranks, paired, rank_correlation, spearman_rho
 
 
 def test_ranks_are_scipys_average_ranks_row_by_row_ties_included():
+    from scipy.stats import rankdata  # here, not at the top: every pytest worker imports this file (1.5 CPU-s)
+
     rng = np.random.default_rng(5)
     for shape, values in (((6,), 2), ((9,), 100), ((4, 7), 3), ((300, 25), 6), ((30, 11), 10**9)):
         x = rng.integers(0, values, size=shape).astype(np.float64)
@@ -18,6 +19,8 @@ def test_ranks_are_scipys_average_ranks_row_by_row_ties_included():
 
 
 def test_rho_is_scipys_on_known_data():
+    from scipy.stats import spearmanr
+
     rng = np.random.default_rng(0)
     x = rng.normal(size=40)
     y = 0.6 * x + rng.normal(size=40)
@@ -27,6 +30,8 @@ def test_rho_is_scipys_on_known_data():
 
 
 def test_rho_is_scipys_on_ties():
+    from scipy.stats import spearmanr
+
     x = [1.0, 2.0, 2.0, 3.0, 3.0, 3.0, 7.0, 8.0]
     y = [2.0, 1.0, 4.0, 4.0, 3.0, 9.0, 9.0, 9.0]
     assert spearman_rho(x, y) == pytest.approx(spearmanr(x, y).statistic, abs=1e-12)
@@ -34,6 +39,8 @@ def test_rho_is_scipys_on_ties():
 
 
 def test_interval_holds_rho_and_is_seeded():
+    from scipy.stats import spearmanr
+
     rng = np.random.default_rng(1)
     x = rng.normal(size=30)
     y = x + rng.normal(size=30)
