@@ -19,7 +19,9 @@ def run_drive_file(path, source):
 def test_frames_from_memory_give_the_run_of_the_drive_file(tmp_path, monkeypatch):
     """A run over frames held in memory (a list, read on the prefetch thread) is the file-backed run, bit for bit;
     the confidence is applied as ConfidenceUse says and the kept fraction recorded."""
-    monkeypatch.delenv("DCSLAM_SHARED_CORES", raising=False)  # as a command run on its own: with the prefetch thread
+    from dcslam.workers import SHARED_CORES
+
+    monkeypatch.delenv(SHARED_CORES, raising=False)  # as a command run on its own: with the prefetch thread
     path = tmp_path / "street.h5"
     write_analytic_street(path, N, H, W)
     with DriveFile(path) as d:
