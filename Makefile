@@ -49,16 +49,13 @@ $(STAMP): pyproject.toml
 # TEST_THREADS: threads per worker for torch and the BLAS libraries (OMP_NUM_THREADS and kin, inherited by the
 # commands the tests start): one, as dcslam's own worker pools, since the workers already fill the cores and the
 # tests' small tensors run slower, not faster, on several threads (docs/getting-started.md).
-# DCSLAM_SHARED_CORES=1 (with workers): the pytest workers keep every core busy, as dcslam's own pool workers do, so
-# SLAM runs no prefetch thread beside its frame loop (it would take its CPU from the other worker) and the companion
-# check runs after the main run; the tests of those two paths turn it off for themselves.
 # PYTHONDONTWRITEBYTECODE= (empty: unset): pytest keeps the test modules it rewrote for its assertion messages, which
 # each worker otherwise rewrites again on every run (9 CPU-s a worker; a fresh clone still pays it once).
 PYTEST_ARGS  ?=
 TEST_JOBS    ?= auto
 TEST_THREADS ?= 1
 TEST_ENV      = OMP_NUM_THREADS=$(TEST_THREADS) OPENBLAS_NUM_THREADS=$(TEST_THREADS) MKL_NUM_THREADS=$(TEST_THREADS) \
-                PYTHONDONTWRITEBYTECODE= $(if $(filter 0,$(TEST_JOBS)),,DCSLAM_SHARED_CORES=1)
+                PYTHONDONTWRITEBYTECODE=
 test: setup
 	$(PY) -m ruff check dcslam tests benchmarks examples
 	$(PY) -m compileall -q -j 0 dcslam tests benchmarks examples >/dev/null
