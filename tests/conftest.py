@@ -11,6 +11,13 @@ os.environ.setdefault("DCSLAM_PROGRESS", "0")
 DATA = Path(__file__).parent / "data"
 
 
+def _devices() -> list:
+    import torch
+
+    no_gpu = pytest.mark.skipif(not torch.cuda.is_available(), reason="cuda: no GPU on this machine")
+    return ["cpu", pytest.param("cuda", marks=no_gpu)]
+
+
 @pytest.fixture
 def data_dir() -> Path:
     return DATA
@@ -35,15 +42,11 @@ def cli():
     return invoke
 
 
-@pytest.fixture(params=["cpu", "cuda"])
+@pytest.fixture(params=_devices())
 def device(request):
-    """``torch.device("cpu")``, and ``torch.device("cuda")`` (skipped on a machine without a GPU). torch is imported
-    here, not when this file loads: pytest-xdist's controller loads it too, and runs no test (3 CPU-s before the
-    workers start)."""
+    """``torch.device("cpu")``, and ``torch.device("cuda")`` (skipped on a machine without a GPU)."""
     import torch
 
-    if request.param == "cuda" and not torch.cuda.is_available():
-        pytest.skip("cuda: no GPU on this machine")
     return torch.device(request.param)
 
 
