@@ -39,6 +39,7 @@ from torch import nn
 from dcslam.depth.config import DenoiseConfig
 from dcslam.depth.data import frame_windows
 from dcslam.depth.maps import MapChamfer
+from dcslam.depth.optimizer import adamw
 from dcslam.errors import DcslamError
 from dcslam.progress import Bar
 
@@ -171,7 +172,7 @@ def train_denoiser(model: DepthDenoiser, frames: list[Frames], config: DenoiseCo
     """Train ``model`` in place for ``config.steps`` AdamW steps of the chamfer loss alone; returns the losses."""
     rng = np.random.default_rng(config.seed)
     noise = torch.Generator().manual_seed(config.seed)
-    optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    optimizer = adamw(model.parameters(), config.lr, config.weight_decay)
     warmup = max(1, round(config.steps * config.warmup_fraction))
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda k: min(1.0, (k + 1) / warmup))
     objective = MapChamfer(config.map_frames, map_builder)

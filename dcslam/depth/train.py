@@ -40,6 +40,7 @@ from dcslam.depth.forward import gives_confidence, run_model, run_model_with_con
 from dcslam.depth.hooks import Hook, TrainState, default_hooks
 from dcslam.depth.models import build_model
 from dcslam.depth.objective import Objective
+from dcslam.depth.optimizer import adamw
 from dcslam.errors import DcslamError
 from dcslam.progress import Bar
 
@@ -193,7 +194,7 @@ def train_loop(run_dir: Path, config: TrainConfig, device, train_frames: list[Dr
     0) followed by ``hooks`` (rank 0 only). With ``resume``, continues from ``last.pt``.
     """
     model = initial_model(config).to(device)
-    optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    optimizer = adamw(model.parameters(), config.lr, config.weight_decay)
     checkpoint = read_checkpoint(run_dir / "last.pt", model, optimizer) if resume else None
     if _uses_confidence(config, model) and world > 1:
         raise DcslamError("a loss through the network's confidence (the pose loss with confidence weights, "
