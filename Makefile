@@ -17,9 +17,12 @@ REPRO_ARGS  = --profile $(PROFILE) --workspace $(WORKSPACE) --jobs $(JOBS) $(if 
 .PHONY: setup python-env system-libs test test-cluster bench clean reproduce-table-5-2 reproduce-table-5-1 reproduce-beams reproduce-surface demo-icl results pages
 
 # setup: Open3D's system library (libusb-1.0-0, by apt-get when missing and root), then the Python environment
-# (python-env). torch by pip (its CPU build lies on this machine's disk, where pip looks and uv does not); the rest by
-# uv, which resolves the same versions and installs them in parallel (the test extra: 24 s with an empty cache, 66 s
-# by pip)
+# (python-env): pip installs uv, uv installs torch==2.13.0 (pinned here, not in the package) and dcslam with its test
+# extra in parallel (the test extra alone: 24 s with an empty cache, 66 s by pip). FIND_LINKS: folders of wheels to
+# look in first, by default those pip is configured with (PIP_FIND_LINKS, else pip's global.find-links: where a
+# machine keeps torch's CPU build; uv reads no pip configuration). A torch 2.13.0 already in .venv (a CUDA build
+# installed by hand) is kept.
+FIND_LINKS ?= $(or $(PIP_FIND_LINKS),$(shell $(PYTHON) -m pip config get global.find-links 2>/dev/null))
 setup: system-libs $(STAMP)
 
 python-env: $(STAMP)
@@ -33,9 +36,9 @@ system-libs:
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q torch==2.13.0 uv
-	$(PY) -m uv pip install -q --python $(PY) --compile-bytecode -e '.[test]'
+	$(PY) -m pip install -q uv
+	$(PY) -m uv pip install -q --python $(PY) --compile-bytecode $(foreach d,$(FIND_LINKS),--find-links $(d)) \
+	  torch==2.13.0 -e '.[test]'
 	touch $(STAMP)
 
 # every test, the slow end-to-end ones and the cluster ones included (CI runs this), a worker per core; PYTEST_ARGS='-m "not slow"'

@@ -40,4 +40,5 @@ def test_torch_is_not_pinned_in_the_package_metadata(tmp_path):
 def test_torch_is_a_floor_in_pyproject_and_make_setup_pins_it():
     requirement = _torch(tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"])
     assert re.fullmatch(r"torch>=2\.\d+", requirement), requirement
-    assert re.search(r"pip install -q torch==\d+\.\d+\.\d+[ \n]", (ROOT / "Makefile").read_text())
+    recipe = (ROOT / "Makefile").read_text().replace("\\\n", " ")  # continued lines joined
+    assert re.search(r"uv pip install -q .*[ \t]torch==\d+\.\d+\.\d+[ \n]", recipe)
