@@ -20,19 +20,23 @@ import torch
 _DISABLED = ("add_param_group", "zero_grad", "state_dict", "load_state_dict")
 
 
+def _unwrap(method, wrapper: str, module: str):
+    """The function that ``method`` wraps through the wrapper function named ``wrapper`` defined in torch's file
+    ``module`` (outer ``functools.wraps`` wrappers walked through); None where there is no such wrapper."""
+    while method is not None:
+        code = getattr(method, "__code__", None)
+        if code is not None and code.co_name == wrapper and code.co_filename.endswith(module):
+            return getattr(method, "__wrapped__", None)
+        method = getattr(method, "__wrapped__", None)
+    return None
+
+
 def _plain_methods() -> dict | None:
     """``{name: function}``: AdamW's methods without their dynamo wrappers; None where one cannot be found."""
-    methods = {}
-    for name in _DISABLED:
-        wrapped = getattr(getattr(torch.optim.Optimizer, name), "__wrapped__", None)
-        if wrapped is None:
-            return None
-        methods[name] = wrapped
-    step = torch.optim.AdamW.step  # _use_grad's wrapper (inside profile_hook_step's once an AdamW was made)
-    while step is not None and getattr(step, "__code__", None) is not None and step.__code__.co_name != "_use_grad":
-        step = getattr(step, "__wrapped__", None)
-    plain_step = getattr(step, "__wrapped__", None)
-    if plain_step is None:
+    methods = {name: _unwrap(getattr(torch.optim.Optimizer, name), "inner", "_compile.py") for name in _DISABLED}
+    # step: _use_grad's wrapper (inside profile_hook_step's once an AdamW was made)
+    plain_step = _unwrap(torch.optim.AdamW.step, "_use_grad", "optimizer.py")
+    if plain_step is None or None in methods.values():
         return None
 
     def step_without_dynamo(self, closure=None):

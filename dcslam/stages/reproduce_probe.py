@@ -11,7 +11,7 @@ annotated dense and predicted depth and over a whole drive, and the tables; twic
 completion, so that the tables score more runs), each in a temporary workspace, with one torch thread. The larger sample
 runs first and generates the drives; the smaller prepares the first frames of the same drives (synth, about half of a
 sample's CPU, runs once). The larger sample's first training is measured on a second run, as the first training of a
-process also sets torch up (0.6-0.9 CPU-s more than the next on a small training, 2.8 before the trainings' optimizer
+process also sets torch up (0.3 and 0.8 CPU-s more than the next on a small training, two runs; 2.8 before the optimizer
 stopped importing torch._dynamo: docs/getting-started.md; every other training measured twice gave the same within
 noise). Each stage's stamp records its CPU seconds; the two samples of each kind give its fixed part per stage
 (``stage_s``) and its part per unit (``unit_s``) by a line through the two (:func:`fit`; synth: per generated frame),
