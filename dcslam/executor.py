@@ -6,9 +6,11 @@ as each finishes (in any order); the caller (:meth:`dcslam.stages.pipeline.Pipel
 Closing the iterator before it is exhausted (a failure, Ctrl-C, SIGTERM) stops the work still running: local
 workers are terminated, Slurm jobs cancelled with ``scancel``, so nothing keeps writing after the caller gave up.
 
-On Slurm, every task is one job; tasks of one kind (``train``, ``predict``, ``filter``, ``slam``, ``score``,
-``other``: declared by whoever makes the task, :attr:`Task.kind`) asking the same resources are submitted together as
-one job array. The workspace must be on a filesystem
+On Slurm, every task is one job, or ``stages_per_job`` tasks of a kind share one job that runs them one after the
+other (:func:`slurm_job`: a job of short stages spends most of its time starting Python and importing torch, 2-3
+CPU-s, and the cluster schedules each job); tasks of one kind (``train``, ``predict``, ``filter``, ``slam``,
+``score``, ``other``: declared by whoever makes the task, :attr:`Task.kind`) asking the same resources are submitted
+together as one job array. The workspace must be on a filesystem
 the nodes share (the jobs read and write it), and so must the Python environment (the jobs run this interpreter).
 Each job's submitit folder, with its stdout / stderr logs, is ``<workspace>/logs/slurm/<job id>/``. The ``[slurm]``
 table of ``dcslam reproduce --config FILE`` sets the partition, account, QoS, extra sbatch options, commands run
@@ -229,12 +231,14 @@ def died(stopped: list[Task], tasks: list[Task], workers: list, marks: Path) -> 
 @dataclass(frozen=True)
 class Resources:
     """What one job of a kind asks Slurm for; ``gpus`` None: one per training process (``nproc``) for trainings
-    and predictions whose ``device`` is ``cuda``, none otherwise."""
+    and predictions whose ``device`` is ``cuda``, none otherwise; ``stages_per_job``: at most that many stages of
+    the kind run one after the other in each job (``time_min`` is the whole job's)."""
 
     cpus: int = 1
     mem_gb: float = 4
     time_min: int = 60
     gpus: int | None = None
+    stages_per_job: int = 1
 
     def gpus_for(self, task: Task) -> int:
         if self.gpus is not None:
@@ -269,8 +273,9 @@ class SlurmSettings:
         [slurm.train]                     # resources of one kind: train, predict, filter, slam, score, other
         cpus = 8
         mem_gb = 32
-        time_min = 600
+        time_min = 600                    # the whole job's: all its stages
         gpus = 1                          # default: one per process for --device cuda trainings and predictions
+        stages_per_job = 1                # stages run one after the other in one job (default 1)
     """
 
     partition: str | None = None
@@ -317,7 +322,7 @@ class SlurmSettings:
 
 def _resources(default: Resources, table, where: str) -> Resources:
     if not isinstance(table, dict):
-        raise DcslamError(f"{where}: expected a table (cpus, mem_gb, time_min, gpus), got {table!r}")
+        raise DcslamError(f"{where}: expected a table (cpus, mem_gb, time_min, gpus, stages_per_job), got {table!r}")
     names = [f.name for f in fields(Resources)]
     for key, value in table.items():
         if key not in names:
@@ -329,9 +334,11 @@ def _resources(default: Resources, table, where: str) -> Resources:
     return replace(default, **table)
 
 
-def slurm_job(run: Callable, workspace, config) -> tuple[str, object]:
-    """What one Slurm job runs: the stage, with as many threads as the job has CPUs; ``("ok", (seconds, CPU
-    seconds))`` or ``("error", message)`` for a known error (a bug still fails the job with its traceback)."""
+def slurm_job(stages: list[tuple[Callable, object, object]]) -> list[tuple[str, object]]:
+    """What one Slurm job runs: its stages (``(run, workspace, config)``) one after the other, with as many threads
+    as the job has CPUs. Per stage ``("ok", (seconds, CPU seconds))``, ``("error", message)`` for a known error or
+    ``("bug", "Type: message")`` for any other exception (its traceback printed to the job's stderr log); the first
+    stage that fails ends the job (the stages after it are not run: they would be stopped with it anyway)."""
     cpus = os.environ.get("SLURM_CPUS_PER_TASK")
     if cpus:
         from dcslam.workers import THREAD_VARIABLES
@@ -341,10 +348,29 @@ def slurm_job(run: Callable, workspace, config) -> tuple[str, object]:
         torch = sys.modules.get("torch")
         if torch is not None:
             torch.set_num_threads(int(cpus))
-    try:
-        return "ok", timed(run, workspace, config)
-    except DcslamError as error:
-        return "error", str(error)
+    results: list[tuple[str, object]] = []
+    for run, workspace, config in stages:
+        try:
+            results.append(("ok", timed(run, workspace, config)))
+        except DcslamError as error:
+            results.append(("error", str(error)))
+        except Exception as error:  # a bug: named with its stage, its traceback in the job's log
+            import traceback
+
+            traceback.print_exc()
+            results.append(("bug", f"{type(error).__name__}: {error}"))
+        if results[-1][0] != "ok":
+            break
+    return results
+
+
+def packs(tasks: list[Task], size: int) -> list[list[Task]]:
+    """``tasks`` in order, cut into as few jobs of at most ``size`` as possible, of sizes that differ by one at
+    most (17 stages of 8 a job: 6, 6, 5 rather than 8, 8, 1)."""
+    count = -(-len(tasks) // max(size, 1))
+    base, longer = divmod(len(tasks), count) if count else (0, 0)
+    cuts = [i * base + min(i, longer) for i in range(count + 1)]
+    return [tasks[a:b] for a, b in zip(cuts, cuts[1:])]
 
 
 #: Seconds a job may be gone from the queue before its result file must be there (a shared filesystem's delay).
@@ -387,9 +413,10 @@ class SlurmExecutor:
             params["slurm_setup"] = list(s.setup)
         return params
 
-    def submit(self, tasks: list[Task]) -> Iterator[tuple[object, Task]]:
-        """Submit ``tasks``: one job array per (kind, GPUs) group; yields (submitit job, task) pairs as each group is
-        submitted (so that a failure or an interrupt part way cancels the groups already in the queue)."""
+    def submit(self, tasks: list[Task]) -> Iterator[tuple[object, list[Task]]]:
+        """Submit ``tasks``: one job array per (kind, GPUs) group, each job running up to the kind's
+        ``stages_per_job`` tasks (:func:`packs`); yields (submitit job, its tasks) pairs as each group is submitted
+        (so that a failure or an interrupt part way cancels the groups already in the queue)."""
         import submitit
 
         groups: dict[tuple[str, int], list[Task]] = {}
@@ -403,46 +430,44 @@ class SlurmExecutor:
         for (kind, gpus), group in groups.items():
             executor = submitit.AutoExecutor(folder=self.folder / "%j", cluster="slurm")
             executor.update_parameters(**self._parameters(kind, gpus))
+            cut = packs(group, self.settings.resources[kind].stages_per_job)
             try:
                 with executor.batch():
-                    jobs = [executor.submit(slurm_job, t.run, t.workspace, t.config) for t in group]
+                    jobs = [executor.submit(slurm_job, [(t.run, t.workspace, t.config) for t in pack])
+                            for pack in cut]
             except Exception as error:  # sbatch refused (a partition that does not exist, resources too large)
                 message = str(error).strip().splitlines()
                 raise DcslamError(f"sbatch refused the {kind} jobs ({message[-1] if message else error}); check the "
                                   "[slurm] table of --config (partition, account, qos, resources)") from None
             self.submitted += [job.job_id for job in jobs]
-            yield from zip(jobs, group)
+            yield from zip(jobs, cut)
 
     def run(self, tasks: list[Task]) -> Iterator[Outcome]:
-        pending: dict[str, tuple[object, Task]] = {}
+        pending: dict[str, tuple[object, list[Task]]] = {}
         ran: set[str] = set()
         try:
-            for job, task in self.submit(tasks):
-                pending[job.job_id] = (job, task)
+            for job, pack in self.submit(tasks):
+                pending[job.job_id] = (job, pack)
                 ran.add(job.job_id)
-                self.log(f"[slurm] {task.name}: job {job.job_id}")
+                for task in pack:
+                    self.log(f"[slurm] {task.name}: job {job.job_id}")
             vanished: dict[str, float] = {}
             while pending:
                 queued = _queued_jobs()
-                for job_id, (job, task) in list(pending.items()):
-                    outcome = _finished(job, task)
-                    if outcome is None and queued is not None and job_id not in queued:
+                for job_id, (job, pack) in list(pending.items()):
+                    outcomes = _finished(job, pack)
+                    if outcomes is None and queued is not None and job_id not in queued:
                         vanished.setdefault(job_id, time.monotonic())
                         if time.monotonic() - vanished[job_id] > VANISHED_GRACE_S:
-                            outcome = Outcome(task, error=f"job {job_id} left the queue without a result "
-                                                          f"({_last_line(job) or 'no log line'})",
-                                              job=job_id, log=_log_path(job))
-                    elif outcome is None and queued is not None and queued[job_id] in NEVER_STARTS:
-                        res = self.settings.resources[task.kind]
-                        outcome = Outcome(task, error=f"job {job_id} can never start: Slurm says {queued[job_id]} "
-                                                      f"(it asks {res.cpus} CPUs, {res.mem_gb:g} GB, "
-                                                      f"{res.time_min} min, {res.gpus_for(task)} GPUs); lower "
-                                                      f"[slurm.{task.kind}] of --config or choose another partition",
-                                          job=job_id, log=_existing_log(job))  # it never ran: no log
+                            outcomes = [Outcome(task, error=f"job {job_id} left the queue without a result "
+                                                            f"({_last_line(job) or 'no log line'})",
+                                                job=job_id, log=_log_path(job)) for task in pack]
+                    elif outcomes is None and queued is not None and queued[job_id] in NEVER_STARTS:
+                        outcomes = [self._never_starts(job, task, queued[job_id]) for task in pack]
                         self.cancel([job_id])
-                    if outcome is not None:
+                    if outcomes is not None:
                         del pending[job_id]
-                        yield outcome
+                        yield from outcomes
                 if pending:
                     time.sleep(self.settings.poll_seconds)
         finally:
@@ -450,6 +475,13 @@ class SlurmExecutor:
                 self.cancel(list(pending))
             # a job that wrote its result may still be exiting: return with none of this run's jobs in the queue
             self.wait_gone(sorted(ran))
+
+    def _never_starts(self, job, task: Task, reason: str) -> Outcome:
+        res = self.settings.resources[task.kind]
+        return Outcome(task, error=f"job {job.job_id} can never start: Slurm says {reason} (it asks {res.cpus} "
+                                   f"CPUs, {res.mem_gb:g} GB, {res.time_min} min, {res.gpus_for(task)} GPUs); lower "
+                                   f"[slurm.{task.kind}] of --config or choose another partition",
+                       job=job.job_id, log=_existing_log(job))  # it never ran: no log
 
     def wait_gone(self, job_ids: list[str]) -> None:
         """Wait (at most :data:`CANCEL_WAIT_S`) until none of ``job_ids`` is in the queue."""
@@ -507,21 +539,30 @@ def _queued_jobs() -> dict[str, str] | None:
     return queued
 
 
-def _finished(job, task: Task) -> Outcome | None:
-    """The outcome of ``job`` if its result file is there, else None."""
+def _finished(job, pack: list[Task]) -> list[Outcome] | None:
+    """The outcomes of ``job``'s tasks (``pack``, in the order it ran them) if its result file is there, else None:
+    those that ran, then the one that failed, then any left unrun after it."""
     if not job.paths.result_pickle.exists():
         return None
+    where = {"job": job.job_id, "log": _log_path(job)}
     try:
-        status, value = job.result()
-    except Exception as error:  # the job raised something other than a DcslamError: its traceback is in the log
+        results = job.result()
+    except Exception as error:  # the job failed outside the stages (e.g. unpickling them): traceback in the log
         lines = [line for line in str(error).splitlines() if line.strip()]
-        return Outcome(task, error=f"job {job.job_id} failed: {lines[-1].strip() if lines else type(error).__name__}",
-                       job=job.job_id, log=_log_path(job))
-    if status == "ok":
-        seconds, cpu = value if isinstance(value, (tuple, list)) else (value, None)  # a bare number: an older job's
-        return Outcome(task, seconds=float(seconds), cpu_seconds=None if cpu is None else float(cpu), job=job.job_id,
-                       log=_log_path(job))
-    return Outcome(task, error=str(value), job=job.job_id, log=_log_path(job))
+        why = f"job {job.job_id} failed: {lines[-1].strip() if lines else type(error).__name__}"
+        return [Outcome(task, error=why, **where) for task in pack]
+    outcomes = []
+    for task, (status, value) in zip(pack, results):
+        if status == "ok":
+            seconds, cpu = value
+            outcomes.append(Outcome(task, seconds=float(seconds), cpu_seconds=float(cpu), **where))
+        else:
+            outcomes.append(Outcome(task, error=f"job {job.job_id} failed: {value}" if status == "bug" else str(value),
+                                    **where))
+    outcomes += [Outcome(task, error=f"not run: stage {pack[len(results) - 1].name} before it in the same job "
+                                     "failed", **where)
+                 for task in pack[len(results):]]
+    return outcomes
 
 
 def _log_path(job) -> Path:

@@ -12,7 +12,7 @@ import pytest
 
 from dcslam.errors import DcslamError
 from dcslam.executor import (DEFAULT_RESOURCES, LocalExecutor, Outcome, Resources, SlurmExecutor, SlurmSettings,
-                             Task)
+                             Task, packs, slurm_job)
 from dcslam.stages import filter as filter_stage
 from dcslam.stages import predict, prepare, score, slam, synth, train
 from dcslam.stages.config import to_toml
@@ -35,6 +35,8 @@ def test_slurm_table_is_read_with_each_kinds_resources():
     assert settings.resources["slam"] == Resources(cpus=1, mem_gb=2.5, time_min=DEFAULT_RESOURCES["slam"].time_min)
     assert settings.resources["predict"] == DEFAULT_RESOURCES["predict"]
     assert SlurmSettings.from_table({}) == SlurmSettings()
+    assert all(res.stages_per_job == 1 for res in SlurmSettings().resources.values())  # a job per stage by default
+    assert SlurmSettings.from_table({"slam": {"stages_per_job": 8}}).resources["slam"].stages_per_job == 8
 
 
 @pytest.mark.parametrize("table, message", [
@@ -47,6 +49,7 @@ def test_slurm_table_is_read_with_each_kinds_resources():
     ({"sbatch": ["--exclusive"]}, "sbatch: expected a table of sbatch options"),
     ({"setup": "module load cuda"}, "setup: expected a list of shell lines"),
     ({"poll_seconds": 0}, "poll_seconds: must be > 0"),
+    ({"slam": {"stages_per_job": 0}}, "slam stages_per_job: expected a whole number >= 1"),
 ])
 def test_slurm_table_mistakes_name_the_key(table, message):
     with pytest.raises(DcslamError, match=message):
@@ -155,6 +158,66 @@ def test_local_workers_are_stopped_when_the_caller_gives_up(tmp_path):
     outcomes.close()
     with pytest.raises(ProcessLookupError):  # terminated and reaped, not left running
         os.kill(pid, 0)
+
+
+def _pack_stage(ws, config, *, force=False):
+    """A stage for the job tests (module level, so a job process can import it): ``frames`` 2 raises a DcslamError,
+    3 a bug; otherwise it writes ``out``."""
+    if config.frames == 2:
+        raise DcslamError(f"no drive {config.drive[0]}")
+    if config.frames == 3:
+        raise ZeroDivisionError("division by zero")
+    config.out.write_text("done")
+
+
+def _pack(tmp_path, *frames):
+    ws = Workspace(tmp_path)
+    return [Task(f"slam-{i}", _pack_stage, SlamStageConfig(drive=[f"d{i}"], frames=n, out=tmp_path / f"{i}.txt"), ws,
+                 "slam") for i, n in enumerate(frames)]
+
+
+def test_packs_cut_a_kinds_stages_into_jobs_of_nearly_equal_size():
+    tasks = list(range(17))
+    assert [len(p) for p in packs(tasks, 8)] == [6, 6, 5] and sum(packs(tasks, 8), []) == tasks
+    assert packs(tasks, 1) == [[t] for t in tasks] and packs(tasks, 17) == [tasks] and packs(tasks, 99) == [tasks]
+    assert [len(p) for p in packs(tasks[:3], 2)] == [2, 1] and packs([], 4) == []
+
+
+def test_a_job_runs_its_stages_in_turn_and_the_first_failure_ends_it(tmp_path, capsys):
+    """Each stage's result, the first that fails last: a known error by its message, a bug by its type and message
+    with its traceback in the job's log (stderr); the stages after it never run."""
+    tasks = _pack(tmp_path, 1, 2, 1)
+    results = slurm_job([(t.run, t.workspace, t.config) for t in tasks])
+    assert [status for status, _ in results] == ["ok", "error"] and results[1][1] == "no drive d1"
+    assert all(isinstance(x, float) for x in results[0][1])
+    assert (tmp_path / "0.txt").exists() and not (tmp_path / "2.txt").exists()
+    tasks = _pack(tmp_path / "bug", 3, 1)
+    (tmp_path / "bug").mkdir()
+    bug = ("bug", "ZeroDivisionError: division by zero")
+    assert slurm_job([(t.run, t.workspace, t.config) for t in tasks]) == [bug]
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "ZeroDivisionError: division by zero" in err
+    assert not (tmp_path / "bug" / "1.txt").exists()
+
+
+def test_a_finished_jobs_result_gives_each_of_its_stages_an_outcome(tmp_path):
+    """A real submitit job (its local executor: the same result file and logs as a Slurm job) running a pack of
+    three stages whose second fails: the first is done, the second failed with its message, the third not run;
+    each names the job and its log."""
+    submitit = pytest.importorskip("submitit")
+    from dcslam.executor import _finished
+
+    tasks = _pack(tmp_path, 1, 2, 1)
+    executor = submitit.LocalExecutor(folder=tmp_path / "logs" / "%j")
+    executor.update_parameters(timeout_min=5)
+    job = executor.submit(slurm_job, [(t.run, t.workspace, t.config) for t in tasks])
+    job.wait()
+    done, failed, unrun = _finished(job, tasks)
+    assert done.ok and done.seconds > 0 and done.cpu_seconds > 0 and done.task is tasks[0]
+    assert failed.error == "no drive d1" and failed.task is tasks[1]
+    assert unrun.error == "not run: stage slam-1 before it in the same job failed" and unrun.task is tasks[2]
+    assert {o.job for o in (done, failed, unrun)} == {job.job_id} and done.log == failed.log == Path(job.paths.stderr)
+    assert not (tmp_path / "2.txt").exists()
 
 
 class _Scripted:

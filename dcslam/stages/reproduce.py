@@ -49,7 +49,7 @@ class ReproduceConfig:
                            "partition, account, resources: the [slurm] table of --config).")
     slurm: dict = option(default_factory=dict, file_only=True, help="The [slurm] table of a --config file "
                          "(dcslam.executor.SlurmSettings): partition, account, qos, sbatch options, setup lines, "
-                         "poll_seconds and [slurm.<kind>] resources (cpus, mem_gb, time_min, gpus).")
+                         "poll_seconds and [slurm.<kind>] resources (cpus, mem_gb, time_min, gpus, stages_per_job).")
     seeds: int | None = option(None, min=1, help="Train every trained run with N seeds (seed, seed+1, ...; runs "
                                "<run>, <run>-s1, ...), each predicted, filtered and run through SLAM; the tables "
                                "report the spread over seeds and drives. Default: the profile's (1; study: 3).")

@@ -14,6 +14,7 @@ import subprocess
 import sys
 import time
 import tomllib
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -33,7 +34,9 @@ pytestmark = [pytest.mark.cluster, pytest.mark.timeout(1800)]
 # this file's time)
 PROFILE = ["--profile", "smoke"]
 SEEDS = ["--seeds", "2"]
-# One CPU and 1 GB per job: the node is this machine; the local run's workers have one thread each too.
+# One CPU and 1 GB per job: the node is this machine; the local run's workers have one thread each too. The stages
+# share jobs (each job is a fresh Python that imports torch, 2-3 CPU-s): a round's SLAM runs (17) in two jobs, its
+# trainings, predictions and filters two or four to a job.
 SLURM_CONFIG = """\
 [slurm]
 poll_seconds = 1
@@ -41,13 +44,17 @@ poll_seconds = 1
 cpus = 1
 mem_gb = 1
 time_min = 30
+stages_per_job = 2
 [slurm.predict]
 cpus = 1
 mem_gb = 1
+stages_per_job = 4
 [slurm.filter]
 mem_gb = 1
+stages_per_job = 4
 [slurm.slam]
 mem_gb = 1
+stages_per_job = 9
 """
 SETTINGS = tomllib.loads(SLURM_CONFIG)["slurm"]
 JOB_STAGES = ("train-", "predict-", "filter-", "slam-")  # what runs through the executor; the rest in reproduce
@@ -129,6 +136,12 @@ def test_every_independent_stage_ran_as_a_slurm_job(runs):
         assert re.search(rf"_job_complete: JobId={pattern} WEXITSTATUS 0", ctld), (stage, job)
     arrays = {job.split("_")[0] for stage, job in jobs.items() if stage.startswith("slam-")}
     assert len(arrays) == 1 and all("_" in jobs[s] for s in jobs if s.startswith("slam-"))  # one array for SLAM
+    for kind in ("train", "slam", "predict", "filter"):  # up to stages_per_job of a kind share a job
+        per_job = Counter(job for stage, job in jobs.items() if stage.startswith(f"{kind}-"))
+        size = SETTINGS[kind]["stages_per_job"]
+        assert max(per_job.values()) <= size and len(per_job) < sum(per_job.values()), (kind, per_job)
+    slam_jobs = Counter(job for stage, job in jobs.items() if stage.startswith("slam-"))  # one round: fewest jobs
+    assert len(slam_jobs) == -(-sum(slam_jobs.values()) // SETTINGS["slam"]["stages_per_job"]), slam_jobs
     assert queued() == []
 
 
@@ -141,19 +154,26 @@ def test_a_rerun_on_slurm_submits_nothing(runs):
 def test_a_failed_job_names_its_stage_drive_seed_and_log(runs, tmp_path):
     shutil.copytree(runs["slurm"] / "drives", tmp_path / "drives")
     ws = Workspace(tmp_path)
-    pipe = Pipeline(ws, executor=SlurmExecutor(tmp_path / "logs", SlurmSettings.from_table(SETTINGS)))
+    submitted = []
+    pipe = Pipeline(ws, executor=SlurmExecutor(tmp_path / "logs", SlurmSettings.from_table(SETTINGS),
+                                               log=submitted.append))
     broken_train = Stage("train-broken", train.run, train.TrainStageConfig(name="broken", init="absent", seed=5),
                          outputs=lambda: [tmp_path / "runs" / "broken" / "model.pt"], kind="train")
-    broken_slam = Stage("slam-broken", slam.run, slam.SlamStageConfig(drive=["absent_drive"], frames=2),
-                        outputs=lambda: [tmp_path / "slam" / "dense" / "absent_drive.json"], kind="slam")
-    for stage, label in ((broken_train, "seed 5"), (broken_slam, "drive absent_drive")):
+    broken_slam, after = (Stage(f"slam-broken{i}", slam.run, slam.SlamStageConfig(drive=[drive], frames=2),
+                                outputs=lambda d=drive: [tmp_path / "slam" / "dense" / f"{d}.json"], kind="slam")
+                          for i, drive in ((1, "absent_drive"), (2, "other_drive")))
+    for stages, label in (([broken_train], "seed 5"), ([broken_slam, after], "drive absent_drive")):
+        stage = stages[0]
         with pytest.raises(DcslamError) as failed:
-            pipe.run_all([stage])
+            pipe.run_all(stages)  # the two SLAM stages in one job: the first fails, the second is not run
         message = str(failed.value)
         assert message.startswith(f"stage {stage.name} failed (") and f"; {label}; Slurm job " in message, message
         log = Path(re.search(r", log (\S+);", message).group(1))
         assert log.is_file() and log.is_relative_to(tmp_path / "logs")
-        assert not json.loads((tmp_path / ".reproduce" / f"{stage.name}.json").read_text())["complete"]
+        for each in stages:
+            assert not json.loads((tmp_path / ".reproduce" / f"{each.name}.json").read_text())["complete"]
+    jobs = dict(re.findall(r"^\[slurm\] (\S+): job (\S+)$", "\n".join(submitted), flags=re.M))
+    assert jobs["slam-broken1"] == jobs["slam-broken2"], submitted
     assert queued() == []
 
 
