@@ -1,6 +1,7 @@
 """Shared test settings: no progress bars, the path of the committed KITTI sample, the in-process command line
-(``cli``), and the device and dtype fixtures of the torch op tests (cpu always, cuda on a machine with a GPU and
-reported as skipped elsewhere; float32 and float64)."""
+(``cli``), one smoke reproduction on tiny drives shared by the session (``tiny_smoke``), and the device and dtype
+fixtures of the torch op tests (cpu always, cuda on a machine with a GPU and reported as skipped elsewhere; float32
+and float64)."""
 import os
 from pathlib import Path
 
@@ -21,6 +22,16 @@ def _devices() -> list:
 @pytest.fixture
 def data_dir() -> Path:
     return DATA
+
+
+@pytest.fixture(scope="session")
+def tiny_smoke(tmp_path_factory):
+    """``reproduce --profile smoke`` on three tiny drives, made once for every pytest-xdist worker of the session
+    (tests.fixtures.smoke): read it only."""
+    from tests.fixtures.smoke import tiny_smoke
+
+    base = tmp_path_factory.getbasetemp()
+    return tiny_smoke(base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base)
 
 
 @pytest.fixture(scope="session")

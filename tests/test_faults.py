@@ -13,8 +13,6 @@ import random
 import shutil
 import signal
 import subprocess
-import sys
-import time
 from pathlib import Path
 
 import h5py
@@ -22,15 +20,12 @@ import numpy as np
 import pytest
 
 from dcslam.stages.experiments.table_5_2 import PROFILES
-from tests.fixtures.kitti import write_tiny_drive
+from tests.fixtures.smoke import dcslam, start
 
 pytestmark = [pytest.mark.faults, pytest.mark.slow]  # a whole reproduction, then one per stage
 
 SMOKE = PROFILES["smoke"]
 SEED = 16  # the moments of interruption follow from it: a failure is reproducible
-# Heavy modules are imported before "ready" is printed, so each moment falls in the command's own work.
-LAUNCH = ("import sys, dcslam.cli, dcslam.interrupt, torch, h5py, numpy, scipy, matplotlib; sys.argv[0] = 'dcslam'; "
-          "dcslam.interrupt.install(); print('ready', flush=True); dcslam.cli.main()")
 STAGES = {  # each stage as `reproduce --profile smoke` runs it, so that its outputs are the uninterrupted ones
     "prepare-kitti": ["prepare-kitti", "--kitti", "{kitti}"],
     "train": ["train", "--loss", "mse", "--mask", "dense", "--epochs", "1", "--max-frames", "2", "--scale", "0.25",
@@ -41,32 +36,12 @@ STAGES = {  # each stage as `reproduce --profile smoke` runs it, so that its out
 }
 
 
-def _env() -> dict:
-    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parents[1]), *sys.path]),
-            "OMP_NUM_THREADS": "1", "DCSLAM_PROGRESS": "0"}
-
-
-def _start(args: list[str]) -> tuple[subprocess.Popen, float]:
-    proc = subprocess.Popen([sys.executable, "-c", LAUNCH, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=_env(), start_new_session=True)
-    assert proc.stdout.readline().strip() == "ready", proc.stderr.read()
-    return proc, time.perf_counter()
-
-
-def dcslam(*args) -> tuple[str, float]:
-    """Run a command to its end; returns its stdout and the seconds of its own work."""
-    proc, started = _start([str(a) for a in args])
-    out, err = proc.communicate(timeout=300)
-    assert proc.returncode == 0, err
-    return out, time.perf_counter() - started
-
-
 def interrupt(args, after_s: float) -> bool:
     """Run ``args``, SIGINT its process group ``after_s`` seconds into its work; True if it was interrupted.
 
     A Ctrl-C that lands once the command has written everything (while Python shuts down) changes nothing: exit 0.
     """
-    proc, _ = _start([str(a) for a in args])
+    proc, _ = start([str(a) for a in args])
     try:
         proc.wait(timeout=after_s)
         return False  # it finished first
@@ -128,23 +103,19 @@ def rerun_args(stage: str, ws: Path) -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def baseline(tmp_path_factory):
-    """Tiny KITTI-format drives, and one uninterrupted ``reproduce --profile smoke`` on them: its workspace holds
-    the uninterrupted output of every stage, and its stamps the seconds each stage worked."""
+def baseline(tiny_smoke, tmp_path_factory):
+    """The session's uninterrupted ``reproduce --profile smoke`` on tiny drives (``tiny_smoke``, shared with the Slurm
+    test): its workspace holds the uninterrupted output of every stage, and its stamps the seconds each stage worked.
+    Each test works in a folder of its own."""
     root = tmp_path_factory.mktemp("faults")
-    kitti = root / "kitti"
-    for i in range(3):
-        write_tiny_drive(kitti, name=f"2011_09_26_drive_{1000 + i:04d}_sync", n_frames=16, size=(64, 96), seed=i)
-    (kitti / "SYNTHETIC").write_text("tiny drives of the fault test\n")
-    straight = root / "straight"
-    table, seconds = dcslam("reproduce", "--profile", "smoke", "--kitti", kitti, "-w", straight)
+    straight = tiny_smoke.workspace
     stamps = {stage: f"{stage}-mse-dense" if stage in ("train", "predict") else stage for stage in STAGES}
     stamps["slam"] = "slam-dense-*"  # reproduce runs SLAM as one stage per (layer, test drive)
     work = {stage: sum(json.loads(path.read_text())["seconds"]
                        for path in (straight / ".reproduce").glob(f"{stamp}.json"))
             for stage, stamp in stamps.items()}
     assert all(work.values()), work
-    return root, kitti, straight, {**work, "reproduce": seconds}, table
+    return root, tiny_smoke.kitti, straight, {**work, "reproduce": tiny_smoke.seconds}, tiny_smoke.table
 
 
 @pytest.mark.parametrize("stage", list(STAGES))

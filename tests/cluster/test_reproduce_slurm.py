@@ -2,7 +2,8 @@
 tables the local executor gives; a failed job names its stage, drive, seed and log; SIGTERM cancels the jobs and the
 rerun resubmits only what is missing.
 
-Drives: three tiny KITTI-format drives (16 frames of 64 × 96, tests.fixtures.kitti), through ``--kitti``."""
+Drives: three tiny KITTI-format drives (16 frames of 64 × 96, tests.fixtures.smoke), through ``--kitti``; the local
+run to compare with is the session's (the ``tiny_smoke`` fixture)."""
 from __future__ import annotations
 
 import json
@@ -24,7 +25,6 @@ from dcslam.executor import SlurmExecutor, SlurmSettings
 from dcslam.stages import slam, train
 from dcslam.stages.pipeline import Pipeline, Stage
 from dcslam.workspace import Workspace
-from tests.fixtures.kitti import write_tiny_drive
 
 pytestmark = [pytest.mark.cluster, pytest.mark.timeout(1800)]
 
@@ -34,9 +34,9 @@ pytestmark = [pytest.mark.cluster, pytest.mark.timeout(1800)]
 # this file's time)
 PROFILE = ["--profile", "smoke"]
 SEEDS = ["--seeds", "2"]
-# One CPU and 1 GB per job: the node is this machine; the local run's workers have one thread each too. The stages
-# share jobs (each job is a fresh Python that imports torch, 2-3 CPU-s): a round's SLAM runs (17) in two jobs, its
-# trainings, predictions and filters two or four to a job.
+# One CPU and 1 GB per job: the node is this machine; the local run has one thread too. The stages share jobs (each
+# job is a fresh Python that imports torch, 2-3 CPU-s): a round's SLAM runs (17) in two jobs, its trainings,
+# predictions and filters two or four to a job.
 SLURM_CONFIG = """\
 [slurm]
 poll_seconds = 1
@@ -83,27 +83,19 @@ def stamps(ws: Path) -> dict[str, dict]:
 
 
 @pytest.fixture(scope="module")
-def runs(slurm_cluster, tmp_path_factory):
-    """The smoke profile on the tiny drives into two workspaces: local workers (``--jobs 2``), and Slurm jobs."""
+def runs(slurm_cluster, tiny_smoke, tmp_path_factory):
+    """The smoke profile on the tiny drives as Slurm jobs, beside the session's local run of it (``tiny_smoke``, in
+    the ``reproduce`` process; shared with the fault test: read only)."""
     root = tmp_path_factory.mktemp("cluster")
-    kitti = root / "kitti"
-    for i in range(3):
-        write_tiny_drive(kitti, name=f"2011_09_26_drive_{1000 + i:04d}_sync", n_frames=16, size=(64, 96), seed=i)
-    (kitti / "SYNTHETIC").write_text("tiny drives of the cluster tests\n")  # split as generated drives are
     config = root / "slurm.toml"
     config.write_text(SLURM_CONFIG)
-    common = ["reproduce", *PROFILE, "--kitti", kitti]
-    seconds = {}
-    start = time.perf_counter()
-    local = dcslam(*common, "--jobs", 2, "-w", root / "local")
-    seconds["local"] = time.perf_counter() - start
-    assert local.returncode == 0, local.stderr
+    common = ["reproduce", *PROFILE, "--kitti", tiny_smoke.kitti]
     start = time.perf_counter()
     on_slurm = dcslam(*common, "--executor", "slurm", "--config", config, "-w", root / "slurm")
-    seconds["slurm"] = time.perf_counter() - start
+    seconds = time.perf_counter() - start
     assert on_slurm.returncode == 0, on_slurm.stderr
-    print(f"smoke profile: local {seconds['local']:.0f} s, slurm {seconds['slurm']:.0f} s")
-    return {"root": root, "kitti": kitti, "config": config, "common": common, "local": root / "local",
+    print(f"smoke profile: local {tiny_smoke.seconds:.0f} s, slurm {seconds:.0f} s")
+    return {"root": root, "kitti": tiny_smoke.kitti, "config": config, "common": common, "local": tiny_smoke.workspace,
             "slurm": root / "slurm", "log": on_slurm.stderr, "ctld": slurm_cluster}
 
 
