@@ -202,17 +202,38 @@ def to_toml(config, title: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: The last :func:`code_version`: the sources it hashed (path, size, modification time) and what it gave.
+_VERSION: tuple[tuple, str] | None = None
+#: Nanoseconds after its last change before a source is taken as settled: a file changed again within its
+#: timestamp's granularity (a few ms) keeps its size and time, so a recent one is read every time.
+SETTLED_NS = 2_000_000_000
+
+
 def code_version() -> str:
     """dcslam's version and a hash of its Python and C sources (dcslam.native): changes when the code that makes
-    outputs changes."""
+    outputs changes. The hash is kept while no source's path, size or time changes (every stage's stamp asks for it:
+    reading and hashing the sources each time cost 10-20 ms a call, hundreds of calls a reproduction)."""
+    import os
+    import time
+
     from dcslam.version import __version__
 
+    global _VERSION
     root = Path(__file__).resolve().parents[1]
+    paths = sorted(Path(folder) / name for folder, _, names in os.walk(root) for name in names
+                   if name.endswith((".py", ".c")))
+    stats = [path.stat() for path in paths]
+    sources = tuple((str(path), stat.st_size, stat.st_mtime_ns) for path, stat in zip(paths, stats))
+    if _VERSION is not None and _VERSION[0] == sources:
+        return _VERSION[1]
     digest = hashlib.sha256()
-    for path in sorted([*root.rglob("*.py"), *root.rglob("*.c")]):
+    for path in paths:
         digest.update(str(path.relative_to(root)).encode())
         digest.update(path.read_bytes())
-    return f"{__version__}+{digest.hexdigest()[:16]}"
+    version = f"{__version__}+{digest.hexdigest()[:16]}"
+    if all(stat.st_mtime_ns < time.time_ns() - SETTLED_NS for stat in stats):
+        _VERSION = (sources, version)
+    return version
 
 
 class Options(Mapping):

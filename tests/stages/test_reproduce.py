@@ -3,6 +3,7 @@ every stage run in this process."""
 import json
 import os
 import signal
+import time
 
 import pytest
 
@@ -99,6 +100,33 @@ def test_code_version_changes_with_the_sources(tmp_path, monkeypatch):
     second = code_version()
     (fake_root / "kernels.c").write_text("int x;\n")      # the native kernels make outputs too
     assert code_version() != second
+
+
+def test_code_version_is_kept_while_no_source_changes_and_read_again_when_one_does(tmp_path, monkeypatch):
+    """Settled sources (changed more than SETTLED_NS ago) are not read again while their sizes and times stay; a
+    touched one is; one changed just now is read on every call (within its timestamp's granularity it could change
+    again unseen)."""
+    from pathlib import Path
+
+    import dcslam.stages.config as config
+
+    fake_root = tmp_path / "dcslam"
+    (fake_root / "stages").mkdir(parents=True)
+    source = fake_root / "a.py"
+    source.write_text("x = 1\n")
+    old = time.time() - 10
+    os.utime(source, (old, old))
+    monkeypatch.setattr(config, "__file__", str(fake_root / "stages" / "config.py"))
+    first = code_version()
+    reads = []
+    read_bytes = Path.read_bytes
+    monkeypatch.setattr(Path, "read_bytes", lambda self: reads.append(self.name) or read_bytes(self))
+    assert code_version() == first and reads == []
+    os.utime(source, (old + 1, old + 1))
+    assert code_version() == first and reads == ["a.py"]  # touched: read again, the same sources
+    source.write_text("x = 22\n")
+    now = code_version()
+    assert now != first and code_version() == now and reads == ["a.py"] * 3  # just changed: read each time
 
 
 def test_failed_stage_stops_the_pipeline_with_one_line(tmp_path, monkeypatch):
