@@ -24,6 +24,7 @@ import shutil
 import subprocess
 import sys
 import time
+import traceback
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -355,8 +356,6 @@ def slurm_job(stages: list[tuple[Callable, object, object]]) -> list[tuple[str, 
         except DcslamError as error:
             results.append(("error", str(error)))
         except Exception as error:  # a bug: named with its stage, its traceback in the job's log
-            import traceback
-
             traceback.print_exc()
             results.append(("bug", f"{type(error).__name__}: {error}"))
         if results[-1][0] != "ok":
@@ -367,8 +366,10 @@ def slurm_job(stages: list[tuple[Callable, object, object]]) -> list[tuple[str, 
 def packs(tasks: list[Task], size: int) -> list[list[Task]]:
     """``tasks`` in order, cut into as few jobs of at most ``size`` as possible, of sizes that differ by one at
     most (17 stages of 8 a job: 6, 6, 5 rather than 8, 8, 1)."""
+    if not tasks:
+        return []
     count = -(-len(tasks) // max(size, 1))
-    base, longer = divmod(len(tasks), count) if count else (0, 0)
+    base, longer = divmod(len(tasks), count)
     cuts = [i * base + min(i, longer) for i in range(count + 1)]
     return [tasks[a:b] for a, b in zip(cuts, cuts[1:])]
 
