@@ -25,6 +25,7 @@ from dcslam.executor import SlurmExecutor, SlurmSettings
 from dcslam.stages import slam, train
 from dcslam.stages.pipeline import Pipeline, Stage
 from dcslam.workspace import Workspace
+from tests.fixtures.smoke import env
 
 pytestmark = [pytest.mark.cluster, pytest.mark.timeout(1800)]
 
@@ -61,14 +62,9 @@ JOB_STAGES = ("train-", "predict-", "filter-", "slam-")  # what runs through the
 MESSAGE = "interrupted: the stages that finished are kept in "
 
 
-def _env() -> dict:
-    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parents[2]), *sys.path]),
-            "DCSLAM_PROGRESS": "0"}
-
-
 def dcslam(*args, timeout: float = 1200) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "dcslam", *map(str, args)], capture_output=True, text=True,
-                          env=_env(), timeout=timeout)
+                          env=env(), timeout=timeout)
 
 
 def queued() -> list[str]:
@@ -194,7 +190,7 @@ def test_sigterm_cancels_the_jobs_and_the_rerun_submits_only_what_is_missing(run
     err = tmp_path.parent / f"{tmp_path.name}.stderr"
     with open(err, "w") as stderr:
         proc = subprocess.Popen([sys.executable, "-m", "dcslam", *map(str, args)], stdout=subprocess.DEVNULL,
-                                stderr=stderr, text=True, env=_env())
+                                stderr=stderr, text=True, env=env())
         try:
             while proc.poll() is None and not any(line.endswith(" RUNNING") and " dcslam-train " in line
                                                   for line in queued()):
