@@ -60,8 +60,8 @@ def slam_surface_settings(depth_m: np.ndarray, reference_m: np.ndarray):
                            max_depth=frame.max_depth)
 
 
-#: Frames of each drive whose surface errors a table scores (:func:`surface_frames`): they cost about 1.5 s of CPU
-#: per full-size frame, so a table of many rows scores a fixed sample of each drive rather than every frame.
+#: Frames of each drive whose surface errors a table scores (:func:`surface_frames`): they cost 0.15-0.3 s of CPU
+#: per full-size frame (docs/metrics.md), so a table of many rows scores a fixed sample of each drive, not every frame.
 SURFACE_FRAMES = 5
 
 
