@@ -78,9 +78,36 @@ def checkout_commit(repo: Path) -> tuple[str, bool] | None:
     return commit, bool(_git(repo, "status", "--porcelain", "--untracked-files=no"))
 
 
+def cpu_name(cpuinfo: str | None = None) -> str:
+    """This machine's processor in words: its model name and, from ``/proc/cpuinfo`` (or the text ``cpuinfo``), its
+    family and model numbers and widest x86 vector extension, e.g. ``AMD EPYC (family 25, model 17; AVX-512)``;
+    what the platform module names where the file has no model name. The extension is named because results differ
+    with it: NumPy and oneDNN pick their kernels by it (RESULTS.md, a table made on three CPUs)."""
+    if cpuinfo is None:
+        try:
+            cpuinfo = Path("/proc/cpuinfo").read_text()
+        except OSError:
+            cpuinfo = ""
+    fields: dict[str, str] = {}
+    for line in cpuinfo.splitlines():
+        key, sep, value = line.partition(":")
+        if sep:
+            fields.setdefault(key.strip(), value.strip())  # the first processor's, where each lists its own
+    name = fields.get("model name") or platform.processor() or platform.machine()
+    details = []
+    if "cpu family" in fields and "model" in fields:
+        details.append(f"family {fields['cpu family']}, model {fields['model']}")
+    flags = set(fields.get("flags", "").split())
+    extension = next((label for flag, label in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"))
+                      if flag in flags), None)
+    if extension:
+        details.append(extension)
+    return f"{name} ({'; '.join(details)})" if details else name
+
+
 def default_machine() -> str:
-    """This machine in a few words: CPU cores, architecture, system."""
-    return f"{os.cpu_count()} CPU cores, {platform.machine()}, {platform.system()}"
+    """This machine in a few words: CPU cores, processor (:func:`cpu_name`), system."""
+    return f"{os.cpu_count()} CPU cores, {cpu_name()}, {platform.system()}"
 
 
 def _written_date(source: Path, files: list[Path]) -> str:

@@ -21,7 +21,6 @@ the estimate then uses.
 from __future__ import annotations
 
 import os
-import platform
 import tempfile
 import time
 from collections.abc import Callable
@@ -174,16 +173,11 @@ def fit(small: dict[str, tuple[float, float, int]], large: dict[str, tuple[float
 
 
 def machine() -> str:
-    """This machine in words: its processor, cores and load (what a calibration's source names)."""
-    model = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{model}, {os.cpu_count()} CPU cores, load {os.getloadavg()[0]:.1f}"
+    """This machine in words: its processor (:func:`dcslam.report.provenance.cpu_name`), cores and load (what a
+    calibration's source names: unit costs differ between CPUs of one model name)."""
+    from dcslam.report.provenance import cpu_name
+
+    return f"{cpu_name()}, {os.cpu_count()} CPU cores, load {os.getloadavg()[0]:.1f}"
 
 
 def calibrate(ws: Workspace, profile, log: Callable[[str], None] = lambda line: None) -> Path:

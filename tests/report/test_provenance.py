@@ -1,12 +1,13 @@
 """Committed results: a workspace's results copied with their provenance record; the record read back and written
 as one line."""
 import json
+import platform
 import subprocess
 
 import pytest
 
 from dcslam.errors import DcslamError
-from dcslam.report.provenance import collect_results, provenance_line, read_provenance
+from dcslam.report.provenance import collect_results, cpu_name, default_machine, provenance_line, read_provenance
 
 
 def _workspace_results(root):
@@ -92,3 +93,25 @@ def test_malformed_provenance(tmp_path, content, message):
     (tmp_path / "provenance.json").write_text(content)
     with pytest.raises(DcslamError, match=message):
         read_provenance(tmp_path)
+
+
+XEON = """processor\t: 0
+vendor_id\t: GenuineIntel
+cpu family\t: 6
+model\t\t: 106
+model name\t: Intel(R) Xeon(R) Platinum 8375C CPU @ 2.90GHz
+flags\t\t: fpu sse sse2 avx avx2 avx512f avx512dq
+
+processor\t: 1
+model name\t: another name
+flags\t\t: fpu sse
+"""
+
+
+def test_cpu_name_gives_the_model_its_numbers_and_widest_vector_extension():
+    assert cpu_name(XEON) == "Intel(R) Xeon(R) Platinum 8375C CPU @ 2.90GHz (family 6, model 106; AVX-512)"
+    amd = "processor\t: 0\ncpu family\t: 25\nmodel\t\t: 1\nmodel name\t: AMD EPYC\nflags\t\t: sse2 avx avx2 fma\n"
+    assert cpu_name(amd) == "AMD EPYC (family 25, model 1; AVX2)"  # the two AMD hosts both call themselves AMD EPYC
+    arm = "processor\t: 0\nBogoMIPS\t: 50.00\nFeatures\t: fp asimd\nCPU implementer\t: 0x41\n"
+    assert cpu_name(arm) == cpu_name("") == (platform.processor() or platform.machine())  # no model name
+    assert cpu_name() in default_machine() and "CPU cores" in default_machine()
