@@ -1,5 +1,5 @@
 """Committed results: a workspace's results copied with their provenance record; the record read back and written
-as one line."""
+as one line; the processor a record names by default."""
 import json
 import platform
 import subprocess
