@@ -3,7 +3,6 @@ Ctrl-C does: the one-line interrupted message saying what was kept and how to go
 exit 143; the rerun finishes."""
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -13,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from tests.fixtures.depth import write_workspace
+from tests.fixtures.smoke import env
 
 pytestmark = pytest.mark.slow  # each test runs a command into its work, then to its end: 19-26 s on a loaded machine
 
@@ -21,15 +21,10 @@ LAUNCH = ("import sys, dcslam.cli, torch, h5py, numpy, scipy; sys.argv[0] = 'dcs
           "dcslam.cli.main()")
 
 
-def _env() -> dict:
-    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parents[1]), *sys.path]),
-            "OMP_NUM_THREADS": "1", "DCSLAM_PROGRESS": "0"}
-
-
 def _sigterm_when(args: list[str], ready: callable) -> subprocess.CompletedProcess:
     """Run ``dcslam args``; once ``ready()`` is true, SIGTERM the process (not its group); wait for its end."""
     proc = subprocess.Popen([sys.executable, "-c", LAUNCH, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=_env())
+                            text=True, env=env())
     assert proc.stdout.readline().strip() == "ready", proc.stderr.read()
     while not ready() and proc.poll() is None:
         time.sleep(0.02)
@@ -59,7 +54,7 @@ def test_sigterm_stops_slam_between_drives_and_keeps_no_partial_output(tmp_path)
     kept = {d: (out / f"{d}.json").read_bytes() for d in drives if (out / f"{d}.json").exists()}
     assert "drive_a" in kept and all(d in last for d in kept)
     others = ["slam", *args[1:args.index("--drive")], *(arg for d in drives if d not in kept for arg in ("--drive", d))]
-    again = subprocess.run([sys.executable, "-m", "dcslam", *others], capture_output=True, text=True, env=_env(),
+    again = subprocess.run([sys.executable, "-m", "dcslam", *others], capture_output=True, text=True, env=env(),
                            timeout=600)  # the message's first advice: the drives not done
     assert again.returncode == 0, again.stderr
     assert all((out / f"{d}.json").exists() for d in drives)
@@ -78,6 +73,6 @@ def test_sigterm_stops_training_which_then_resumes(tmp_path):
     assert "Traceback" not in done.stderr, done.stderr
     assert _leftovers(ws) == []
     again = subprocess.run([sys.executable, "-m", "dcslam", "train", "--resume", "--epochs", "2", "--name", "long",
-                            "--loss", "mse", "-w", str(ws)], capture_output=True, text=True, env=_env(), timeout=600)
+                            "--loss", "mse", "-w", str(ws)], capture_output=True, text=True, env=env(), timeout=600)
     assert again.returncode == 0, again.stderr
     assert (run / "model.pt").exists()

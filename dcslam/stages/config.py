@@ -230,7 +230,8 @@ def code_version() -> str:
         digest.update(str(path.relative_to(root)).encode())
         digest.update(path.read_bytes())
     version = f"{__version__}+{digest.hexdigest()[:16]}"
-    if all(stat.st_mtime_ns < time.time_ns() - SETTLED_NS for stat in stats):
+    settled = time.time_ns() - SETTLED_NS
+    if all(stat.st_mtime_ns < settled for stat in stats):
         _VERSION = (sources, version)
     return version
 
